@@ -1,0 +1,3 @@
+from iceresist.cli import main
+
+raise SystemExit(main())

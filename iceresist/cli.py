@@ -1,0 +1,60 @@
+"""Command line: ``iceresist demo | run | sweep | report | validate``.
+
+Every subcommand turns bad input into one line on stderr and exit status 2,
+with no traceback (:class:`iceresist.errors.InputError`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from iceresist import __version__
+from iceresist.errors import InputError
+
+log = logging.getLogger("iceresist")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports usage errors as one line and exit status 2."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _cmd_demo(args) -> int:
+    """The main job on the built-in default scene. Until the engine runs ships: the FSICR comparison."""
+    from fsicr.cli import main as fsicr_main
+
+    return fsicr_main(["compare"] + (["--json"] if args.json else []))
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="iceresist", description="Ice resistance of a ship in a brash-ice channel (LBM-DEM) beside FSICR.")
+    p.add_argument("--version", action="version", version=f"iceresist {__version__}")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    d = sub.add_parser("demo", help="run the main job on the built-in default scene")
+    d.add_argument("--json", action="store_true", help="machine-readable output")
+    d.set_defaults(func=_cmd_demo)
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"iceresist: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("iceresist: interrupted; files already written are complete", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Lattice Boltzmann operators: collision (cumulant, BGK), streaming, boundaries, forcing."""

@@ -15,7 +15,8 @@ sqrt(tau_int). Two standard estimators are used:
   a Student-t interval with B - 1 degrees of freedom.
 
 The batch count is chosen from tau_int: batches of about 10 tau_int, between 10
-and 32 of them; fewer than 10 batches of at least 5 tau_int is refused, since
+and 32 of them; fewer than 10 batches of at least 5 tau_int (or fewer than 100
+samples) is refused, since
 the interval would then be too narrow (the batch-means variance is biased low by
 about tau_int / (2 b) for a batch of b samples).
 
@@ -46,8 +47,10 @@ MIN_BATCHES = 10
 MAX_BATCHES = 32
 #: Target batch length of the automatic batch count, in units of tau_int.
 BATCH_LENGTH_TAU = 10.0
-#: Shortest batch accepted by the automatic batch count, in units of tau_int.
+#: Shortest batch accepted by the automatic batch count, in units of tau_int (tau_int taken >= 1).
 MIN_BATCH_LENGTH_TAU = 5.0
+#: Fewest samples in a window for the automatic batch count (the tau_int estimate needs a long record).
+MIN_SAMPLES = 100
 
 
 def autocorrelation(x) -> np.ndarray:
@@ -142,14 +145,16 @@ def batch_means(x, n_batches: int, confidence: float = 0.95) -> BatchMeans:
 def choose_n_batches(n_samples: int, tau_int: float, label: str = "window") -> int:
     """Automatic batch count: batches of about BATCH_LENGTH_TAU tau_int, MIN_BATCHES..MAX_BATCHES of them.
 
-    Raises InputError when fewer than MIN_BATCHES batches of MIN_BATCH_LENGTH_TAU tau_int fit.
+    Raises InputError when the window holds fewer than MIN_SAMPLES samples or
+    fewer than MIN_BATCHES batches of MIN_BATCH_LENGTH_TAU max(tau_int, 1) fit.
     """
-    b_min = max(1, math.ceil(MIN_BATCH_LENGTH_TAU * tau_int))
-    needed = MIN_BATCHES * b_min
+    b_min = math.ceil(MIN_BATCH_LENGTH_TAU * max(tau_int, 1.0))
+    needed = max(MIN_SAMPLES, MIN_BATCHES * b_min)
     if n_samples < needed:
         raise InputError(
             f"{label} holds {n_samples} samples, too few for batch means: with tau_int = {tau_int:.3g} samples "
-            f"it needs at least {needed} ({MIN_BATCHES} batches of {b_min}); widen the window or sample more often"
+            f"it needs at least {needed} ({MIN_BATCHES} batches of >= {b_min}, >= {MIN_SAMPLES} in all); "
+            "widen the window or sample more often"
         )
     b_target = max(1, math.ceil(BATCH_LENGTH_TAU * tau_int))
     return int(min(MAX_BATCHES, max(MIN_BATCHES, n_samples // b_target)))
@@ -242,7 +247,7 @@ def steady_mean(t_s, F_N, *, window_s=None, window_m=None, x_ship_m=None, n_batc
     y = w.values
     n = y.size
     if n < 2:
-        raise InputError(f"{w.label} holds {n} sample: batch means needs at least {2 * MIN_BATCHES}")
+        raise InputError(f"{w.label} holds {n} sample: batch means needs at least {MIN_SAMPLES}")
     tau = integrated_autocorrelation_time(y)
     if n_batches is None:
         n_batches = choose_n_batches(n, tau, w.label)

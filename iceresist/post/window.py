@@ -47,7 +47,7 @@ def _as_1d_float(name: str, a) -> np.ndarray:
     return arr
 
 
-def _check_range(name: str, window) -> tuple[float, float]:
+def _check_range(name: str, window, unit: str) -> tuple[float, float]:
     try:
         lo, hi = (float(v) for v in window)
     except (TypeError, ValueError):
@@ -55,7 +55,7 @@ def _check_range(name: str, window) -> tuple[float, float]:
     if not (np.isfinite(lo) and np.isfinite(hi)):
         raise InputError(f"{name}={window!r} must hold finite numbers")
     if not lo < hi:
-        raise InputError(f"{name}=({lo:g}, {hi:g}) is empty: the start must be below the end")
+        raise InputError(f"{name}=({lo:g}, {hi:g}) {unit} is empty: the start must be below the end")
     return lo, hi
 
 
@@ -117,7 +117,7 @@ def select_window(t_s, signal, *, window_s=None, window_m=None, x_ship_m=None,
     if window_s is not None and window_m is not None:
         raise InputError("give either window_s (time range) or window_m (ship-position range), not both")
     if window_s is not None:
-        lo, hi = _check_range("window_s", window_s)
+        lo, hi = _check_range("window_s", window_s, "s")
         label = f"window_s=({lo:g}, {hi:g}) s"
         tol = 0.5 * dt_s
         if lo < t[0] - tol or hi > t[-1] + tol:
@@ -139,7 +139,7 @@ def select_window(t_s, signal, *, window_s=None, window_m=None, x_ship_m=None,
             raise InputError(
                 "x_ship_m is not strictly monotonic: a position window needs a ship moving one way; use window_s"
             )
-        lo, hi = _check_range("window_m", window_m)
+        lo, hi = _check_range("window_m", window_m, "m")
         label = f"window_m=({lo:g}, {hi:g}) m"
         tol = 0.5 * float(np.max(np.abs(dx)))
         x_min, x_max = float(min(x[0], x[-1])), float(max(x[0], x[-1]))

@@ -289,3 +289,11 @@ def test_too_few_samples_says_how_many_are_needed():
     t = np.arange(600) * 0.01
     with pytest.raises(InputError, match=r"window_s=\(0, 5\) s holds 501 samples.*needs at least \d+"):
         steady_mean(t, x, window_s=(0.0, 5.0))
+
+
+def test_random_walk_is_refused_not_averaged():
+    """A non-stationary record (random walk) has no steady mean: tau_int grows with the record and it is refused."""
+    rng = np.random.default_rng(53)
+    x = np.cumsum(rng.standard_normal(5000))
+    with pytest.raises(InputError, match="too few for batch means"):
+        steady_mean(np.arange(5000) * 0.01, x)

@@ -87,8 +87,8 @@ def main(argv=None) -> int:
         else:
             print(f"a={a:g}: tau_int true {r['tau_int_true']:.2f}, long record {r['tau_int_long_record']:.2f}, "
                   f"{r['n']}-sample records {r['tau_int_mean']:.2f} +- {r['tau_int_std']:.2f}; "
-                  f"95 % coverage {r['coverage_95']:.3f} +- {r['coverage_binomial_se']:.3f} over {r['reps'] - r['refused']} "
-                  f"records ({r['refused']} refused, {r['n_batches_mean']:.1f} batches); "
+                  f"95 % coverage {r['coverage_95']:.3f} +- {r['coverage_binomial_se']:.3f} "
+                  f"over {r['reps'] - r['refused']} records ({r['refused']} refused, {r['n_batches_mean']:.1f} batches); "
                   f"rms stderr / true {r['stderr_rms_over_true']:.3f}; {r['seconds']:.2f} s")
     return 0
 

@@ -75,8 +75,10 @@ def integrated_autocorrelation_time(x, c: float = SOKAL_WINDOW_C) -> np.ndarray 
     """Integrated autocorrelation time tau_int [samples] along the last axis (Sokal's automatic window).
 
     tau_int = 1 + 2 sum_{k=1}^{M} rho_k with M the first lag where M >= c tau_int(M).
-    Where no such lag exists (record shorter than about c tau_int) the whole
-    record is summed and the estimate is too low; callers check the batch length.
+    With the biased autocovariance the sum over all lags is exactly -1/2, so
+    tau_int(M) falls to 0 at the last lag and such an M always exists; on a
+    record shorter than a few tau_int it comes early and the estimate is too
+    low, but still of order n / c, which the batch-length check then refuses.
     Returns a float for a 1-D input, an array otherwise.
     """
     rho = autocorrelation(x)

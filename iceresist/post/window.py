@@ -106,7 +106,8 @@ def select_window(t_s, signal, *, window_s=None, window_m=None, x_ship_m=None,
         signal: values at those times (any unit; finite).
         window_s: time range (t0, t1) [s], inclusive; or
         window_m: ship-position range (x0, x1) [m], inclusive, with
-        x_ship_m: ship position at each time [m], strictly monotonic (either direction).
+        x_ship_m: ship position at each time [m], monotonic (either direction; a ship at rest
+            for a while is fine).
         signal_name: name of the signal in messages.
 
     With neither window the whole record is used. A window must lie inside the
@@ -135,9 +136,9 @@ def select_window(t_s, signal, *, window_s=None, window_m=None, x_ship_m=None,
             i = int(np.flatnonzero(~np.isfinite(x))[0])
             raise InputError(f"x_ship_m[{i}] is {x[i]}: ship positions must be finite")
         dx = np.diff(x)
-        if not (np.all(dx > 0.0) or np.all(dx < 0.0)):
+        if not (np.all(dx >= 0.0) or np.all(dx <= 0.0)) or not np.any(dx):
             raise InputError(
-                "x_ship_m is not strictly monotonic: a position window needs a ship moving one way; use window_s"
+                "x_ship_m is not monotonic: a position window needs a ship moving one way; use window_s"
             )
         lo, hi = _check_range("window_m", window_m, "m")
         label = f"window_m=({lo:g}, {hi:g}) m"

@@ -227,7 +227,7 @@ def test_format_comparison_table_text_and_markdown():
     assert "0.642" in lines[1] and "-35.8" in lines[1] and "188" in lines[1] and "293" in lines[1]
     md = format_comparison_table(table, style="markdown")
     assert md.splitlines()[1].startswith("|---|") and md.count("\n") == 3
-    assert "| Bow B | 21.1 |" in md
+    assert "| Bow B | 21.12 | 0.8 | 330 | 12.5 | 355 | 0.930 | -25 | -7.0 |" in md
 
 
 def test_comparison_row_from_steady_mean():

@@ -74,7 +74,7 @@ def _as_frame(cases) -> pd.DataFrame:
             df[col] = pd.to_numeric(df[col])
         except (TypeError, ValueError):
             raise InputError(f"cases column {col!r} must hold numbers") from None
-    for i, row in df.iterrows():
+    for _, row in df.iterrows():
         name = row["case"]
         if not math.isfinite(row["mean_force_N"]):
             raise InputError(f"case {name!r}: mean_force_N={row['mean_force_N']} must be finite")
@@ -128,7 +128,7 @@ def case_ratio(table: pd.DataFrame, numerator: str, denominator: str) -> tuple[f
     return float(sim), float(rules)
 
 
-def format_comparison_table(table: pd.DataFrame, style: str = "text", digits: int = 3) -> str:
+def format_comparison_table(table: pd.DataFrame, style: str = "text", digits: int = 4) -> str:
     """Readable text of a :func:`comparison_table`: ``style="text"`` (aligned columns) or ``"markdown"``.
 
     Forces are printed with ``digits`` significant digits, the ratio with 3

@@ -14,11 +14,11 @@ from .validity import validity_warnings
 #: Printed label of each entry of :attr:`ResistanceResult.terms`, in print order.
 TERM_LABELS = {
     "H_M_m": "H_M    brash-ice thickness in mid channel [m]",
-    "H_F_m": "H_F    = 0.26 + (H_M B)^0.5 [m]                 (eq. 25)",
-    "psi_deg": "psi    = arctan(tan phi2 / sin alpha) [deg]     (eq. 26)",
-    "C_mu_unclamped": "C_mu   = 0.15 cos phi2 + sin psi sin alpha      (eq. 23, before clamp)",
-    "C_mu": "C_mu   used, >= 0.45                            (eq. 23)",
-    "C_psi": "C_psi  = 0.047 psi - 2.115, 0 if psi <= 45 deg  (eq. 24)",
+    "H_F_m": "H_F    = 0.26 + (H_M B)^0.5 [m]                         (eq. 25)",
+    "psi_deg": "psi    = arctan(tan phi2 / sin alpha) [deg]             (eq. 26)",
+    "C_mu_unclamped": "C_mu   before clamp = 0.15 cos phi2 + sin psi sin alpha (eq. 23)",
+    "C_mu": "C_mu   used, >= 0.45                                    (eq. 23)",
+    "C_psi": "C_psi  = 0.047 psi - 2.115, 0 if psi <= 45 deg          (eq. 24)",
     "phi1_used_deg": "phi1   used in C1, C2 (90 for a bulbous bow) [deg]",
     "LT_over_B2": "L T / B^2",
     "shape_factor_unclamped": "(L T / B^2)^3 before clamp",

@@ -176,3 +176,9 @@ def test_good_ship_file_with_lower_waterline(capsys, tmp_path):
     d = json.loads(out)
     assert code == 0 and set(d["power_by_waterline_kW"]) == {"upper", "lower"}
     assert d["required_kW"] == max(d["power_by_waterline_kW"].values())
+
+
+def test_fsicr_imports_nothing_from_the_engine():
+    code = "import sys, fsicr.cli; bad = [m for m in sys.modules if m.startswith(('iceresist', 'numba'))]; print(bad)"
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stdout.strip() == "[]"

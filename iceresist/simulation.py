@@ -12,6 +12,7 @@ A *model* is anything with this protocol (no I/O of its own)::
     model.is_finite() -> bool     optional: a cheap NaN/Inf check (else fields() are checked)
     model.diagnostics() -> dict   optional: one time-series row (mass, energy, forces, ...)
 
+A writer whose ``schedule`` is ``None`` writes only once, when the run ends.
 ``Simulation.run`` steps the model in chunks that end exactly where a schedule
 is due, so ``model.step(n)`` may run many steps in one kernel launch sequence.
 """
@@ -283,7 +284,7 @@ class Simulation:
 
     def _actuate(self):
         for _, act in self._actions():
-            if act.schedule(self):
+            if act.schedule is not None and act.schedule(self):
                 if isinstance(act, Callback):
                     act(self)
                 else:
@@ -300,6 +301,8 @@ class Simulation:
         if self.stop_time_s is not None:
             n = min(n, max(1, math.ceil((self.stop_time_s - m.time_s) / dt - 1e-6)) if dt else 1)
         for _, act in self._actions():
+            if act.schedule is None:
+                continue
             k = act.schedule.steps_to_next(self)
             if k is not None:
                 n = min(n, k)
@@ -354,7 +357,8 @@ class Simulation:
         if pickup:
             self._pickup(pickup)
         for _, act in self._actions():
-            act.schedule.initialize(self)
+            if act.schedule is not None:
+                act.schedule.initialize(self)
         if not pickup:
             self._actuate()
         self._check_stop()

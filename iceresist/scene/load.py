@@ -99,7 +99,7 @@ def _describe(err) -> tuple[str, bool]:
 
 def format_validation_error(exc: ValidationError, source: str) -> str:
     """One line for the first error of ``exc``: ``source: section.key: what is wrong (got value)``."""
-    errors = exc.errors()
+    errors = sorted(exc.errors(), key=lambda e: e["type"] != "extra_forbidden")  # a misspelt key first
     err = errors[0]
     loc = tuple(err["loc"])
     if err["type"] == "missing" and loc and isinstance(loc[-1], int):

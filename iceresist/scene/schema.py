@@ -151,8 +151,9 @@ class Numerics(_Section):
     backend: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` takes CUDA where a GPU is visible.")
     mach: float = Field(MACH_LATTICE, gt=0, le=MACH_LATTICE_CEILING,
                         description="Lattice velocity limit: the reference speed in lattice units, u dt/dx.")
-    u_max_m_s: float | None = Field(None, gt=0, description="Largest flow speed expected (m/s). Default: the largest "
-                                                            "speed the scene names (faces, initial flow, ship).")
+    u_max_m_s: float | None = Field(None, gt=0, description="Largest flow speed expected (m/s), e.g. of a "
+                                                            "force-driven flow; the speeds the scene names (faces, "
+                                                            "initial flow, ship, bodies) count too.")
     dt_s: float | None = Field(None, gt=0, description="Time step (s). Default: from the lattice velocity limit.")
     tau: float | None = Field(None, gt=0.5, description="Shear relaxation time (lattice scenes only; "
                                                         "instead of fluid.nu_m2_s).")
@@ -179,12 +180,22 @@ class Output(_Section):
     directory: str = Field("runs", description="Result folder (relative to the working directory).")
     fields: list[Literal[FIELD_NAMES]] = Field(["rho", "u", "flags"], description="Fields in each snapshot: "
                                                + ", ".join(f"`{n}`" for n in FIELD_NAMES) + ".")
-    fields_every_steps: int | None = Field(None, ge=1, description="Snapshot every N steps.")
+    fields_every_steps: int | None = Field(None, ge=1, description="Snapshot every N steps (and at the end). "
+                                                                    "Neither this nor fields_every_s: at the end only.")
     fields_every_s: float | None = Field(None, gt=0, description="Snapshot every t seconds of simulated time.")
     timeseries_every_steps: int = Field(10, ge=1, description="Diagnostics row (mass, kinetic energy, max |u|) "
                                                               "every N steps.")
-    checkpoint_every_steps: int | None = Field(None, ge=1, description="Checkpoint every N steps.")
+    checkpoint_every_steps: int | None = Field(None, ge=1, description="Checkpoint every N steps (a checkpoint "
+                                                                        "is always written at the end).")
     checkpoint_wall_s: float | None = Field(None, gt=0, description="Checkpoint every t seconds of wall time.")
+
+    @model_validator(mode="after")
+    def _one_field_schedule(self):
+        if self.fields_every_steps is not None and self.fields_every_s is not None:
+            raise ValueError("fields_every_s: give at most one of fields_every_steps and fields_every_s")
+        if self.checkpoint_every_steps is not None and self.checkpoint_wall_s is not None:
+            raise ValueError("checkpoint_wall_s: give at most one of checkpoint_every_steps and checkpoint_wall_s")
+        return self
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -337,14 +348,14 @@ class Scene(_Section):
         return self.domain.shape_cells()
 
     def largest_speed_m_s(self) -> float:
-        """The largest speed the scene names: ``numerics.u_max_m_s`` if given, else faces, initial flow, ship, bodies."""
-        if self.numerics.u_max_m_s is not None:
-            return self.numerics.u_max_m_s
+        """The largest speed the scene names: faces, initial flow, ship, bodies and ``numerics.u_max_m_s``."""
         speeds = [_norm(f.velocity_m_s) for _, f in self.domain.faces.items()]
         speeds.append(_norm(self.fluid.initial_velocity_m_s))
         if self.ship is not None:
             speeds.append(self.ship.speed_m_s)
         speeds += [_norm(b.velocity_m_s) for b in self.bodies]
+        if self.numerics.u_max_m_s is not None:
+            speeds.append(self.numerics.u_max_m_s)
         return max(speeds)
 
     def units(self) -> Units:

@@ -65,14 +65,14 @@ class FluidModel:
     components = ("fluid",)
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
-        from iceresist.grid.forest import BlockForest
-        from iceresist.lbm.solver import LBMSolver
-
         self.scene = scene
         self.units = scene.units()
         u = self.units
         self.shape_cells = scene.shape_cells()
         check_block_shape(self.shape_cells)
+        from iceresist.grid.forest import BlockForest
+        from iceresist.lbm.solver import LBMSolver
+
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)

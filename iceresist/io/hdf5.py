@@ -1,0 +1,230 @@
+"""The result file of one run (HDF5, h5py) with its XDMF sidecar (DESIGN.md section 8).
+
+Layout::
+
+    meta                      attrs: scene TOML, version, git revision, backend, device, precision,
+                              cells, steps, wall time, MLUPS, units ... (see :mod:`iceresist.io.meta`)
+    fields/                   attrs: shape_cells (x, y, z), dx_m, origin_m, axes = "zyx"
+      0000000100/             one snapshot, attrs: iteration, time_s
+        rho  [z, y, x]        float32 on disk
+        u    [z, y, x, 3]     float32, components (u_x, u_y, u_z)
+        flags [z, y, x]       uint8
+    timeseries/               one resizable 1-D (or (n, k)) dataset per column;
+      iteration, time_s, ...  rows appended as the run goes
+
+Datasets are stored ``[z, y, x]`` (x fastest) because XDMF/ParaView read the
+last index as x; :meth:`RunFile.read_field` returns the ``[x, y, z]`` array the
+engine uses. Every write is followed by a flush, and the XDMF sidecar is
+rewritten atomically, so a run that dies leaves a readable file holding
+everything written before.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from iceresist.io import xdmf
+
+log = logging.getLogger(__name__)
+
+_SNAP_FMT = "{:010d}"
+
+
+def _attr_value(v):
+    """h5py-storable attribute: strings, numbers and arrays as they are, anything else as JSON."""
+    if v is None:
+        return "none"
+    if isinstance(v, (str, bytes, int, float, bool, np.generic, np.ndarray)):
+        return v
+    if isinstance(v, (list, tuple)) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
+        return np.asarray(v)
+    return json.dumps(v, default=str)
+
+
+def to_disk(a: np.ndarray) -> np.ndarray:
+    """``[x, y, z(, c)]`` engine array -> ``[z, y, x(, c)]`` contiguous disk array; floats become float32."""
+    a = np.asarray(a)
+    axes = (2, 1, 0) + tuple(range(3, a.ndim))
+    out = np.ascontiguousarray(a.transpose(axes))
+    if np.issubdtype(out.dtype, np.floating):
+        out = out.astype(np.float32, copy=False)
+    elif out.dtype == np.bool_:
+        out = out.astype(np.uint8)
+    return out
+
+
+def from_disk(a: np.ndarray) -> np.ndarray:
+    """``[z, y, x(, c)]`` disk array -> ``[x, y, z(, c)]``."""
+    return np.ascontiguousarray(a.transpose((2, 1, 0) + tuple(range(3, a.ndim))))
+
+
+class RunFile:
+    """Context manager over one run's HDF5 file.
+
+    ``mode``: ``"w"`` create or overwrite, ``"x"`` create and fail if it exists, ``"a"`` continue (pickup),
+    ``"r"`` read. ``shape_cells``, ``dx_m`` and ``origin_m`` describe the grid (needed to write fields).
+    """
+
+    def __init__(self, path, mode: str = "r", *, shape_cells=None, dx_m: float = 1.0, origin_m=(0.0, 0.0, 0.0),
+                 write_xdmf: bool = True):
+        self.path = Path(path)
+        self.mode = mode
+        self.xdmf_path = self.path.with_suffix(".xdmf")
+        self._write_xdmf = write_xdmf and mode != "r"
+        self.h5 = h5py.File(self.path, mode)
+        if mode in ("w", "x", "w-"):
+            self.h5.create_group("meta")
+            self.h5.create_group("timeseries")
+            g = self.h5.create_group("fields")
+            if shape_cells is not None:
+                g.attrs["shape_cells"] = np.asarray(shape_cells, dtype=np.int64)
+            g.attrs["dx_m"] = float(dx_m)
+            g.attrs["origin_m"] = np.asarray(origin_m, dtype=np.float64)
+            g.attrs["axes"] = "zyx"
+            self.flush()
+        elif mode == "a":
+            for name in ("meta", "timeseries", "fields"):
+                self.h5.require_group(name)
+
+    # -- context manager ------------------------------------------------------------------------------
+    def __enter__(self) -> "RunFile":
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def close(self):
+        if self.h5.id.valid:
+            if self._write_xdmf:
+                self.flush()
+                self.write_xdmf()
+            self.h5.close()
+
+    def flush(self):
+        self.h5.flush()
+
+    # -- grid -----------------------------------------------------------------------------------------
+    @property
+    def shape_cells(self) -> tuple[int, int, int] | None:
+        s = self.h5["fields"].attrs.get("shape_cells")
+        return None if s is None else tuple(int(n) for n in s)
+
+    @property
+    def dx_m(self) -> float:
+        return float(self.h5["fields"].attrs.get("dx_m", 1.0))
+
+    @property
+    def origin_m(self) -> tuple[float, float, float]:
+        return tuple(float(o) for o in self.h5["fields"].attrs.get("origin_m", (0.0, 0.0, 0.0)))
+
+    # -- meta -----------------------------------------------------------------------------------------
+    def write_meta(self, **attrs):
+        """Set attributes of ``meta`` (dicts and other objects are stored as JSON text)."""
+        meta = self.h5["meta"]
+        for k, v in attrs.items():
+            meta.attrs[k] = _attr_value(v)
+        self.flush()
+
+    @property
+    def meta(self) -> dict:
+        out = {}
+        for k, v in self.h5["meta"].attrs.items():
+            out[k] = v.decode() if isinstance(v, bytes) else v
+        return out
+
+    # -- fields ---------------------------------------------------------------------------------------
+    def write_fields(self, iteration: int, time_s: float, fields: dict, units: dict | None = None):
+        """One snapshot: ``fields`` maps names to ``[x, y, z]`` or ``[x, y, z, 3]`` arrays of the grid shape."""
+        shape = self.shape_cells
+        g = self.h5["fields"].create_group(_SNAP_FMT.format(int(iteration)))
+        g.attrs["iteration"] = int(iteration)
+        g.attrs["time_s"] = float(time_s)
+        for name, arr in fields.items():
+            arr = np.asarray(arr)
+            if shape is not None and tuple(arr.shape[:3]) != shape:
+                raise ValueError(f"field {name!r} has shape {arr.shape}, the grid has {shape} cells")
+            ds = g.create_dataset(name, data=to_disk(arr))
+            if units and name in units:
+                ds.attrs["units"] = units[name]
+        self.flush()
+        if self._write_xdmf:
+            self.write_xdmf()
+
+    def snapshot_iterations(self) -> list[int]:
+        return sorted(int(k) for k in self.h5["fields"].keys())
+
+    def read_field(self, iteration: int, name: str) -> np.ndarray:
+        """A stored field as the ``[x, y, z(, c)]`` array."""
+        return from_disk(self.h5["fields"][_SNAP_FMT.format(int(iteration))][name][...])
+
+    def snapshot_time_s(self, iteration: int) -> float:
+        return float(self.h5["fields"][_SNAP_FMT.format(int(iteration))].attrs["time_s"])
+
+    def _snapshots(self):
+        snaps = []
+        for key in sorted(self.h5["fields"].keys()):
+            g = self.h5["fields"][key]
+            arrays = tuple(xdmf.Array(n, f"/fields/{key}/{n}", tuple(ds.shape), ds.dtype.str[1:])
+                           for n, ds in g.items())
+            snaps.append(xdmf.Snapshot(float(g.attrs["time_s"]), int(g.attrs["iteration"]), arrays))
+        return snaps
+
+    def write_xdmf(self):
+        """(Re)write the XDMF sidecar listing every snapshot in the file."""
+        shape = self.shape_cells
+        if shape is None:
+            return None
+        return xdmf.write(self.xdmf_path, self.path, shape, self.dx_m, self.origin_m, self._snapshots())
+
+    # -- time series ----------------------------------------------------------------------------------
+    def append_timeseries(self, row: dict, group: str = "timeseries"):
+        """Append one row; each key is a column (scalar or fixed-shape array). Missing values are NaN."""
+        g = self.h5.require_group(group)
+        n = self._rows(g)
+        for name, value in row.items():
+            v = np.asarray(value)
+            if name not in g:
+                dtype = np.int64 if name == "iteration" else np.float64
+                fill = 0 if dtype is np.int64 else np.nan
+                g.create_dataset(name, shape=(n,) + v.shape, maxshape=(None,) + v.shape, dtype=dtype,
+                                 chunks=(256,) + v.shape, fillvalue=fill)
+            ds = g[name]
+            if ds.shape[1:] != v.shape:
+                raise ValueError(f"time-series column {group}/{name} has shape {ds.shape[1:]}, got {v.shape}")
+        for name in g.keys():
+            ds = g[name]
+            ds.resize(n + 1, axis=0)
+            if name in row:
+                ds[n] = row[name]
+        self.flush()
+
+    @staticmethod
+    def _rows(g) -> int:
+        return max((g[k].shape[0] for k in g.keys()), default=0)
+
+    def timeseries(self, group: str = "timeseries") -> dict[str, np.ndarray]:
+        g = self.h5[group]
+        return {k: g[k][...] for k in g.keys()}
+
+    # -- restart --------------------------------------------------------------------------------------
+    def truncate_after(self, iteration: int):
+        """Drop snapshots and time-series rows later than ``iteration`` (a pickup rewrites them)."""
+        for key in list(self.h5["fields"].keys()):
+            if int(key) > iteration:
+                del self.h5["fields"][key]
+        for gname in list(self.h5.keys()):
+            g = self.h5[gname]
+            if isinstance(g, h5py.Group) and "iteration" in g and isinstance(g["iteration"], h5py.Dataset):
+                its = g["iteration"][...]
+                keep = int(np.searchsorted(its, iteration, side="right"))
+                for k in g.keys():
+                    g[k].resize(keep, axis=0)
+        self.flush()
+        if self._write_xdmf:
+            self.write_xdmf()

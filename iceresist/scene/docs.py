@@ -1,0 +1,237 @@
+"""The scene-key reference of ``docs/SCENES.md``, generated from the schema so the two cannot drift.
+
+``python -m iceresist.scene.docs`` prints the whole of ``docs/SCENES.md``.
+"""
+
+from __future__ import annotations
+
+import typing
+
+from pydantic import BaseModel
+from pydantic_core import PydanticUndefined
+
+from iceresist.scene import schema as S
+from iceresist.scene.load import preset_text
+
+#: (heading, model, key prefix) for each table, in file order.
+SECTIONS = [
+    ("[scene]", S.SceneInfo, "scene"),
+    ("[domain]", S.Domain, "domain"),
+    ("[domain.faces.<face>] (face = x_min, x_max, y_min, y_max, z_min, z_max)", S.Face, "domain.faces.<face>"),
+    ("[fluid]", S.Fluid, "fluid"),
+    ("[numerics]", S.Numerics, "numerics"),
+    ("[run]", S.RunSettings, "run"),
+    ("[output]", S.Output, "output"),
+    ("[free_surface] (optional)", S.FreeSurface, "free_surface"),
+    ("[ship] (optional)", S.Ship, "ship"),
+    ("[ice] (optional)", S.Ice, "ice"),
+    ("[contact] (optional)", S.Contact, "contact"),
+    ("[[bodies]] (optional, repeatable)", S.Body, "bodies[]"),
+]
+
+_UNITS = [("_m2_s", "m^2/s"), ("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_kg_m3", "kg/m^3"), ("_N_m3", "N/m^3"),
+          ("_N_m", "N/m"), ("_deg", "deg"), ("_cells", "cells"), ("_lattice", "lattice units"), ("_m", "m"),
+          ("_s", "s")]
+
+
+def _unit(name: str) -> str:
+    for suffix, unit in _UNITS:
+        if name.endswith(suffix):
+            return unit
+    return "-"
+
+
+def _allowed(field) -> str:
+    parts = []
+    for m in field.metadata:
+        for attr, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):
+            v = getattr(m, attr, None)
+            if v is not None:
+                parts.append(f"{op} {v:g}")
+        if getattr(m, "pattern", None):
+            parts.append("letters, digits, `_ . -`")
+    lits = _literals(field.annotation)
+    if lits:
+        parts.append(" \\| ".join(f"`{v}`" for v in lits))
+    ann = str(field.annotation)
+    if not parts and "tuple" in ann:
+        parts.append("3 integers >= 1" if "int" in ann else "3 numbers > 0" if "gt=0" in ann else "3 numbers")
+    return ", ".join(parts) or "any"
+
+
+def _literals(ann):
+    if typing.get_origin(ann) is typing.Literal:
+        return list(typing.get_args(ann))
+    for a in typing.get_args(ann):
+        found = _literals(a)
+        if found:
+            return found
+    return []
+
+
+def _default(field) -> str:
+    if field.is_required() or field.default is PydanticUndefined:
+        return "required"
+    d = field.default
+    if d is None:
+        return "absent"
+    if isinstance(d, BaseModel):
+        return "see table"
+    if isinstance(d, str):
+        return f'`"{d}"`'
+    if isinstance(d, (list, tuple)):
+        return "`[" + ", ".join(f'"{v}"' if isinstance(v, str) else f"{v:g}" for v in d) + "]`"
+    if isinstance(d, float):
+        return f"`{d:g}`"
+    return f"`{d}`"
+
+
+def schema_keys() -> list[str]:
+    """Every documented key, dotted (``domain.dx_m``, ``domain.faces.<face>.kind``, ``bodies[].name``)."""
+    keys = [prefix for _, _, prefix in SECTIONS]
+    for _, model, prefix in SECTIONS:
+        keys += [f"{prefix}.{name}" for name in model.model_fields]
+    return keys
+
+
+def reference_markdown() -> str:
+    """Markdown tables of every key: meaning, unit, default, allowed values."""
+    out = []
+    for heading, model, prefix in SECTIONS:
+        out.append(f"### `{prefix}` — {heading}\n\n{(model.__doc__ or '').strip()}\n\n")
+        out.append("| key | meaning | unit | default | allowed |\n|---|---|---|---|---|\n")
+        for name, field in model.model_fields.items():
+            desc = (field.description or "").replace("|", "\\|")
+            out.append(f"| `{prefix}.{name}` | {desc} | {_unit(name)} | {_default(field)} | {_allowed(field)} |\n")
+        out.append("\n")
+    return "".join(out)
+
+
+INTRO = """# Scene files
+
+A scene file is TOML. It declares the domain, the resolution, the fluid, the
+numerics, when to stop and what to write, and, optionally, the free surface,
+the ship, the ice field, the contact law and extra bodies. Run one with
+
+    iceresist run my_scene.toml [--backend auto|cpu|cuda] [--precision float32|float64]
+                                [--steps N] [--output DIR] [--force] [--pickup [CHECKPOINT]]
+
+`iceresist run cavity` (or `poiseuille`) runs a built-in scene. The result is
+`<output.directory>/<scene.name>.h5` with an XDMF sidecar `<scene.name>.xdmf`
+(open it in ParaView) and a checkpoint `<scene.name>.checkpoint.h5`. An
+existing result is never overwritten without `--force`; `--pickup` continues it
+from its checkpoint to the (new) stop criterion.
+
+## Rules
+
+* **Unknown keys are errors.** Every problem is reported on one line that
+  names the key, e.g. `scene.toml: domain.dx_m: must be > 0 (got -1)`, and the
+  command exits with status 2.
+* **Units are in the key name** (`_m`, `_s`, `_m_s`, `_kg_m3`, `_N_m`, ...).
+  With `[scene] units = "lattice"` every number is in lattice units instead
+  (cell size, time step and reference density are 1); the key names stay.
+* **Time step.** `dt = mach * dx / u_ref`, where `u_ref` is the largest speed
+  the scene names (moving faces, inlets, initial flow, ship, bodies,
+  `numerics.u_max_m_s`) or, with a free surface, the shallow-water wave speed
+  `sqrt(g h)` if that is larger. `mach` is the lattice velocity limit
+  `u dt/dx` (default 0.1, i.e. Mach 0.17 against the lattice sound speed
+  `1/sqrt(3)`). The relaxation time is `tau = 1/2 + 3 nu dt / dx^2`.
+* **Refusals.** A scene that cannot run stably is refused with the fix named:
+  `tau <= 1/2`, `tau - 1/2 < numerics.min_tau_excess` (default 1e-8; a warning
+  below 1e-4, where only the cumulant operator is expected to hold), or a
+  speed above the lattice velocity limit.
+* **Blocks.** The grid is made of 8x8x8-cell blocks: each cell count must be a
+  multiple of 8 (`size_m / dx_m` is rounded to whole cells first).
+* **Optional sections** (`[free_surface]`, `[ship]`, `[ice]`, `[contact]`,
+  `[[bodies]]`): a scene that leaves them out allocates nothing for them.
+  This version of `iceresist run` runs fluid-only scenes and refuses the
+  others with a message; their keys are already fixed here.
+
+## Result file
+
+| path | content |
+|---|---|
+| `meta` (attributes) | scene TOML text, version, git revision, backend, device, precision, cells, steps, wall time, MLUPS, units, stop reason |
+| `fields/<iteration>/rho`, `u`, `pressure`, `flags` | snapshots, float32 (flags uint8), stored `[z, y, x]` (`u`: `[z, y, x, 3]`) as ParaView reads them; attributes `iteration`, `time_s`, `units` |
+| `timeseries/iteration`, `time_s`, `mass_kg`, `kinetic_energy_J`, `max_speed_m_s`, `max_lattice_speed` | one row every `output.timeseries_every_steps` |
+
+Read a field back in the engine's `[x, y, z]` order with
+`iceresist.io.RunFile(path).read_field(iteration, "u")`.
+
+## Key reference
+
+"""
+
+FULL_EXAMPLE = """# Paper case (Watanabe, Hu and Aoki 2023, section 3): the keys of a ship in a brash-ice channel.
+# `iceresist run` refuses [free_surface]/[ship]/[ice]/[contact] until the coupled engine is built.
+[scene]
+name = "b063_bow_a_c68_1kn"
+description = "B-063 Bow A, 68 % brash ice, 1 knot, model scale 1:25"
+
+[domain]
+size_m = [11.15, 1.39, 1.39]
+dx_m = 0.0434                 # a coarse uniform grid; the paper refines to 2.72 mm
+
+[domain.faces]
+x_min = "wall"
+x_max = "wall"
+y_min = "wall"
+y_max = "wall"
+z_min = "wall"
+z_max = "wall"
+
+[fluid]
+nu_m2_s = 1.0e-6
+rho_kg_m3 = 1000.0
+gravity_m_s2 = [0.0, 0.0, -9.81]
+
+[numerics]
+precision = "float32"
+backend = "auto"
+mach = 0.1
+
+[run]
+end_time_s = 20.0
+wall_time_limit_s = 86400
+
+[output]
+directory = "runs"
+fields_every_s = 0.5
+timeseries_every_steps = 10
+checkpoint_wall_s = 3600
+
+[free_surface]
+water_depth_m = 1.11
+
+[ship]
+hull = "b063"
+bow_angle_deg = 30            # Bow A; 45 for Bow B
+speed_m_s = 0.514             # 1 knot
+
+[ice]
+size_m = 0.041
+density_kg_m3 = 950.0
+count = 3136                  # 68 %: 28 x 112 cubes
+channel_width_m = 1.39
+channel_length_m = 5.56
+
+[contact]
+stiffness_N_m = 1.0e4
+restitution = 0.3
+friction_ice_ice = 0.3
+friction_ice_hull = 0.1
+"""
+
+
+def scenes_markdown() -> str:
+    """The whole of docs/SCENES.md."""
+    out = [INTRO, reference_markdown(), "## Complete examples\n\n"]
+    for name, what in (("cavity", "Lid-driven cavity in lattice units (the default scene)"),
+                       ("poiseuille", "Plane Poiseuille flow of water in SI units")):
+        out.append(f"### `{name}` — {what}\n\n```toml\n{preset_text(name).rstrip()}\n```\n\n")
+    out.append(f"### A ship in a brash-ice channel (all sections)\n\n```toml\n{FULL_EXAMPLE.rstrip()}\n```\n")
+    return "".join(out)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    print(scenes_markdown(), end="")

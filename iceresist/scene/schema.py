@@ -1,0 +1,377 @@
+"""The scene file schema: TOML sections as pydantic v2 models (DESIGN.md section 6).
+
+Every model forbids unknown keys. Key names carry their SI unit (``_m``, ``_s``,
+``_m_s``, ``_kg_m3``, ``_N_m``, ...). A scene with ``[scene] units = "lattice"``
+is written in lattice units instead: every such key is then read with
+dx = dt = rho0 = 1 (the unit suffix is kept so one schema serves both).
+
+Sections ``[free_surface]``, ``[ship]``, ``[ice]``, ``[contact]`` and
+``[[bodies]]`` are optional; a scene that leaves one out gets ``None`` (or an
+empty list) and the model builder allocates nothing for it. Cross-key rules
+raise ``ValueError("key: message")`` (``section.key`` from the root); the loader turns them into one line
+``file: section.key: message``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
+
+from iceresist.units import MACH_LATTICE, MACH_LATTICE_CEILING, MIN_TAU_EXCESS, Units, check_lattice_velocity
+
+log = logging.getLogger(__name__)
+
+Vec3 = tuple[float, float, float]
+PositiveFloat = Annotated[float, Field(gt=0)]
+FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet")
+FACE_NAMES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
+FIELD_NAMES = ("rho", "u", "pressure", "flags")
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", validate_default=True)
+
+
+def _norm(v) -> float:
+    return math.sqrt(sum(float(c) * float(c) for c in v))
+
+
+# ---------------------------------------------------------------------------------------------------------
+class SceneInfo(_Section):
+    """``[scene]``: what the case is and which unit system its numbers are in."""
+
+    name: str = Field("scene", pattern=r"^[A-Za-z0-9_.-]+$", max_length=100,
+                      description="Case name; names the result file `<name>.h5`. Letters, digits, `_ . -`.")
+    description: str = Field("", description="Free text stored in the result file.")
+    units: Literal["physical", "lattice"] = Field(
+        "physical", description="`physical`: SI units. `lattice`: every number in lattice units (dx = dt = rho0 = 1).")
+
+
+class Face(_Section):
+    """One domain face: its boundary condition."""
+
+    kind: Literal[FACE_KINDS] = Field("wall", description="Boundary condition: " + ", ".join(FACE_KINDS) + ".")
+    velocity_m_s: Vec3 = Field((0.0, 0.0, 0.0),
+                               description="Wall or inlet velocity (m/s); only for `moving_wall` and `velocity_inlet`.")
+    density_kg_m3: float | None = Field(None, gt=0,
+                                        description="Outlet density (kg/m^3); only for `pressure_outlet`. "
+                                                    "Default: the fluid density.")
+
+    @model_validator(mode="after")
+    def _kind_uses_its_keys(self):
+        if any(self.velocity_m_s) and self.kind not in ("moving_wall", "velocity_inlet"):
+            raise ValueError(f"velocity_m_s: only a moving_wall or velocity_inlet face has a velocity "
+                             f"(this face is {self.kind})")
+        if self.density_kg_m3 is not None and self.kind != "pressure_outlet":
+            raise ValueError(f"density_kg_m3: only a pressure_outlet face has a density (this face is {self.kind})")
+        return self
+
+
+class Faces(_Section):
+    """``[domain.faces]``: one boundary condition per face; write ``x_min = "periodic"`` or a table."""
+
+    x_min: Face = Field(Face(), description="Face at x = 0.")
+    x_max: Face = Field(Face(), description="Face at x = L_x.")
+    y_min: Face = Field(Face(), description="Face at y = 0.")
+    y_max: Face = Field(Face(), description="Face at y = L_y.")
+    z_min: Face = Field(Face(), description="Face at z = 0 (bottom; gravity points to -z).")
+    z_max: Face = Field(Face(), description="Face at z = L_z (top).")
+
+    @field_validator(*FACE_NAMES, mode="before")
+    @classmethod
+    def _kind_shorthand(cls, v):
+        return {"kind": v} if isinstance(v, str) else v
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        for axis, a in zip("xyz", range(3)):
+            lo, hi = getattr(self, f"{axis}_min"), getattr(self, f"{axis}_max")
+            if (lo.kind == "periodic") != (hi.kind == "periodic"):
+                raise ValueError(f"{axis}_min: periodic faces come in pairs: set both {axis}_min and {axis}_max "
+                                 f"periodic, or neither")
+            for side, face in ((f"{axis}_min", lo), (f"{axis}_max", hi)):
+                if face.kind == "moving_wall" and face.velocity_m_s[a] != 0.0:
+                    raise ValueError(f"{side}: a moving_wall slides in its own plane: velocity_m_s[{a}] must be 0")
+        return self
+
+    def items(self):
+        return [(n, getattr(self, n)) for n in FACE_NAMES]
+
+
+class Domain(_Section):
+    """``[domain]``: the box, its resolution and its faces. Give ``cells`` or ``size_m``, and ``dx_m``."""
+
+    size_m: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = Field(
+        None, description="Box size [L_x, L_y, L_z] (m); rounded to whole cells of dx_m.")
+    cells: tuple[Annotated[int, Field(ge=1)], Annotated[int, Field(ge=1)], Annotated[int, Field(ge=1)]] | None = Field(
+        None, description="Number of cells [n_x, n_y, n_z] (instead of size_m).")
+    dx_m: float | None = Field(None, gt=0, description="Cell size (m). Required in physical units; 1 in lattice units.")
+    faces: Faces = Field(Faces(), description="Boundary conditions, see `[domain.faces]`.")
+
+    @model_validator(mode="after")
+    def _one_extent(self):
+        if (self.size_m is None) == (self.cells is None):
+            raise ValueError("cells: give exactly one of cells and size_m")
+        if self.size_m is not None and self.dx_m is None:
+            raise ValueError("dx_m: size_m needs the cell size dx_m")
+        return self
+
+    def shape_cells(self) -> tuple[int, int, int]:
+        """(n_x, n_y, n_z): ``cells``, or ``size_m / dx_m`` rounded to whole cells."""
+        if self.cells is not None:
+            return tuple(int(n) for n in self.cells)
+        dx = self.dx_m
+        shape = tuple(max(1, int(round(s / dx))) for s in self.size_m)
+        if any(abs(n * dx - s) > 1e-9 * max(s, 1.0) for n, s in zip(shape, self.size_m)):
+            log.info("domain size %s m rounded to %s cells of %g m", self.size_m, shape, dx)
+        return shape
+
+
+class Fluid(_Section):
+    """``[fluid]``: the liquid and the forces on it."""
+
+    nu_m2_s: float | None = Field(None, gt=0, description="Kinematic viscosity (m^2/s); water at 20 C: 1.0e-6. "
+                                                          "Lattice scenes may give numerics.tau instead.")
+    rho_kg_m3: float | None = Field(None, gt=0, description="Density (kg/m^3). Default 1000 (physical), 1 (lattice).")
+    operator: Literal["cumulant", "bgk"] = Field(
+        "cumulant", description="Collision operator: `cumulant` (Geier et al. 2015) or `bgk` (reference).")
+    initial_velocity_m_s: Vec3 = Field((0.0, 0.0, 0.0), description="Uniform velocity at t = 0 (m/s).")
+    gravity_m_s2: Vec3 = Field((0.0, 0.0, 0.0), description="Gravitational acceleration (m/s^2), e.g. [0, 0, -9.81].")
+    body_force_N_m3: Vec3 = Field((0.0, 0.0, 0.0),
+                                  description="Uniform driving force density (N/m^3), e.g. a pressure gradient.")
+
+
+class Numerics(_Section):
+    """``[numerics]``: precision, backend and the step-size limits."""
+
+    precision: Literal["float32", "float64"] = Field("float32", description="Storage and arithmetic precision.")
+    backend: Literal["auto", "cpu", "cuda"] = Field("auto", description="`auto` takes CUDA where a GPU is visible.")
+    mach: float = Field(MACH_LATTICE, gt=0, le=MACH_LATTICE_CEILING,
+                        description="Lattice velocity limit: the reference speed in lattice units, u dt/dx.")
+    u_max_m_s: float | None = Field(None, gt=0, description="Largest flow speed expected (m/s), e.g. of a "
+                                                            "force-driven flow; the speeds the scene names (faces, "
+                                                            "initial flow, ship, bodies) count too.")
+    dt_s: float | None = Field(None, gt=0, description="Time step (s). Default: from the lattice velocity limit.")
+    tau: float | None = Field(None, gt=0.5, description="Shear relaxation time (lattice scenes only; "
+                                                        "instead of fluid.nu_m2_s).")
+    min_tau_excess: float = Field(MIN_TAU_EXCESS, gt=0, description="Smallest tau - 1/2 accepted.")
+
+
+class RunSettings(_Section):
+    """``[run]``: when to stop. At least one of ``steps`` and ``end_time_s``; the first reached stops the run."""
+
+    steps: int | None = Field(None, ge=0, description="Number of time steps.")
+    end_time_s: float | None = Field(None, ge=0, description="Simulated time to stop at (s).")
+    wall_time_limit_s: float | None = Field(None, gt=0, description="Stop (with output written) after this wall time.")
+
+    @model_validator(mode="after")
+    def _a_stop(self):
+        if self.steps is None and self.end_time_s is None:
+            raise ValueError("steps: give steps or end_time_s")
+        return self
+
+
+class Output(_Section):
+    """``[output]``: where results go and how often."""
+
+    directory: str = Field("runs", description="Result folder (relative to the working directory).")
+    fields: list[Literal[FIELD_NAMES]] = Field(["rho", "u", "flags"], description="Fields in each snapshot: "
+                                               + ", ".join(f"`{n}`" for n in FIELD_NAMES) + ".")
+    fields_every_steps: int | None = Field(None, ge=1, description="Snapshot every N steps (and at the end). "
+                                                                    "Neither this nor fields_every_s: at the end only.")
+    fields_every_s: float | None = Field(None, gt=0, description="Snapshot every t seconds of simulated time.")
+    timeseries_every_steps: int = Field(10, ge=1, description="Diagnostics row (mass, kinetic energy, max |u|) "
+                                                              "every N steps.")
+    checkpoint_every_steps: int | None = Field(None, ge=1, description="Checkpoint every N steps (a checkpoint "
+                                                                        "is always written at the end).")
+    checkpoint_wall_s: float | None = Field(None, gt=0, description="Checkpoint every t seconds of wall time.")
+
+    @model_validator(mode="after")
+    def _one_field_schedule(self):
+        if self.fields_every_steps is not None and self.fields_every_s is not None:
+            raise ValueError("fields_every_s: give at most one of fields_every_steps and fields_every_s")
+        if self.checkpoint_every_steps is not None and self.checkpoint_wall_s is not None:
+            raise ValueError("checkpoint_wall_s: give at most one of checkpoint_every_steps and checkpoint_wall_s")
+        return self
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Optional sections (later engine components). A scene without them builds none of their state.
+class FreeSurface(_Section):
+    """``[free_surface]``: phase-field free surface (paper section 2.2, eqs. 4-11)."""
+
+    water_depth_m: float = Field(..., gt=0, description="Still-water depth measured from z = 0 (m).")
+    mobility_lattice: float = Field(0.02, gt=0, description="Interface mobility M in lattice units (eq. 4, 10).")
+    interface_width_cells: float = Field(3.0, ge=1, description="Interface thickness W in cells (eq. 4).")
+
+
+class Ship(_Section):
+    """``[ship]``: the hull and its prescribed constant speed along +x (paper section 3)."""
+
+    hull: str = Field("b063", description="Built-in hull (`b063`, the NMRI model ship) or path to an STL file.")
+    bow_angle_deg: float = Field(30.0, gt=0, lt=90, description="Bow inclination (deg): 30 = Bow A, 45 = Bow B.")
+    length_m: float = Field(3.5, gt=0, description="Length overall (m).")
+    beam_m: float = Field(0.7, gt=0, description="Beam (m).")
+    draught_m: float | None = Field(None, gt=0, description="Draught (m). Default: the hull's design draught.")
+    speed_m_s: float = Field(..., ge=0, description="Ship speed (m/s); 1 knot = 0.514 m/s.")
+    start_x_m: float | None = Field(None, description="x of the bow at t = 0 (m). Default: clear of the ice channel.")
+
+
+class Ice(_Section):
+    """``[ice]``: a brash-ice channel of floating cubes (paper section 3). Give ``concentration`` or ``count``."""
+
+    size_m: float = Field(0.041, gt=0, description="Cube edge (m).")
+    density_kg_m3: float = Field(950.0, gt=0, description="Ice density (kg/m^3).")
+    concentration: float | None = Field(None, gt=0, le=1, description="Area fraction of the channel covered.")
+    count: int | None = Field(None, ge=1, description="Number of cubes (instead of concentration).")
+    channel_width_m: float | None = Field(None, gt=0, description="Channel width (m). Default: the domain width.")
+    channel_length_m: float | None = Field(None, gt=0, description="Channel length (m).")
+    channel_start_x_m: float | None = Field(None, description="x where the channel begins (m).")
+    arrangement: Literal["regular", "random"] = Field("regular", description="`regular` grid or `random` placement.")
+    seed: int = Field(0, ge=0, description="Random seed for `random` placement and jitter.")
+    spheres_per_edge: int = Field(3, ge=1, description="DEM spheres along a cube edge (clumped-sphere body).")
+
+    @model_validator(mode="after")
+    def _amount(self):
+        if (self.concentration is None) == (self.count is None):
+            raise ValueError("concentration: give exactly one of concentration and count")
+        return self
+
+
+class Contact(_Section):
+    """``[contact]``: DEM spring-dashpot contact law with Coulomb friction (paper section 2.3)."""
+
+    stiffness_N_m: float = Field(1.0e4, gt=0, description="Normal spring stiffness (N/m).")
+    tangential_stiffness_ratio: float = Field(2.0 / 7.0, gt=0, le=1, description="Tangential / normal stiffness.")
+    restitution: float = Field(0.3, gt=0, le=1, description="Normal coefficient of restitution (sets the dashpot).")
+    friction_ice_ice: float = Field(0.3, ge=0, description="Coulomb friction coefficient, ice on ice.")
+    friction_ice_hull: float = Field(0.1, ge=0, description="Coulomb friction coefficient, ice on hull.")
+    dem_safety: float = Field(0.2, gt=0, le=1, description="DEM sub-step as a fraction of the critical 2 sqrt(m/k).")
+
+
+class Body(_Section):
+    """``[[bodies]]``: an extra rigid body (box or sphere), free, fixed or moving at a prescribed velocity."""
+
+    name: str = Field(..., pattern=r"^[A-Za-z0-9_.-]+$", description="Body name (time-series column prefix).")
+    shape: Literal["box", "sphere"] = Field(..., description="`box` (edges size_m) or `sphere` (radius_m).")
+    size_m: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = Field(None, description="Box edges (m).")
+    radius_m: float | None = Field(None, gt=0, description="Sphere radius (m).")
+    position_m: Vec3 = Field(..., description="Centre at t = 0 (m).")
+    velocity_m_s: Vec3 = Field((0.0, 0.0, 0.0), description="Velocity at t = 0, or the prescribed velocity (m/s).")
+    density_kg_m3: float | None = Field(None, gt=0, description="Density (kg/m^3); needed for `free` bodies.")
+    motion: Literal["free", "prescribed", "fixed"] = Field("free", description="How the body moves.")
+
+    @model_validator(mode="after")
+    def _shape_keys(self):
+        if self.shape == "box" and self.size_m is None:
+            raise ValueError("size_m: a box needs size_m")
+        if self.shape == "sphere" and self.radius_m is None:
+            raise ValueError("radius_m: a sphere needs radius_m")
+        if self.motion == "free" and self.density_kg_m3 is None:
+            raise ValueError("density_kg_m3: a free body needs its density")
+        return self
+
+
+# ---------------------------------------------------------------------------------------------------------
+class Scene(_Section):
+    """A whole scene file. Build one with :func:`iceresist.scene.load.load_scene`."""
+
+    scene: SceneInfo = Field(SceneInfo(), description="Name, description, unit system.")
+    domain: Domain = Field(..., description="Box, resolution, faces.")
+    fluid: Fluid = Field(..., description="Viscosity, density, forces, initial flow.")
+    numerics: Numerics = Field(Numerics(), description="Precision, backend, step limits.")
+    run: RunSettings = Field(..., description="Stop criteria.")
+    output: Output = Field(Output(), description="Result files.")
+    free_surface: FreeSurface | None = Field(None, description="Optional phase-field free surface.")
+    ship: Ship | None = Field(None, description="Optional ship.")
+    ice: Ice | None = Field(None, description="Optional ice field.")
+    contact: Contact | None = Field(None, description="Optional DEM contact law (defaults apply where ice is present).")
+    bodies: list[Body] = Field([], description="Optional extra rigid bodies.")
+
+    _source_text: str = PrivateAttr("")
+    _source_name: str = PrivateAttr("scene.toml")
+
+    @model_validator(mode="after")
+    def _unit_system(self):
+        lattice = self.scene.units == "lattice"
+        if lattice:
+            if self.domain.dx_m not in (None, 1.0):
+                raise ValueError("domain.dx_m: a lattice-unit scene has dx_m = 1; leave it out")
+            if self.numerics.dt_s not in (None, 1.0):
+                raise ValueError("numerics.dt_s: a lattice-unit scene has dt_s = 1; leave it out")
+            if (self.numerics.tau is None) == (self.fluid.nu_m2_s is None):
+                raise ValueError("numerics.tau: a lattice-unit scene gives exactly one of numerics.tau "
+                                 "and fluid.nu_m2_s")
+            if self.fluid.rho_kg_m3 not in (None, 1.0):
+                raise ValueError("fluid.rho_kg_m3: a lattice-unit scene has density 1; leave it out")
+        else:
+            if self.domain.dx_m is None:
+                raise ValueError("domain.dx_m: a physical scene needs the cell size dx_m (m)")
+            if self.fluid.nu_m2_s is None:
+                raise ValueError("fluid.nu_m2_s: a physical scene needs the viscosity (water: 1.0e-6 m^2/s)")
+            if self.numerics.tau is not None:
+                raise ValueError("numerics.tau: only lattice-unit scenes give tau; physical scenes give "
+                                 "fluid.nu_m2_s")
+        if self.free_surface is not None and not any(self.fluid.gravity_m_s2):
+            raise ValueError("fluid.gravity_m_s2: a free surface needs gravity, e.g. [0, 0, -9.81]")
+        if self.ice is not None and self.free_surface is None:
+            raise ValueError("free_surface: floating ice needs a [free_surface] section (water depth)")
+        names = [b.name for b in self.bodies]
+        if len(set(names)) != len(names):
+            raise ValueError("bodies: body names must be unique")
+        return self
+
+    # -- derived values --------------------------------------------------------------------------------
+    @property
+    def source_text(self) -> str:
+        """The TOML text this scene was read from (stored in the result file)."""
+        return self._source_text
+
+    @property
+    def source_name(self) -> str:
+        return self._source_name
+
+    @property
+    def is_lattice(self) -> bool:
+        return self.scene.units == "lattice"
+
+    @property
+    def rho_kg_m3(self) -> float:
+        if self.fluid.rho_kg_m3 is not None:
+            return self.fluid.rho_kg_m3
+        return 1.0 if self.is_lattice else 1000.0
+
+    def shape_cells(self) -> tuple[int, int, int]:
+        return self.domain.shape_cells()
+
+    def largest_speed_m_s(self) -> float:
+        """The largest speed the scene names: faces, initial flow, ship, bodies and ``numerics.u_max_m_s``."""
+        speeds = [_norm(f.velocity_m_s) for _, f in self.domain.faces.items()]
+        speeds.append(_norm(self.fluid.initial_velocity_m_s))
+        if self.ship is not None:
+            speeds.append(self.ship.speed_m_s)
+        speeds += [_norm(b.velocity_m_s) for b in self.bodies]
+        if self.numerics.u_max_m_s is not None:
+            speeds.append(self.numerics.u_max_m_s)
+        return max(speeds)
+
+    def units(self) -> Units:
+        """Lattice scales of this scene; raises StabilityError when it cannot run stably."""
+        n = self.numerics
+        if self.is_lattice:
+            u = Units.lattice(tau=n.tau, nu=self.fluid.nu_m2_s, min_tau_excess=n.min_tau_excess)
+            check_lattice_velocity(self.largest_speed_m_s(), n.mach, what="the largest speed in the scene")
+            return u
+        g = _norm(self.fluid.gravity_m_s2) or 9.81
+        depth = self.free_surface.water_depth_m if self.free_surface is not None else None
+        return Units.from_physical(self.domain.dx_m, self.fluid.nu_m2_s, self.largest_speed_m_s(),
+                                   mach_lattice=n.mach, depth_m=depth, g_m_s2=g, rho0_kg_m3=self.rho_kg_m3,
+                                   dt_s=n.dt_s, min_tau_excess=n.min_tau_excess)
+
+    def optional_sections(self) -> list[str]:
+        """Names of the optional sections this scene uses."""
+        used = [k for k in ("free_surface", "ship", "ice", "contact") if getattr(self, k) is not None]
+        return used + (["bodies"] if self.bodies else [])

@@ -1,0 +1,390 @@
+"""The time loop, after Oceananigans.jl's ``Simulation``: stop criteria, callbacks and output writers on schedules.
+
+A *model* is anything with this protocol (no I/O of its own)::
+
+    model.step(n)                 advance n time steps
+    model.iteration, model.time_s current step count and simulated time (s)
+    model.dt_s                    time step (s), optional: lets time schedules land on the right step
+    model.cells                   number of lattice cells (for MLUPS)
+    model.fields() -> dict        name -> [x, y, z(, 3)] host arrays (physical units)
+    model.state() / load_state(d) everything a checkpoint needs, as a nested dict of arrays
+    model.describe() -> dict      plain values for the run metadata
+    model.is_finite() -> bool     optional: a cheap NaN/Inf check (else fields() are checked)
+    model.diagnostics() -> dict   optional: one time-series row (mass, energy, forces, ...)
+
+A writer whose ``schedule`` is ``None`` writes only once, when the run ends.
+``Simulation.run`` steps the model in chunks that end exactly where a schedule
+is due, so ``model.step(n)`` may run many steps in one kernel launch sequence.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.io.checkpoint import read_checkpoint, write_checkpoint
+from iceresist.io.meta import mlups
+
+log = logging.getLogger(__name__)
+
+
+# -- schedules ------------------------------------------------------------------------------------------
+class IterationInterval:
+    """Due every ``interval`` iterations (at iterations ``offset + k * interval``)."""
+
+    def __init__(self, interval: int, offset: int = 0):
+        if int(interval) < 1:
+            raise ValueError(f"IterationInterval needs an interval >= 1, not {interval}")
+        self.interval, self.offset = int(interval), int(offset)
+
+    def initialize(self, sim):
+        pass
+
+    def __call__(self, sim) -> bool:
+        return (sim.model.iteration - self.offset) % self.interval == 0
+
+    def steps_to_next(self, sim) -> int | None:
+        return self.interval - (sim.model.iteration - self.offset) % self.interval
+
+    def __repr__(self):
+        return f"IterationInterval({self.interval})"
+
+
+class TimeInterval:
+    """Due at the first step at or after each multiple ``k * interval_s`` of simulated time."""
+
+    def __init__(self, interval_s: float):
+        if not interval_s > 0:
+            raise ValueError(f"TimeInterval needs an interval > 0 s, not {interval_s}")
+        self.interval_s = float(interval_s)
+        self._next_k = 0
+
+    def _eps(self, sim) -> float:
+        return 1e-9 * self.interval_s + 1e-6 * (getattr(sim.model, "dt_s", 0.0) or 0.0)
+
+    def initialize(self, sim):
+        self._next_k = max(0, math.ceil((sim.model.time_s - self._eps(sim)) / self.interval_s))
+
+    def __call__(self, sim) -> bool:
+        t = sim.model.time_s
+        if t >= self._next_k * self.interval_s - self._eps(sim):
+            self._next_k = math.floor((t + self._eps(sim)) / self.interval_s) + 1
+            return True
+        return False
+
+    def steps_to_next(self, sim) -> int | None:
+        dt = getattr(sim.model, "dt_s", None)
+        if not dt:
+            return 1
+        remaining = self._next_k * self.interval_s - sim.model.time_s
+        return max(1, math.ceil(remaining / dt - 1e-6))
+
+    def __repr__(self):
+        return f"TimeInterval({self.interval_s} s)"
+
+
+class WallTimeInterval:
+    """Due once ``interval_s`` seconds of wall-clock time have passed since it was last due (or since the start)."""
+
+    def __init__(self, interval_s: float):
+        if not interval_s > 0:
+            raise ValueError(f"WallTimeInterval needs an interval > 0 s, not {interval_s}")
+        self.interval_s = float(interval_s)
+        self._last = time.perf_counter()
+
+    def initialize(self, sim):
+        self._last = time.perf_counter()
+
+    def __call__(self, sim) -> bool:
+        now = time.perf_counter()
+        if now - self._last >= self.interval_s:
+            self._last = now
+            return True
+        return False
+
+    def steps_to_next(self, sim) -> int | None:
+        return None
+
+    def __repr__(self):
+        return f"WallTimeInterval({self.interval_s} s)"
+
+
+@dataclass
+class Callback:
+    """``func(sim)`` called whenever ``schedule`` is due."""
+
+    func: Callable
+    schedule: object
+
+    def __call__(self, sim):
+        return self.func(sim)
+
+
+# -- NaN checker ----------------------------------------------------------------------------------------
+def fields_are_finite(model) -> bool:
+    check = getattr(model, "is_finite", None)
+    if check is not None:
+        return bool(check())
+    return all(np.isfinite(a).all() for a in model.fields().values() if np.issubdtype(np.asarray(a).dtype,
+                                                                                       np.floating))
+
+
+def check_finite(sim):
+    """Stop the run when the model holds NaN or Inf (default callback ``nan_checker``)."""
+    if not fields_are_finite(sim.model):
+        sim.diverge()
+
+
+# -- output writers -------------------------------------------------------------------------------------
+class FieldWriter:
+    """Snapshots of ``model.fields()`` (or the names in ``fields``) into a :class:`~iceresist.io.hdf5.RunFile`."""
+
+    def __init__(self, runfile, schedule, fields=None, *, units: dict | None = None, write_final: bool = True):
+        self.runfile, self.schedule, self.fields = runfile, schedule, fields
+        self.units, self.write_final = units, write_final
+        self.last_iteration = None
+
+    def write(self, sim):
+        model = sim.model
+        data = model.fields()
+        if self.fields is not None:
+            data = {k: data[k] for k in self.fields}
+        if not all(np.isfinite(a).all() for a in data.values() if np.issubdtype(np.asarray(a).dtype, np.floating)):
+            sim.diverge()
+            return
+        self.runfile.write_fields(model.iteration, model.time_s, data, units=self.units)
+        self.last_iteration = model.iteration
+
+    def pickup(self, sim):
+        self.runfile.truncate_after(sim.model.iteration)
+        its = self.runfile.snapshot_iterations()
+        self.last_iteration = its[-1] if its else None
+
+    def finalize(self, sim):
+        if self.write_final and not sim.diverged and self.last_iteration != sim.model.iteration:
+            self.write(sim)
+
+
+class TimeSeriesWriter:
+    """Rows ``{iteration, time_s, **diagnostics(model)}`` appended to a RunFile time-series group."""
+
+    def __init__(self, runfile, schedule, diagnostics: Callable | None = None, *, group: str = "timeseries",
+                 write_final: bool = True):
+        self.runfile, self.schedule, self.group = runfile, schedule, group
+        self.diagnostics, self.write_final = diagnostics, write_final
+        self.last_iteration = None
+
+    def write(self, sim):
+        model = sim.model
+        diag = self.diagnostics(model) if self.diagnostics is not None else (
+            model.diagnostics() if hasattr(model, "diagnostics") else {})
+        row = {"iteration": model.iteration, "time_s": model.time_s, **diag}
+        self.runfile.append_timeseries(row, self.group)
+        self.last_iteration = model.iteration
+
+    def pickup(self, sim):
+        self.runfile.truncate_after(sim.model.iteration)
+        self.last_iteration = sim.model.iteration
+
+    def finalize(self, sim):
+        if self.write_final and not sim.diverged and self.last_iteration != sim.model.iteration:
+            self.write(sim)
+
+
+class Checkpointer:
+    """The whole model state in one file ``path``, replaced atomically each time the schedule is due."""
+
+    def __init__(self, path, schedule, *, write_final: bool = True):
+        self.path, self.schedule, self.write_final = Path(path), schedule, write_final
+        self.last_iteration = None
+
+    def write(self, sim):
+        m = sim.model
+        write_checkpoint(self.path, {"model": m.state(), "iteration": np.int64(m.iteration),
+                                     "time_s": np.float64(m.time_s)})
+        self.last_iteration = m.iteration
+        log.debug("checkpoint at iteration %d -> %s", m.iteration, self.path)
+
+    def finalize(self, sim):
+        if self.write_final and not sim.diverged and self.last_iteration != sim.model.iteration:
+            self.write(sim)
+
+
+# -- the simulation -------------------------------------------------------------------------------------
+class Simulation:
+    """Run ``model`` until a stop criterion, calling ``callbacks`` and ``output_writers`` on their schedules.
+
+    Stop criteria (the first reached wins): ``stop_iteration``, ``stop_time_s`` (simulated), ``wall_time_limit_s``.
+    A NaN checker (``callbacks["nan_checker"]``, every ``nan_check_interval`` steps) stops a diverged run;
+    outputs already written stay, and no output is written from a diverged state.
+    """
+
+    def __init__(self, model, *, stop_iteration: int | None = None, stop_time_s: float | None = None,
+                 wall_time_limit_s: float | None = None, progress: bool = True, nan_check_interval: int = 100):
+        self.model = model
+        self.stop_iteration, self.stop_time_s, self.wall_time_limit_s = stop_iteration, stop_time_s, wall_time_limit_s
+        self.progress = progress
+        self.callbacks: dict[str, Callback] = {"nan_checker": Callback(check_finite,
+                                                                       IterationInterval(nan_check_interval))}
+        self.output_writers: dict[str, object] = {}
+        self.stop_reason: str | None = None
+        self.diverged = False
+        self.steps_done = 0
+        self.wall_time_s = 0.0
+        self.step_time_s = 0.0
+        self._chunk_cap = 1
+        self._start_wall = time.perf_counter()
+
+    # -- control --------------------------------------------------------------------------------------
+    def stop(self, reason: str):
+        if self.stop_reason is None:
+            self.stop_reason = reason
+
+    def diverge(self):
+        m = self.model
+        self.diverged = True
+        self.stop(f"NaN or Inf in the solution at iteration {m.iteration} (t = {m.time_s:.6g} s): the run "
+                  f"diverged; outputs written before stay. Lower the lattice velocity limit (numerics.mach), "
+                  f"refine the grid or raise the viscosity")
+
+    @property
+    def running(self) -> bool:
+        return self.stop_reason is None
+
+    @property
+    def mlups(self) -> float:
+        """Million cell updates per second over the time spent stepping (compilation of the first step included)."""
+        return mlups(getattr(self.model, "cells", 0), self.steps_done, self.step_time_s)
+
+    def _check_stop(self):
+        m = self.model
+        if self.stop_iteration is not None and m.iteration >= self.stop_iteration:
+            self.stop(f"stop iteration {self.stop_iteration} reached")
+        if self.stop_time_s is not None and m.time_s >= self.stop_time_s - 1e-6 * (getattr(m, "dt_s", 0.0) or 0.0):
+            self.stop(f"stop time {self.stop_time_s:g} s reached")
+        if self.wall_time_limit_s is not None and time.perf_counter() - self._start_wall >= self.wall_time_limit_s:
+            self.stop(f"wall time limit {self.wall_time_limit_s:g} s reached")
+
+    def _actions(self):
+        """(name, object) in call order: NaN checker, callbacks, writers, checkpointers last."""
+        acts = [("nan_checker", self.callbacks["nan_checker"])] if "nan_checker" in self.callbacks else []
+        acts += [(k, c) for k, c in self.callbacks.items() if k != "nan_checker"]
+        writers = list(self.output_writers.items())
+        acts += [(k, w) for k, w in writers if not isinstance(w, Checkpointer)]
+        acts += [(k, w) for k, w in writers if isinstance(w, Checkpointer)]
+        return acts
+
+    def _actuate(self):
+        for _, act in self._actions():
+            if act.schedule is not None and act.schedule(self):
+                if isinstance(act, Callback):
+                    act(self)
+                else:
+                    act.write(self)
+                if self.diverged:
+                    return
+
+    def _chunk(self) -> int:
+        m = self.model
+        n = self._chunk_cap
+        if self.stop_iteration is not None:
+            n = min(n, self.stop_iteration - m.iteration)
+        dt = getattr(m, "dt_s", None)
+        if self.stop_time_s is not None:
+            n = min(n, max(1, math.ceil((self.stop_time_s - m.time_s) / dt - 1e-6)) if dt else 1)
+        for _, act in self._actions():
+            if act.schedule is None:
+                continue
+            k = act.schedule.steps_to_next(self)
+            if k is not None:
+                n = min(n, k)
+        return max(1, n)
+
+    def _checkpointer(self) -> Checkpointer | None:
+        for w in self.output_writers.values():
+            if isinstance(w, Checkpointer):
+                return w
+        return None
+
+    def _pickup(self, pickup):
+        path = pickup if not isinstance(pickup, bool) else (self._checkpointer().path if self._checkpointer() else None)
+        if path is None:
+            raise InputError("pickup asked for, but there is no Checkpointer and no checkpoint path")
+        path = Path(path)
+        if not path.is_file():
+            raise InputError(f"{path}: no checkpoint to pick up from")
+        state = read_checkpoint(path)
+        self.model.load_state(state["model"])
+        log.info("picked up from %s at iteration %d", path, self.model.iteration)
+        for w in self.output_writers.values():
+            if hasattr(w, "pickup"):
+                w.pickup(self)
+            w.last_iteration = self.model.iteration
+
+    def _progress_bar(self):
+        m = self.model
+        total = None
+        if self.stop_iteration is not None:
+            total = self.stop_iteration - m.iteration
+        dt = getattr(m, "dt_s", None)
+        if self.stop_time_s is not None and dt:
+            by_time = math.ceil((self.stop_time_s - m.time_s) / dt - 1e-6)
+            total = by_time if total is None else min(total, by_time)
+        enabled = self.progress and sys.stderr.isatty()
+        if not enabled:
+            return None
+        from tqdm import tqdm
+
+        return tqdm(total=max(total, 0) if total is not None else None, unit="step", dynamic_ncols=True,
+                    file=sys.stderr)
+
+    # -- the loop -------------------------------------------------------------------------------------
+    def run(self, pickup=False):
+        """Run to a stop criterion. ``pickup``: ``True`` (the Checkpointer's file) or a checkpoint path."""
+        if self.stop_iteration is None and self.stop_time_s is None and self.wall_time_limit_s is None:
+            raise InputError("the simulation has no stop criterion: set stop_iteration, stop_time_s or "
+                             "wall_time_limit_s")
+        self.stop_reason, self.diverged = None, False
+        self._start_wall = time.perf_counter()
+        if pickup:
+            self._pickup(pickup)
+        for _, act in self._actions():
+            if act.schedule is not None:
+                act.schedule.initialize(self)
+        if not pickup:
+            self._actuate()
+        self._check_stop()
+        bar = self._progress_bar()
+        try:
+            while self.running:
+                n = self._chunk()
+                t0 = time.perf_counter()
+                self.model.step(n)
+                dt_wall = time.perf_counter() - t0
+                self.step_time_s += dt_wall
+                self.steps_done += n
+                # grow the chunk towards ~0.2 s of wall time so wall-time schedules and the bar stay responsive
+                per_step = dt_wall / n
+                self._chunk_cap = max(1, min(2 * self._chunk_cap, int(0.2 / per_step) if per_step > 0 else 1 << 20))
+                if bar is not None:
+                    bar.update(n)
+                    bar.set_postfix_str(f"{self.mlups:.1f} MLUPS", refresh=False)
+                self._actuate()
+                self._check_stop()
+            for _, w in self.output_writers.items():
+                if hasattr(w, "finalize"):
+                    w.finalize(self)
+        finally:
+            if bar is not None:
+                bar.close()
+            self.wall_time_s += time.perf_counter() - self._start_wall
+        (log.error if self.diverged else log.info)("simulation stopped: %s", self.stop_reason)
+        return self

@@ -1,0 +1,184 @@
+"""``iceresist run``: exit codes and one-line errors, overwrite protection, result files (fake model)."""
+
+import argparse
+import xml.etree.ElementTree as ET
+
+import numpy as np
+import pytest
+
+from iceresist import cli
+from iceresist.io import RunFile
+from iceresist.run import add_run_arguments
+from iceresist.scene import preset_text
+from iceresist.units import Units
+
+POISEUILLE = preset_text("poiseuille")
+
+
+def _parser():
+    """The CLI parser with the ``run`` subcommand (as wired in iceresist/cli.py)."""
+    p = _original_build_parser()
+    sub = next(a for a in p._actions if isinstance(a, argparse._SubParsersAction))
+    if "run" not in sub.choices:
+        add_run_arguments(sub.add_parser("run", help="run one scene file"))
+    return p
+
+
+_original_build_parser = cli.build_parser
+
+
+@pytest.fixture
+def main(monkeypatch, capsys):
+    monkeypatch.setattr(cli, "build_parser", _parser)
+
+    def run(*argv):
+        try:
+            rc = cli.main(["run", *map(str, argv), "--no-progress"])
+        except SystemExit as exc:  # argparse usage errors
+            rc = exc.code
+        out = capsys.readouterr()
+        return rc, out.err
+
+    return run
+
+
+def _one_line_error(rc, err, *needles):
+    assert rc == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("iceresist") and ": error: " in lines[0], err
+    assert "Traceback" not in err
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (("dx_m = 0.001", "dx_m = -1"), "domain.dx_m: must be > 0 (got -1)"),
+    (("dx_m = 0.001", "dx_m = = 1"), "TOML syntax error"),
+    (("[fluid]", "[fluid]\nviscosity = 1"), "fluid.viscosity: unknown key"),
+    (("nu_m2_s = 1.0e-6", 'nu_m2_s = "water"'), "fluid.nu_m2_s: must be a number"),
+    (("nu_m2_s = 1.0e-6", "nu_m2_s = 1.0e-16"), "below the floor"),
+    (("size_m = [0.008, 0.008, 0.016]", "size_m = [0.008, 0.008, 0.012]"), "12 cells along z is not a multiple of 8"),
+    (("[run]", "[ship]\nspeed_m_s = 0.01\n\n[run]"), "[ship] need the free-surface, DEM and coupling engine"),
+])
+def test_bad_scenes_exit_2_with_one_line(tmp_path, main, edit, needle):
+    p = tmp_path / "s.toml"
+    p.write_text(POISEUILLE.replace(*edit))
+    rc, err = main(p, "--output", tmp_path / "out")
+    _one_line_error(rc, err, str(p), needle) if "multiple of 8" not in needle else _one_line_error(rc, err, needle)
+    assert not (tmp_path / "out" / "poiseuille.h5").exists()
+
+
+def test_missing_file_and_bad_flags(tmp_path, main):
+    _one_line_error(*main(tmp_path / "nope.toml"), "no such scene file", "cavity")
+    _one_line_error(*main("poiseuille", "--steps", "-1", "--output", tmp_path), "--steps: must be >= 0")
+    _one_line_error(*main("poiseuille", "--precision", "float16"), "invalid choice")
+    _one_line_error(*main("poiseuille", "--pickup", "--output", tmp_path), "no result to continue")
+
+
+class FakeFluid:
+    """Stands in for FluidModel: the protocol plus what run.py reads (units, shape, target, precision)."""
+
+    components = ("fluid",)
+
+    def __init__(self, scene, backend=None, precision=None):
+        self.units = scene.units()
+        self.shape_cells = scene.shape_cells()
+        self.cells = int(np.prod(self.shape_cells))
+        self.precision = precision or scene.numerics.precision
+        self.target = argparse.Namespace(name="cpu")
+        self.dt_s = self.units.dt_s
+        self.iteration = 0
+        self.u = np.zeros(self.shape_cells + (3,))
+
+    @property
+    def time_s(self):
+        return self.iteration * self.dt_s
+
+    def step(self, n=1):
+        for _ in range(n):
+            self.iteration += 1
+            self.u[..., 0] += 1e-4 * np.sin(np.pi * (np.arange(self.shape_cells[2]) + 0.5) / self.shape_cells[2])
+
+    def fields(self):
+        return {"rho": np.full(self.shape_cells, 1000.0), "u": self.u.copy(), "pressure": np.zeros(self.shape_cells),
+                "flags": np.ones(self.shape_cells, np.uint8)}
+
+    @staticmethod
+    def field_units(lattice):
+        return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits"}
+
+    def diagnostics(self):
+        return {"max_speed_m_s": float(np.abs(self.u).max())}
+
+    def state(self):
+        return {"u": self.u.copy(), "iteration": np.int64(self.iteration)}
+
+    def load_state(self, d):
+        self.u, self.iteration = np.array(d["u"]), int(d["iteration"])
+
+    def describe(self):
+        return {"components": ["fluid"], "backend": "cpu", "precision": self.precision}
+
+
+@pytest.fixture
+def fake_model(monkeypatch):
+    import iceresist.model
+
+    monkeypatch.setattr(iceresist.model, "build_model", lambda scene, **kw: FakeFluid(scene, **kw))
+
+
+def test_run_writes_result_meta_fields_and_xdmf(tmp_path, main, fake_model):
+    rc, err = main("poiseuille", "--output", tmp_path, "--steps", "1200")
+    assert rc == 0, err
+    h5 = tmp_path / "poiseuille.h5"
+    with RunFile(h5) as rf:
+        m = rf.meta
+        assert m["scene_name"] == "poiseuille" and m["scene_toml"] == POISEUILLE
+        assert m["steps"] == 1200 and m["iteration"] == 1200 and m["cells"] == 8 * 8 * 16
+        assert m["stop_reason"] == "stop iteration 1200 reached" and not m["diverged"]
+        assert m["wall_time_s"] > 0 and m["mlups"] > 0 and m["precision"] == "float32"
+        assert '"dt_s": 0.01' in m["units"]
+        # fields every 5 s of simulated time = every 500 steps of 0.01 s, and the end
+        assert rf.snapshot_iterations() == [0, 500, 1000, 1200]
+        assert rf.read_field(1200, "u")[3, 3, 8, 0] == pytest.approx(1200 * 1e-4 * np.sin(np.pi * 8.5 / 16), rel=1e-6)
+        assert rf.h5["fields/0000001200/u"].attrs["units"] == "m/s"
+        assert rf.timeseries()["iteration"][-1] == 1200
+    grids = ET.parse(tmp_path / "poiseuille.xdmf").getroot().findall("Domain/Grid/Grid")
+    assert len(grids) == 4
+    assert grids[-1].find("Topology").get("Dimensions") == "17 9 9"
+    assert (tmp_path / "poiseuille.checkpoint.h5").is_file()
+
+
+def test_existing_result_is_kept_unless_force(tmp_path, main, fake_model):
+    assert main("poiseuille", "--output", tmp_path, "--steps", "10")[0] == 0
+    h5 = tmp_path / "poiseuille.h5"
+    before = h5.read_bytes()
+    _one_line_error(*main("poiseuille", "--output", tmp_path, "--steps", "20"), "already exists", "--force")
+    assert h5.read_bytes() == before
+    # --force with a start that fails (cells not a multiple of 8 is caught before any file is opened)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(POISEUILLE.replace("[0.008, 0.008, 0.016]", "[0.008, 0.008, 0.015]"))
+    import iceresist.model
+
+    iceresist.model.build_model = _real_build_model  # restored by monkeypatch at teardown
+    _one_line_error(*main(bad, "--output", tmp_path, "--force"), "multiple of 8")
+    assert h5.read_bytes() == before
+    _one_line_error(*main("poiseuille", "--output", tmp_path, "--force", "--pickup"), "exclude each other")
+
+
+from iceresist.model import build_model as _real_build_model  # noqa: E402
+
+
+def test_pickup_continues_a_result(tmp_path, main, fake_model):
+    assert main("poiseuille", "--output", tmp_path, "--steps", "700")[0] == 0
+    assert main("poiseuille", "--output", tmp_path, "--steps", "1200", "--pickup")[0] == 0
+    assert main("poiseuille", "--output", tmp_path / "straight", "--steps", "1200")[0] == 0
+    with RunFile(tmp_path / "poiseuille.h5") as a, RunFile(tmp_path / "straight" / "poiseuille.h5") as b:
+        assert a.snapshot_iterations() == [0, 500, 700, 1000, 1200]
+        assert np.array_equal(a.read_field(1200, "u"), b.read_field(1200, "u"))
+        assert a.meta["steps"] == 1200 and a.meta["iteration"] == 1200
+
+
+def test_units_of_the_preset_match_the_scene_doc():
+    u = Units.from_physical(0.001, 1e-6, 0.01)
+    assert (u.dt_s, u.tau) == pytest.approx((0.01, 0.53))

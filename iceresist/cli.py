@@ -39,6 +39,11 @@ def build_parser() -> argparse.ArgumentParser:
     d = sub.add_parser("demo", help="run the main job on the built-in default scene")
     d.add_argument("--json", action="store_true", help="machine-readable output")
     d.set_defaults(func=_cmd_demo)
+
+    from iceresist.run import add_run_arguments
+
+    r = sub.add_parser("run", help="run one scene file (SCENE.toml or a built-in scene name)")
+    add_run_arguments(r)
     return p
 
 

@@ -25,5 +25,7 @@ BC_OUTLET = 2     # anti-bounce-back at a prescribed density (pressure outlet)
 BC_OF_KIND = {"wall": BC_WALL, "moving_wall": BC_MOVING, "velocity_inlet": BC_MOVING, "pressure_outlet": BC_OUTLET}
 
 #: Which face wins where a link leaves the domain through an edge or corner shared by two faces:
-#: resting walls first (no mass through domain edges), then moving walls, inlets, outlets.
-FACE_PRIORITY = {"wall": 0, "moving_wall": 1, "velocity_inlet": 2, "pressure_outlet": 3}
+#: the velocity inlet first, so that the inflow is U * (face area) exactly (each inlet cell takes
+#: 6 U sum_{c_x = 1} w_q = U through its links, edge cells included); then resting walls, moving
+#: walls, outlets.
+FACE_PRIORITY = {"velocity_inlet": 0, "wall": 1, "moving_wall": 2, "pressure_outlet": 3}

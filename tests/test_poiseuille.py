@@ -14,7 +14,7 @@ from iceresist.backends import jit
 from iceresist.grid import BlockForest, Face
 from iceresist.lbm.solver import LBMSolver, operator_available
 
-TAU = 1.0                     # fixed for every resolution; nu = (tau - 1/2)/3 = 1/6
+TAU = 0.8                     # fixed for every resolution; nu = (tau - 1/2)/3 = 0.1
 NU = (TAU - 0.5) / 3.0
 U_MAX = 0.01                  # centre-line velocity kept fixed: force ~ 1/N^2 (diffusive scaling)
 OPERATORS = ["bgk"] + (["cumulant"] if operator_available("cumulant") else [])

@@ -111,12 +111,12 @@ def dissipation_history(n, reynolds, amplitude, t_star_end, samples_per_unit=4, 
 
 @pytest.mark.slow
 def test_taylor_green_re1600_transition():
-    """64^3, Re = 1600, U = 0.05, 20 convective times: no NaN; dissipation peak near the DNS value
-    eps* = 0.0127 at t* = 9 (van Rees et al. 2011); the under-resolved 64^3 peak is recorded in
-    docs/VALIDATION.md and held here within a loose band."""
+    """64^3, Re = 1600, U = 0.05, 20 convective times without NaN; the dissipation peak lies within
+    10 % and 1 t* of the DNS value eps* = 0.0127 at t* = 9 (Brachet et al. 1983; van Rees et al. 2011).
+    Measured (docs/VALIDATION.md): 0.01206 at t* = 8.51 (sampled every 0.25 t*), 16 min on the 2-core VM."""
     t, e, eps, tau = dissipation_history(64, 1600.0, 0.05, 20.0)
     assert np.all(np.isfinite(e))
     i = int(np.argmax(eps))
     log.info("TGV Re 1600 64^3 tau %.6f: peak eps* %.5f at t* %.2f", tau, eps[i], t[i])
-    assert 6.0 < t[i] < 11.0
-    assert 0.008 < eps[i] < 0.02
+    assert abs(t[i] - 9.0) < 1.0
+    assert eps[i] == pytest.approx(0.0127, rel=0.10)

@@ -5,7 +5,7 @@ import pytest
 
 from iceresist.grid import BlockForest, Face
 from iceresist.lbm.solver import LBMSolver
-from tests.lbm_reference import step as reference_step
+from tests.test_stream_reference import step as reference_step
 
 FACES = {
     "y-": Face("wall"), "y+": Face("moving_wall", (0.05, 0.0, 0.02)),

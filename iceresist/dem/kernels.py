@@ -28,10 +28,10 @@ from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
 from iceresist.dem.search import THREADS, build_cell_hash, build_grid_sort
 
-DRIFT_ARGS = ["h", "pos", "vel", "quat", "angmom", "omega", "inertia", "inv_meff", "kin", "pvel", "pomega",
-              "force", "torque"]
+DRIFT_ARGS = ["h", "pos", "vel", "vpred", "quat", "angmom", "omega", "inertia", "inv_meff", "kin", "pvel",
+              "pomega", "force", "torque"]
 PLACE_ARGS = ["soff", "sbody", "pos", "quat", "xs", "key", "inv_cell", "mask"]
-CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vel", "omega", "inv_mass", "kin", "mat", "start", "count",
+CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mass", "kin", "mat", "start", "count",
                 "order", "mask", "inv_cell", "walls", "n_walls", "params", "h",
                 "hp_old", "hxi_old", "hn_old", "hp_new", "hxi_new", "hn_new", "sforce", "storque", "senergy",
                 "snew", "sover"]
@@ -51,7 +51,9 @@ def build_items(target, real):
     cell_hash = build_cell_hash(target)
 
     @target.device
-    def drift(b, h, pos, vel, quat, angmom, omega, inertia, inv_meff, kin, pvel, pomega, force, torque):
+    def drift(b, h, pos, vel, vpred, quat, angmom, omega, inertia, inv_meff, kin, pvel, pomega, force, torque):
+        """Half kick, drift and free rotor; ``vpred``/``omega`` get the velocities predicted at the end of the
+        sub-step (half-step value plus h/2 of the last force), which the dashpot and friction use."""
         qw = quat[b, 0]
         qx = quat[b, 1]
         qy = quat[b, 2]
@@ -59,6 +61,7 @@ def build_items(target, real):
         if kin[b] != 0:
             for k in range(3):
                 vel[b, k] = pvel[b, k]
+                vpred[b, k] = pvel[b, k]
                 omega[b, k] = pomega[b, k]
                 pos[b, k] += h * pvel[b, k]
             qw, qx, qy, qz = spin_world(qw, qx, qy, qz, pomega[b, 0], pomega[b, 1], pomega[b, 2], h)
@@ -69,6 +72,7 @@ def build_items(target, real):
                 vel[b, k] += hh * im * force[b, k]
                 angmom[b, k] += hh * torque[b, k]
                 pos[b, k] += h * vel[b, k]
+                vpred[b, k] = vel[b, k] + hh * im * force[b, k]
             Lx = angmom[b, 0]
             Ly = angmom[b, 1]
             Lz = angmom[b, 2]
@@ -76,7 +80,8 @@ def build_items(target, real):
             i1 = inertia[b, 1]
             i2 = inertia[b, 2]
             qw, qx, qy, qz = free_rotor(qw, qx, qy, qz, Lx, Ly, Lz, i0, i1, i2, h)
-            wx, wy, wz = omega_world(qw, qx, qy, qz, Lx, Ly, Lz, i0, i1, i2)
+            wx, wy, wz = omega_world(qw, qx, qy, qz, Lx + hh * torque[b, 0], Ly + hh * torque[b, 1],
+                                     Lz + hh * torque[b, 2], i0, i1, i2)
             omega[b, 0] = wx
             omega[b, 1] = wy
             omega[b, 2] = wz
@@ -329,28 +334,38 @@ def build_items(target, real):
     return drift, place, contact, gather
 
 
+#: below this many items the CPU runs the serial build of a launcher: a parallel launch costs more than it saves
+SERIAL_BELOW = 2048
+
+
 def make_launcher(target, item, argnames, name):
-    """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA."""
+    """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA.
+
+    On the CPU a serial twin (plain ``range``) serves small n; each twin compiles on its first call."""
     args = ", ".join(argnames)
     if target.is_cuda:
         from numba import cuda
 
         src = f"def {name}(n, {args}):\n    i = cuda.grid(1)\n    if i < n:\n        item(i, {args})\n"
         ns = {"cuda": cuda, "item": item}
-    else:
-        src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
-        ns = {"prange": numba.prange, "item": item}
-    exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-    kern = target.kernel(ns[name])
+        exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
+        kern = target.kernel(ns[name])
 
-    if target.is_cuda:
         def launch(n, *a):
             if n:
                 kern[(n + THREADS - 1) // THREADS, THREADS](n, *a)
     else:
+        src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
+        ns = {"prange": numba.prange, "item": item}
+        exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
+        par = target.kernel(ns[name])
+        ser = target.kernel(ns[name], parallel=False)
+
         def launch(n, *a):
-            if n:
-                kern(n, *a)
+            if n >= SERIAL_BELOW:
+                par(n, *a)
+            elif n:
+                ser(n, *a)
     launch.__name__ = name
     return launch
 

@@ -157,6 +157,7 @@ class DEMSystem:
         h = {}
         h["pos"] = np.array([b.position for b in self._bodies], dtype=real)
         h["vel"] = np.array([b.velocity for b in self._bodies], dtype=real)
+        h["vpred"] = h["vel"].copy()
         h["quat"] = np.array([b.quat for b in self._bodies], dtype=real)
         h["kin"] = np.array([int(b.kinematic) for b in self._bodies], dtype=np.int32)
         h["mat"] = np.array([b.material for b in self._bodies], dtype=np.int32)
@@ -291,7 +292,7 @@ class DEMSystem:
         old = self._hist(self._cur)
         nxt = "b" if self._cur == "a" else "a"
         new = self._hist(nxt)
-        k["contact"](ns, d["xs"], d["srad"], d["sbody"], d["pos"], d["vel"], d["omega"], d["inv_mass"], d["kin"],
+        k["contact"](ns, d["xs"], d["srad"], d["sbody"], d["pos"], d["vpred"], d["omega"], d["inv_mass"], d["kin"],
                      d["mat"], d["start"], d["count"], d["order"], np.int64(self._mask), r(self._inv_cell),
                      d["walls"], np.int64(len(self._walls)), d["params"], r(h), *old, *new, d["sforce"],
                      d["storque"], d["senergy"], d["snew"], d["sover"])
@@ -303,7 +304,7 @@ class DEMSystem:
 
     def _substep(self, h: float):
         d, r = self._d, self.real
-        self._k["drift"](self.n_bodies, r(h), d["pos"], d["vel"], d["quat"], d["angmom"], d["omega"],
+        self._k["drift"](self.n_bodies, r(h), d["pos"], d["vel"], d["vpred"], d["quat"], d["angmom"], d["omega"],
                          d["inertia"], d["inv_meff"], d["kin"], d["pvel"], d["pomega"], d["force"], d["torque"])
         self._forces(h, 1)
 

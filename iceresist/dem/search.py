@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import cuda  # cuda.grid / cuda.atomic inside kernels (module global for the simulator)
 
 from iceresist.backends.jit import Target
 
@@ -55,8 +56,6 @@ def build_grid_sort(target: Target):
                 cursor[k] += 1
 
         return sort_cpu
-
-    from numba import cuda
 
     @target.kernel
     def zero2(nb, a, b):

@@ -76,7 +76,7 @@ def test_block_slides_above_friction_angle():
     assert abs(a_meas - a_ref) < 0.01 * a_ref
 
 
-def _free_body(omega_body, steps, dt=1e-3):
+def _free_body(omega_body):
     shape = box((0.3, 0.2, 0.1), 900.0, spheres_per_edge=2)
     s = DEMSystem(gravity_m_s2=(0, 0, 0))
     s.add_body(shape, (0, 0, 0), angular_velocity_rad_s=omega_body)
@@ -84,7 +84,7 @@ def _free_body(omega_body, steps, dt=1e-3):
 
 
 def test_free_asymmetric_clump_conserves_angular_momentum():
-    s, _ = _free_body((1.0, 2.0, 3.0), 0)
+    s, _ = _free_body((1.0, 2.0, 3.0))
     s.prime()
     L0, E0 = s.angular_momenta[0].copy(), s.kinetic_energy()
     for _ in range(100):
@@ -96,7 +96,7 @@ def test_free_asymmetric_clump_conserves_angular_momentum():
 
 @pytest.mark.slow
 def test_free_asymmetric_clump_conserves_angular_momentum_1e5_steps():
-    s, _ = _free_body((1.0, 2.0, 3.0), 0)
+    s, _ = _free_body((1.0, 2.0, 3.0))
     s.prime()
     L0, E0 = s.angular_momenta[0].copy(), s.kinetic_energy()
     for _ in range(1000):
@@ -106,7 +106,7 @@ def test_free_asymmetric_clump_conserves_angular_momentum_1e5_steps():
 
 
 def _spin_history(omega_body, t_end=8.0):
-    s, _ = _free_body(omega_body, 0)
+    s, _ = _free_body(omega_body)
     hist = []
     for _ in range(int(t_end / 0.02)):
         s.step(0.02, substeps=20)

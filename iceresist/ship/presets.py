@@ -58,7 +58,7 @@ FIDELITIES = {
     "paper": {"channel_length_m": 5.56, "spheres_per_edge": 3, "hull_spacing_m": 0.02, "hull_band_m": 0.1,
               "stiffness_N_m": 1.0e4, "dem_safety": 0.2, "sample_interval_s": 0.005, "dx_m": 0.00272},
     "quick": {"channel_length_m": 1.2, "spheres_per_edge": 2, "hull_spacing_m": 0.03, "hull_band_m": 0.06,
-              "stiffness_N_m": 5.0e3, "dem_safety": 0.3, "sample_interval_s": 0.01, "dx_m": 0.010875},
+              "stiffness_N_m": 5.0e3, "dem_safety": 0.3, "sample_interval_s": 0.004, "dx_m": 0.010875},
 }
 
 

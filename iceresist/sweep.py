@@ -33,7 +33,7 @@ log = logging.getLogger(__name__)
 SCALE = 25.0
 #: Scene overrides of the CI-sized sweep (a 0.3 m channel crossed in 0.75 s): the machinery, not the physics.
 TINY_OVERRIDES = {"ice": {"channel_length_m": 0.3}, "run": {"end_time_s": 0.75}, "contact": {"sample_interval_s": 0.002},
-                  "ship": {"steady_window_m": [4.1, 4.3], "sphere_band_m": 0.05}}
+                  "ship": {"steady_window_m": [4.1, 4.3], "sphere_band_m": 0.03, "sphere_spacing_m": 0.05}}
 
 #: Batches used where the window is too short for the automatic choice (the table says so).
 FALLBACK_BATCHES = 5

@@ -284,3 +284,21 @@ def cmd_sweep(args) -> int:
     cols = ["case", "mean_force_N", "ci95_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR", "wall_time_s"]
     log.info("sweep table %s/sweep.csv:\n%s", out, table[cols].to_string(index=False, float_format="%.4g"))
     return 0
+
+
+def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto", progress: bool = True) -> int:
+    """``iceresist demo``: the FSICR comparison of the paper's table 2, the quick tier-1 sweep of every case
+    and its report (about 6 minutes on a 2-core x86 VM)."""
+    from fsicr.cli import main as fsicr_main
+    from reports.report import write_report
+
+    rc = fsicr_main(["compare"] + (["--json"] if json_output else []))
+    table = run_sweep("quick", 1, out_dir, None, backend=backend, progress=progress)
+    html, pdf = write_report(out_dir)
+    cols = ["case", "mean_force_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR"]
+    if json_output:
+        print(table[cols].to_json(orient="records"))
+    else:
+        print(table[cols].to_string(index=False, float_format="%.4g"))
+        print(f"report: {html}\n        {pdf}")
+    return rc

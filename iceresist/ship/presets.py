@@ -10,11 +10,11 @@ Fidelities (tier 1 = DEM with water models; tier 2 = the coupled LBM-DEM):
   3 x 3 x 3 surface spheres, hull spheres 20 mm apart, k = 1e4 N/m; the run lasts until the stem reaches the
   channel end, and the steady window holds the whole waterline inside the channel. Tier 2 at the paper's
   finest cell 2.72 mm.
-* ``quick``: a 1.2 m long channel (same width, concentration and pattern), cubes of 2 x 2 x 2 corner spheres,
+* ``quick``: a 1.39 m long channel (same width, pitch and concentration: 28 x 28 cubes at 68 %), cubes of 2 x 2 x 2 corner spheres,
   hull spheres 30 mm apart up to 6 cm above the waterline, a softer contact (k = 5e3 N/m) with a larger
   sub-step; the ship stops when the stem leaves the channel. It trades away: the parallel middle body never
   runs fully in ice (the steady window starts once the bow wedge is in, so side friction along the whole
-  body is missing), a short window (about 0.6 m of travel, so a wide confidence interval), rounder cubes
+  body is missing), a short window (about 0.8 m of travel, so a wide confidence interval), rounder cubes
   and a softer contact. Runs in well under a minute per case on a 2-core x86 VM. Tier 2 at 10.9 mm cells.
 """
 
@@ -57,7 +57,7 @@ CASES = {c.name: c for c in (Case("A", 0.50, 1.0), Case("A", 0.68, 1.0), Case("A
 FIDELITIES = {
     "paper": {"channel_length_m": 5.56, "spheres_per_edge": 3, "hull_spacing_m": 0.02, "hull_band_m": 0.1,
               "stiffness_N_m": 1.0e4, "dem_safety": 0.2, "sample_interval_s": 0.005, "dx_m": 0.00272},
-    "quick": {"channel_length_m": 1.2, "spheres_per_edge": 2, "hull_spacing_m": 0.03, "hull_band_m": 0.06,
+    "quick": {"channel_length_m": 1.39, "spheres_per_edge": 2, "hull_spacing_m": 0.03, "hull_band_m": 0.06,
               "stiffness_N_m": 5.0e3, "dem_safety": 0.3, "sample_interval_s": 0.004, "dx_m": 0.010875},
 }
 

@@ -177,7 +177,14 @@ def _set_populations(solver, f: np.ndarray):
 
 
 def build_model(scene: Scene, *, backend: str | None = None, precision: str | None = None):
-    """The model of the components ``scene`` uses. Only fluid-only scenes run in this version."""
+    """The model of the components ``scene`` uses: fluid-only scenes, and tier-1 ship scenes ([ship] + [ice])."""
+    if scene.ship is not None and scene.ice is not None:
+        if scene.ship.tier != 1:
+            raise InputError(f"{scene.source_name}: ship.tier = 2 (coupled LBM-DEM) needs the free-surface LBM "
+                             f"and the coupling engine, which are not built yet: set ship.tier = 1")
+        from iceresist.tier1 import Tier1Model
+
+        return Tier1Model(scene, backend=backend, precision=precision)
     extra = scene.optional_sections()
     if extra:
         raise InputError(f"{scene.source_name}: sections {', '.join('[' + s + ']' for s in extra)} need the "

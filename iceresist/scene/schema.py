@@ -209,30 +209,72 @@ class FreeSurface(_Section):
 
 
 class Ship(_Section):
-    """``[ship]``: the hull and its prescribed constant speed along +x (paper section 3)."""
+    """``[ship]``: the hull and its prescribed constant speed along +x (paper section 3).
 
-    hull: str = Field("b063", description="Built-in hull (`b063`, the NMRI model ship) or path to an STL file.")
-    bow_angle_deg: float = Field(30.0, gt=0, lt=90, description="Bow inclination (deg): 30 = Bow A, 45 = Bow B.")
-    length_m: float = Field(3.5, gt=0, description="Length overall (m).")
+    The built-in `b063` hull is the NMRI double-ended model ship of the paper, built from these parameters
+    as a convex polyhedron (docs/SHIP.md): wall sides, a parallel middle body, wedge ends of waterline
+    half angle `waterline_angle_deg` and plane bow faces raked at `bow_angle_deg` (stern: `stern_angle_deg`).
+    """
+
+    hull: Literal["b063"] = Field("b063", description="Built-in hull: `b063`, the NMRI model ship of the paper.")
+    bow_angle_deg: float = Field(30.0, gt=0, lt=90, description="Stem rake of the bow going ahead (deg): "
+                                                               "30 = Bow A, 45 = Bow B.")
+    stern_angle_deg: float | None = Field(None, gt=0, lt=90, description="Stem rake of the other end (deg). "
+                                          "Default: the other B-063 bow (45 for Bow A, 30 for Bow B).")
+    length_m: float = Field(3.5, gt=0, description="Length overall, at the deck (m).")
     beam_m: float = Field(0.7, gt=0, description="Beam (m).")
-    draught_m: float | None = Field(None, gt=0, description="Draught (m). Default: the hull's design draught.")
+    draught_m: float = Field(0.44, gt=0, description="Draught (m); B-063: 11.0 m / 25.")
+    parallel_length_m: float = Field(1.828, ge=0, description="Length of the parallel middle body (m); "
+                                                              "B-063: 45.7 m / 25.")
+    waterline_angle_deg: float = Field(30.0, gt=0, lt=90, description="Half angle of the waterline at the "
+                                                                      "ends (deg), alpha of FSICR.")
     speed_m_s: float = Field(..., ge=0, description="Ship speed (m/s); 1 knot = 0.514 m/s.")
-    start_x_m: float | None = Field(None, description="x of the bow at t = 0 (m). Default: clear of the ice channel.")
+    start_x_m: float | None = Field(None, description="x of the stem at the waterline at t = 0 (m). "
+                                                      "Default: 0.05 m before the ice channel.")
+    centre_y_m: float | None = Field(None, description="y of the centreline (m). Default: the middle of the domain.")
+    tier: Literal[1, 2] = Field(1, description="Fidelity: 1 = DEM with water models (no flow field), "
+                                               "2 = coupled LBM-DEM (paper's method).")
+    sphere_spacing_m: float = Field(0.02, gt=0, description="DEM sphere spacing on the hull surface (m).")
+    sphere_band_m: float = Field(0.1, gt=0, description="Hull spheres are kept up to this height above the "
+                                                        "waterline (m); the dry upper hull never meets the ice.")
+    steady_window_m: tuple[float, float] | None = Field(
+        None, description="Stem positions x (m) of the steady window for the mean resistance. Default: from "
+                          "the channel start plus the waterline length (whole ship in the ice) to the channel "
+                          "end; for a channel shorter than the ship, from the channel start plus one bow length.")
+
+    @model_validator(mode="after")
+    def _window(self):
+        w = self.steady_window_m
+        if w is not None and not w[1] > w[0]:
+            raise ValueError("steady_window_m: give [x0, x1] with x1 > x0")
+        return self
 
 
 class Ice(_Section):
-    """``[ice]``: a brash-ice channel of floating cubes (paper section 3). Give ``concentration`` or ``count``."""
+    """``[ice]``: a brash-ice channel of floating cubes (paper section 3). Give ``concentration`` or ``count``.
+
+    Cubes sit on a regular pattern (docs/SHIP.md): 68 % gives 28 x 112 = 3136 cubes and 88 % gives
+    32 x 128 = 4096 in the paper's 1.39 m x 5.56 m channel; 50 % gives 24 x 96 = 2304 (the paper's 2034 is
+    read as a misprint; `count = 2034` reproduces it literally).
+    """
 
     size_m: float = Field(0.041, gt=0, description="Cube edge (m).")
     density_kg_m3: float = Field(950.0, gt=0, description="Ice density (kg/m^3).")
     concentration: float | None = Field(None, gt=0, le=1, description="Area fraction of the channel covered.")
     count: int | None = Field(None, ge=1, description="Number of cubes (instead of concentration).")
     channel_width_m: float | None = Field(None, gt=0, description="Channel width (m). Default: the domain width.")
-    channel_length_m: float | None = Field(None, gt=0, description="Channel length (m).")
-    channel_start_x_m: float | None = Field(None, description="x where the channel begins (m).")
-    arrangement: Literal["regular", "random"] = Field("regular", description="`regular` grid or `random` placement.")
+    channel_length_m: float = Field(5.56, gt=0, description="Channel length (m).")
+    channel_start_x_m: float = Field(4.0, description="x where the channel begins (m).")
+    arrangement: Literal["regular", "random"] = Field(
+        "regular", description="`regular` grid, or `random`: the grid with every cube moved by a random offset "
+                               "of up to half the gap.")
+    jitter_m: float | None = Field(None, ge=0, description="Random offset of each cube in x and y (m), capped "
+                                                           "at half the gap. Default: 0 (regular), half the gap "
+                                                           "(random).")
     seed: int = Field(0, ge=0, description="Random seed for `random` placement and jitter.")
-    spheres_per_edge: int = Field(3, ge=1, description="DEM spheres along a cube edge (clumped-sphere body).")
+    spheres_per_edge: int = Field(3, ge=2, description="DEM spheres along a cube edge (clumped-sphere body).")
+    drag_coefficient: float = Field(1.05, ge=0, description="Tier 1: quadratic drag coefficient of a floe.")
+    added_mass_coefficient: float = Field(0.5, ge=0, description="Tier 1: added-mass coefficient of a floe.")
 
     @model_validator(mode="after")
     def _amount(self):
@@ -250,6 +292,8 @@ class Contact(_Section):
     friction_ice_ice: float = Field(0.3, ge=0, description="Coulomb friction coefficient, ice on ice.")
     friction_ice_hull: float = Field(0.1, ge=0, description="Coulomb friction coefficient, ice on hull.")
     dem_safety: float = Field(0.2, gt=0, le=1, description="DEM sub-step as a fraction of the critical 2 sqrt(m/k).")
+    sample_interval_s: float = Field(0.005, gt=0, description="Tier 1: interval of the recorded ice force (s); "
+                                                              "each record is the mean over its DEM sub-steps.")
 
 
 class Body(_Section):

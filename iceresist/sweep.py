@@ -1,0 +1,304 @@
+"""``iceresist sweep``: the paper's ship cases at one fidelity and tier, one HDF5 per case and a sweep table.
+
+Layout of a sweep folder::
+
+    DIR/sweep.json            preset, tier, cases asked for (written first)
+    DIR/cases/<case>.h5       one finished run: meta, timeseries (Fx_N, x_bow_m, ...), bodies (ice start/end)
+    DIR/sweep.csv             one row per finished case (pandas), rebuilt from the case files
+
+A case is written to ``<case>.partial.h5`` and renamed when it has finished, so a killed sweep leaves no
+half-finished result under the final name; started again, the sweep skips every finished case, runs the
+others from their start and rebuilds the table from the files, so it ends with the table an uninterrupted
+sweep gives (tier-1 runs are deterministic on a fixed backend and thread count).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from iceresist.errors import InputError
+from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
+
+log = logging.getLogger(__name__)
+
+#: Scale ratio of the paper (lambda).
+SCALE = 25.0
+#: Scene overrides of the CI-sized sweep (a 0.3 m channel crossed in 0.75 s): the machinery, not the physics.
+TINY_OVERRIDES = {"ice": {"channel_length_m": 0.3}, "run": {"end_time_s": 0.75}, "contact": {"sample_interval_s": 0.002},
+                  "ship": {"steady_window_m": [4.1, 4.3], "sphere_band_m": 0.03, "sphere_spacing_m": 0.05}}
+
+#: Batches used where the window is too short for the automatic choice (the table says so).
+FALLBACK_BATCHES = 5
+
+TIER2_MESSAGE = ("tier 2 (coupled LBM-DEM, the paper's method) needs the free-surface LBM and the coupling "
+                 "engine, which are not built yet: run the sweep with --tier 1")
+
+
+def case_path(out_dir, case: str) -> Path:
+    return Path(out_dir) / "cases" / f"{case}.h5"
+
+
+def is_finished(path: Path) -> bool:
+    """A case file under its final name that records a completed run."""
+    if not path.is_file():
+        return False
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as h5:
+            return bool(h5["meta"].attrs.get("finished", False))
+    except OSError:
+        return False
+
+
+def resolve_cases(cases) -> list[str]:
+    """Case names in matrix order; ``None`` or ``"all"`` = every case."""
+    if cases is None or cases == "all" or cases == ["all"]:
+        return list(CASES)
+    if isinstance(cases, str):
+        cases = [c for c in cases.split(",") if c]
+    names = [get_case(c).name for c in cases]
+    return [c for c in CASES if c in names]
+
+
+def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "auto", progress: bool = False,
+             overrides: dict | None = None, callbacks: dict | None = None) -> Path:
+    """Run one case to ``DIR/cases/<case>.h5`` (via a partial file renamed at the end)."""
+    from iceresist.io.hdf5 import RunFile
+    from iceresist.io.meta import run_meta
+    from iceresist.simulation import Callback, IterationInterval, Simulation, TimeSeriesWriter
+    from iceresist.tier1 import Tier1Model
+
+    if tier != 1:
+        raise InputError(TIER2_MESSAGE)
+    scene = case_scene(case, fidelity, tier, **(overrides or {}))
+    final = case_path(out_dir, case)
+    partial = final.with_name(f"{case}.partial.h5")
+    final.parent.mkdir(parents=True, exist_ok=True)
+    t_build = time.perf_counter()
+    model = Tier1Model(scene, backend=backend)
+    build_s = time.perf_counter() - t_build
+    with RunFile(partial, "w", write_xdmf=False) as rf:
+        desc = model.describe()
+        rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"], precision=model.precision,
+                                 cells=0),
+                      scene_name=scene.scene.name, case=case, fidelity=fidelity, tier=tier,
+                      bow=get_case(case).bow, concentration_nominal=get_case(case).concentration,
+                      knots=get_case(case).knots, model=desc, finished=False)
+        g = rf.h5.require_group("bodies")
+        g["initial_positions_m"] = model.ice_state()["positions_m"]
+        g["hull_vertices_m"] = model.geometry.vertices()
+        sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
+        sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
+        for name, (func, every) in (callbacks or {}).items():
+            sim.callbacks[name] = Callback(func, IterationInterval(every))
+        log.info("case %s (%s, tier %d): %d cubes, %d spheres, %.3g s simulated", case, fidelity, tier,
+                 model.layout.count, model.dem.n_spheres, scene.run.end_time_s)
+        sim.run()
+        if sim.diverged:
+            raise InputError(f"case {case}: the DEM run diverged ({sim.stop_reason}); lower contact.dem_safety")
+        st = model.ice_state()
+        g["final_positions_m"] = st["positions_m"]
+        g["final_quaternions"] = st["quaternions"]
+        rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=sim.steps_done,
+                      dem_substeps=int(model.dem.substeps_taken), wall_time_s=sim.wall_time_s + build_s,
+                      final_x_bow_m=model.x_bow_m, stop_reason=sim.stop_reason,
+                      finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
+    partial.replace(final)
+    return final
+
+
+def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "auto", progress: bool = False,
+              overrides: dict | None = None, callbacks: dict | None = None) -> pd.DataFrame:
+    """Run every case not yet finished in ``out_dir`` and write ``sweep.csv``; returns the table."""
+    if fidelity not in FIDELITIES:
+        raise InputError(f"--preset: unknown preset {fidelity!r}; use one of {', '.join(FIDELITIES)}")
+    if tier not in (1, 2):
+        raise InputError(f"--tier: must be 1 or 2 (got {tier})")
+    names = resolve_cases(cases)
+    if tier == 2:
+        raise InputError(TIER2_MESSAGE)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    info = {"preset": fidelity, "tier": tier, "cases": names, "overrides": overrides or {}}
+    info_path = out / "sweep.json"
+    if info_path.is_file():
+        old = json.loads(info_path.read_text())
+        if (old.get("preset"), old.get("tier"), old.get("overrides", {})) != (fidelity, tier, overrides or {}):
+            raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}: "
+                             f"use another --output folder")
+        info["cases"] = [c for c in CASES if c in set(old.get("cases", [])) | set(names)]
+    info_path.write_text(json.dumps(info, indent=1))
+    for case in names:
+        if is_finished(case_path(out, case)):
+            log.info("case %s: finished earlier, skipped", case)
+            continue
+        run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
+                 callbacks=callbacks)
+    table = sweep_table(out)
+    return table
+
+
+# -- post-processing of the case files ----------------------------------------------------------------------
+def _fsicr_r_ch_kN() -> dict:
+    """FSICR R_CH (kN) of the paper's table-1 ships (fsicr/ships), class IA."""
+    from importlib import resources
+
+    import fsicr
+
+    out = {}
+    for bow in "AB":
+        ship = fsicr.load_ship(str(resources.files("fsicr") / "ships" / f"b063_bow_{bow.lower()}.toml"))[0]
+        out[bow] = fsicr.r_ch(ship, "IA").r_ch_N / 1e3
+    return out
+
+
+def ice_free_width_m(positions, x_range, centre_y_m, level_m, cube_m, channel_width_m, slice_m=0.1) -> float:
+    """Median over x-slices of the width of the lane around the centreline free of floating ice (m)."""
+    p = np.asarray(positions, dtype=float)
+    floating = p[:, 2] > level_m - cube_m
+    widths = []
+    x0, x1 = x_range
+    if not x1 > x0:
+        return float("nan")
+    slice_m = min(slice_m, x1 - x0)
+    for a in np.arange(x0, x1 - 1e-9, slice_m):
+        sel = floating & (p[:, 0] >= a) & (p[:, 0] < a + slice_m)
+        y = p[sel, 1] - centre_y_m
+        port = y[y > 0] - cube_m / 2
+        stbd = -y[y <= 0] - cube_m / 2
+        half_w = channel_width_m / 2
+        w = (port.min() if port.size else half_w) + (stbd.min() if stbd.size else half_w)
+        widths.append(max(0.0, w))
+    return float(np.median(widths)) if widths else float("nan")
+
+
+def floes_under_hull(positions, waterline_xy, x_bow_m, centre_y_m, level_m, cube_m) -> int:
+    """Cubes below the surface (top under water) within the hull's waterline outline."""
+    from matplotlib.path import Path as MplPath
+
+    p = np.asarray(positions, dtype=float)
+    outline = np.asarray(waterline_xy) + np.array([x_bow_m, centre_y_m])
+    inside = MplPath(outline).contains_points(p[:, :2])
+    submerged = p[:, 2] + cube_m / 2 < level_m
+    return int((inside & submerged).sum())
+
+
+def analyse_case(path) -> dict:
+    """One table row from a finished case file (see :func:`sweep_table` for the columns)."""
+    from iceresist.io.hdf5 import RunFile
+    from iceresist.post import force_to_full_scale, ice_resistance_from_timeseries
+    from iceresist.ship.hull import HullGeometry
+
+    with RunFile(path, "r") as rf:
+        meta = rf.meta
+        ts = rf.timeseries()
+        bodies = {k: rf.h5["bodies"][k][...] for k in rf.h5["bodies"].keys()}
+    model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
+    t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]  # row 0 is the state before the first step
+    window = tuple(model["steady_window_m"])
+    try:
+        sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1)
+        ci_note = "batch means"
+    except InputError as exc:  # a window shorter than 10 batches of 5 tau_int: fewer batches, said in the table
+        log.warning("%s: %s; using %d batches", meta["case"], exc, FALLBACK_BATCHES)
+        sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1,
+                                            n_batches=FALLBACK_BATCHES)
+        ci_note = f"{FALLBACK_BATCHES} batches (window short against tau_int)"
+    hull = model["hull"]
+    geom = HullGeometry(length_overall_m=hull["length_overall_m"], beam_m=hull["beam_m"], draught_m=hull["draught_m"],
+                        parallel_length_m=hull["parallel_length_m"], waterline_angle_deg=hull["waterline_angle_deg"],
+                        bow_rake_deg=hull["bow_rake_deg"], stern_rake_deg=hull["stern_rake_deg"])
+    x_bow = float(meta["final_x_bow_m"])
+    x_lo = model["channel_start_x_m"]
+    x_hi = x_bow - geom.end_length_m
+    final = bodies["final_positions_m"]
+    r_ch = _fsicr_r_ch_kN()[meta["bow"]]
+    R_kN = float(force_to_full_scale(sm.mean_N, SCALE)) / 1e3
+    return {
+        "case": meta["case"], "bow": meta["bow"], "concentration": float(model["concentration"]),
+        "knots": float(meta["knots"]), "speed_m_s": float(model["speed_m_s"]), "tier": int(meta["tier"]),
+        "fidelity": meta["fidelity"], "cubes": int(model["ice_cubes"]),
+        "mean_force_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "std_N": sm.std_N,
+        "window_x0_m": model["steady_window_m"][0], "window_x1_m": model["steady_window_m"][1],
+        "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note,
+        "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, SCALE)) / 1e3,
+        "R_CH_FSICR_kN": r_ch, "ratio_sim_FSICR": R_kN / r_ch,
+        "ice_free_width_m": ice_free_width_m(final, (x_lo, x_hi), model["centre_y_m"], model["water_level_m"],
+                                             model["cube_m"], model["channel_width_m"]),
+        "floes_under_hull": floes_under_hull(final, geom.waterline_polygon(), x_bow, model["centre_y_m"],
+                                             model["water_level_m"], model["cube_m"]),
+        "resolution_m": float(model["resolution_m"]), "cells": int(model["cells"]),
+        "spheres": int(model["spheres"]), "steps": int(meta["steps"]), "dem_substeps": int(meta["dem_substeps"]),
+        "simulated_s": float(meta["time_s"]), "wall_time_s": float(meta["wall_time_s"]),
+        "backend": model["backend"], "file": f"cases/{Path(path).name}",
+    }
+
+
+def sweep_table(out_dir) -> pd.DataFrame:
+    """The table of every finished case in ``out_dir`` (matrix order), also written to ``sweep.csv``."""
+    out = Path(out_dir)
+    rows = [analyse_case(case_path(out, c)) for c in CASES if is_finished(case_path(out, c))]
+    table = pd.DataFrame(rows)
+    table.to_csv(out / "sweep.csv", index=False, float_format="%.10g")
+    return table
+
+
+# -- command line ------------------------------------------------------------------------------------------
+def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Arguments of ``iceresist sweep``; sets ``func=cmd_sweep``."""
+    p.add_argument("--preset", default="quick", help=f"fidelity: {' | '.join(FIDELITIES)} (default quick)")
+    p.add_argument("--tier", type=int, default=1, help="1 = DEM with water models, 2 = coupled LBM-DEM")
+    p.add_argument("--cases", default="all", help=f"comma-separated case names or 'all' ({', '.join(CASES)})")
+    p.add_argument("--output", metavar="DIR", help="sweep folder (default runs/sweep-<preset>-t<tier>)")
+    p.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--threads", type=int, help="CPU threads of the DEM kernels (numba)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
+    return p
+
+
+def set_threads(n: int | None):
+    if n is None:
+        return
+    import numba
+
+    if not 1 <= n <= numba.config.NUMBA_NUM_THREADS:
+        raise InputError(f"--threads: must lie in 1..{numba.config.NUMBA_NUM_THREADS} (got {n})")
+    numba.set_num_threads(n)
+
+
+def cmd_sweep(args) -> int:
+    out = args.output or f"runs/sweep-{args.preset}-t{args.tier}"
+    set_threads(args.threads)
+    table = run_sweep(args.preset, args.tier, out, args.cases, backend=args.backend,
+                      progress=not args.no_progress)
+    cols = ["case", "mean_force_N", "ci95_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR", "wall_time_s"]
+    log.info("sweep table %s/sweep.csv:\n%s", out, table[cols].to_string(index=False, float_format="%.4g"))
+    return 0
+
+
+def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto", progress: bool = True) -> int:
+    """``iceresist demo``: the FSICR comparison of the paper's table 2, the quick tier-1 sweep of every case
+    and its report (about 6 minutes on a 2-core x86 VM)."""
+    from fsicr.cli import main as fsicr_main
+    from reports.report import write_report
+
+    rc = fsicr_main(["compare"] + (["--json"] if json_output else []))
+    table = run_sweep("quick", 1, out_dir, None, backend=backend, progress=progress)
+    html, pdf = write_report(out_dir)
+    cols = ["case", "mean_force_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR"]
+    if json_output:
+        print(table[cols].to_json(orient="records"))
+    else:
+        print(table[cols].to_string(index=False, float_format="%.4g"))
+        print(f"report: {html}\n        {pdf}")
+    return rc

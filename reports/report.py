@@ -1,0 +1,241 @@
+"""``iceresist report SWEEP_DIR``: the naval architect's report of a sweep, as ``report.html`` and ``report.pdf``.
+
+Reads only the files a sweep wrote (``sweep.json``, ``cases/*.h5``, the table rebuilt from them); never runs
+a simulation. The HTML is self-contained (figures embedded as base64 PNG); the PDF holds the same figures and
+tables (matplotlib ``PdfPages``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import datetime as _dt
+import io
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from iceresist.errors import InputError
+
+log = logging.getLogger(__name__)
+
+HERE = Path(__file__).parent
+STYLE = HERE / "iceresist.mplstyle"
+PAPER_TABLE2_KN = {"A": (188.0, 293.0), "B": (330.0, 355.0)}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.style.use(str(STYLE))
+    return plt
+
+
+def _png64(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+def load_case(path) -> dict:
+    """Time series, final ice positions and model description of one case file."""
+    import h5py
+
+    with h5py.File(path, "r") as h5:
+        meta = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5["meta"].attrs.items()}
+        ts = {k: h5["timeseries"][k][...] for k in h5["timeseries"].keys()}
+        bodies = {k: h5["bodies"][k][...] for k in h5["bodies"].keys()}
+    model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
+    return {"meta": meta, "ts": ts, "bodies": bodies, "model": model}
+
+
+def bow_ratios(table) -> tuple[float, float]:
+    """(simulated, FSICR) ratio Bow B / Bow A at 68 %, 1 knot; NaN where a case is missing."""
+    a = table[table.case == "A-c68-v1.0"]
+    b = table[table.case == "B-c68-v1.0"]
+    if a.empty or b.empty:
+        return float("nan"), float("nan")
+    return (float(b.R_sim_kN.iloc[0] / a.R_sim_kN.iloc[0]),
+            float(b.R_CH_FSICR_kN.iloc[0] / a.R_CH_FSICR_kN.iloc[0]))
+
+
+# -- figures ---------------------------------------------------------------------------------------------
+def fig_forces(plt, cases: dict, table):
+    n = len(cases)
+    fig, axes = plt.subplots(n, 1, figsize=(7.0, 1.6 * n + 0.4), sharex=True, squeeze=False)
+    for ax, (name, c) in zip(axes[:, 0], cases.items()):
+        x, R = c["ts"]["x_bow_m"][1:], -c["ts"]["Fx_N"][1:]
+        row = table[table.case == name].iloc[0]
+        ax.semilogy(x, np.where(R > 0, R, np.nan), color="0.3", lw=0.6)
+        ax.axvspan(row.window_x0_m, row.window_x1_m, color="tab:blue", alpha=0.08)
+        ax.hlines(row.mean_force_N, row.window_x0_m, row.window_x1_m, color="red", lw=1.5)
+        ax.set_ylabel("R [N]")
+        ax.set_title(f"{name}: mean {row.mean_force_N:.3g} N", fontsize=8, loc="left")
+    axes[-1, 0].set_xlabel("stem position x [m]")
+    return fig
+
+
+def fig_trends(plt, table):
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(7.0, 3.0))
+    conc = table[(table.bow == "A") & (table.knots == 1.0)].sort_values("concentration")
+    a1.errorbar(100 * conc.concentration, conc.mean_force_N, yerr=conc.ci95_N, marker="o", capsize=3)
+    a1.set_xlabel("ice concentration [%]")
+    a1.set_ylabel("mean ice resistance [N] (model)")
+    a1.set_title("Bow A, 1 knot", fontsize=8)
+    spd = table[(table.bow == "A") & (np.isclose(table.concentration, 0.68, atol=0.02))].sort_values("knots")
+    a2.errorbar(spd.speed_m_s, spd.mean_force_N, yerr=spd.ci95_N, marker="s", capsize=3, color="tab:green")
+    a2.set_xlabel("ship speed [m/s] (model)")
+    a2.set_title("Bow A, 68 %", fontsize=8)
+    return fig
+
+
+def fig_bows(plt, table):
+    fig, ax = plt.subplots(figsize=(5.0, 3.0))
+    rows = [table[table.case == c] for c in ("A-c68-v1.0", "B-c68-v1.0")]
+    labels, sim, ci, fs = [], [], [], []
+    for bow, r in zip("AB", rows):
+        if r.empty:
+            continue
+        labels.append(f"Bow {bow}")
+        sim.append(r.R_sim_kN.iloc[0])
+        ci.append(r.R_sim_ci95_kN.iloc[0])
+        fs.append(r.R_CH_FSICR_kN.iloc[0])
+    xs = np.arange(len(labels))
+    ax.bar(xs - 0.27, sim, 0.26, yerr=ci, capsize=3, label="simulated (this sweep)")
+    ax.bar(xs, fs, 0.26, label="FSICR R_CH")
+    ax.bar(xs + 0.27, [PAPER_TABLE2_KN[lab[-1]][0] for lab in labels], 0.26, label="paper, LBM-DEM", color="0.6")
+    ax.set_xticks(xs, labels)
+    ax.set_ylabel("full-scale ice resistance [kN]")
+    ax.legend(fontsize=7)
+    return fig
+
+
+def fig_topviews(plt, cases: dict):
+    from matplotlib.collections import PolyCollection
+
+    n = len(cases)
+    m0 = next(iter(cases.values()))["model"]
+    span = m0["channel_length_m"] + 0.8
+    fig, axes = plt.subplots(n, 1, figsize=(8.0, n * 8.0 * m0["channel_width_m"] / span + 1.0), squeeze=False,
+                             layout="constrained")
+    for ax, (name, c) in zip(axes[:, 0], cases.items()):
+        m, p = c["model"], c["bodies"]["final_positions_m"]
+        a = m["cube_m"]
+        sq = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * a / 2
+        polys = p[:, None, :2] + sq[None]
+        depth = np.clip(m["water_level_m"] - (p[:, 2] + a / 2), 0, None)
+        pc = PolyCollection(polys, array=depth, cmap="viridis_r", clim=(0, 0.1), edgecolor="none")
+        ax.add_collection(pc)
+        from iceresist.ship.hull import HullGeometry
+
+        h = m["hull"]
+        g = HullGeometry(length_overall_m=h["length_overall_m"], beam_m=h["beam_m"], draught_m=h["draught_m"],
+                         parallel_length_m=h["parallel_length_m"], waterline_angle_deg=h["waterline_angle_deg"],
+                         bow_rake_deg=h["bow_rake_deg"], stern_rake_deg=h["stern_rake_deg"])
+        wl = g.waterline_polygon() + np.array([float(c["meta"]["final_x_bow_m"]), m["centre_y_m"]])
+        ax.fill(wl[:, 0], wl[:, 1], facecolor="none", edgecolor="k", lw=1.0)
+        x0 = m["channel_start_x_m"] - 0.5
+        ax.set_xlim(x0, m["channel_start_x_m"] + m["channel_length_m"] + 0.3)
+        ax.set_ylim(m["centre_y_m"] - m["channel_width_m"] / 2, m["centre_y_m"] + m["channel_width_m"] / 2)
+        ax.set_aspect("equal")
+        ax.set_title(name, fontsize=8, loc="left")
+        ax.set_ylabel("y [m]")
+    axes[-1, 0].set_xlabel("x [m]")
+    fig.colorbar(pc, ax=axes[:, 0].tolist(), label="depth of cube top below surface [m]", shrink=0.6,
+                 orientation="horizontal")
+    return fig
+
+
+# -- tables ----------------------------------------------------------------------------------------------
+TABLE2_COLUMNS = {"case": "case", "mean_force_N": "model mean [N]", "ci95_N": "± 95 % CI [N]",
+                  "R_sim_kN": "full scale [kN]", "R_sim_ci95_kN": "± 95 % CI [kN]",
+                  "R_CH_FSICR_kN": "FSICR R_CH [kN]", "ratio_sim_FSICR": "sim/FSICR",
+                  "ice_free_width_m": "ice-free width [m]", "floes_under_hull": "floes under hull"}
+RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "cubes", "spheres": "DEM spheres",
+               "resolution_m": "resolution [m]", "cells": "cells", "steps": "records",
+               "dem_substeps": "DEM sub-steps", "simulated_s": "simulated [s]", "wall_time_s": "wall time [s]",
+               "backend": "backend", "ci_method": "CI method"}
+
+
+def _html_table(table, columns) -> str:
+    return table[list(columns)].rename(columns=columns).to_html(index=False, float_format=lambda v: f"{v:.4g}",
+                                                                 border=0)
+
+
+def _pdf_table_page(plt, table, columns, title):
+    fig, ax = plt.subplots(figsize=(11.0, 0.4 * len(table) + 1.2))
+    ax.axis("off")
+    cells = [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row] for row in table[list(columns)].values]
+    t = ax.table(cellText=cells, colLabels=list(columns.values()), loc="center")
+    t.auto_set_font_size(False)
+    t.set_fontsize(7)
+    t.scale(1.0, 1.3)
+    ax.set_title(title)
+    return fig
+
+
+def write_report(sweep_dir) -> tuple[Path, Path]:
+    """Write ``report.html`` and ``report.pdf`` into ``sweep_dir``; returns their paths."""
+    import jinja2
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    from iceresist.sweep import SCALE, case_path, sweep_table
+
+    d = Path(sweep_dir)
+    if not d.is_dir():
+        raise InputError(f"{d}: no such sweep folder; run `iceresist sweep --output {d}` first")
+    if not (d / "sweep.json").is_file():
+        raise InputError(f"{d}: not a sweep folder (no sweep.json); run `iceresist sweep --output {d}` first")
+    info = json.loads((d / "sweep.json").read_text())
+    table = sweep_table(d)
+    if table.empty:
+        raise InputError(f"{d}: no finished case yet; run `iceresist sweep --output {d}` to finish them")
+    cases = {name: load_case(case_path(d, name)) for name in table.case}
+    plt = _plt()
+    figs = {"forces": fig_forces(plt, cases, table), "trends": fig_trends(plt, table),
+            "bows": fig_bows(plt, table), "topviews": fig_topviews(plt, cases)}
+    images = {k: _png64(f) for k, f in figs.items()}
+    r_sim, r_fs = bow_ratios(table)
+    from iceresist.ship.presets import __doc__ as presets_doc
+
+    note = ""
+    if info.get("preset") == "quick":
+        note = ("Quick preset: " + presets_doc.split("* ``quick``:")[1].split("Tier 2")[0].strip()
+                .replace("\n ", "").replace("  ", " "))
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=False)
+    html = env.get_template("report.html.j2").render(
+        title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),
+        tier=info.get("tier"), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS), runs=_html_table(table, RUN_COLUMNS),
+        bow_ratio_sim=f"{r_sim:.3g}", bow_ratio_fsicr=f"{r_fs:.3g}", images=images, preset_note=note)
+    html_path, pdf_path = d / "report.html", d / "report.pdf"
+    html_path.write_text(html, encoding="utf-8")
+    with PdfPages(pdf_path) as pdf:
+        pdf.savefig(_pdf_table_page(plt, table, TABLE2_COLUMNS,
+                                    f"Full-scale ice resistance beside FSICR (lambda = {SCALE:g}); "
+                                    f"Bow B/A: sim {r_sim:.3g}, FSICR {r_fs:.3g}"))
+        for f in figs.values():
+            pdf.savefig(f)
+        pdf.savefig(_pdf_table_page(plt, table, RUN_COLUMNS, "Runs"))
+    figs["topviews"].savefig(d / "topviews.png")
+    plt.close("all")
+    log.info("report: %s, %s", html_path, pdf_path)
+    return html_path, pdf_path
+
+
+def add_report_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Arguments of ``iceresist report``; sets ``func=cmd_report``."""
+    p.add_argument("sweep_dir", metavar="SWEEP_DIR", help="folder written by `iceresist sweep`")
+    p.set_defaults(func=cmd_report)
+    return p
+
+
+def cmd_report(args) -> int:
+    html, pdf = write_report(args.sweep_dir)
+    print(f"{html}\n{pdf}")
+    return 0

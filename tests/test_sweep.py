@@ -1,0 +1,111 @@
+"""Sweep machinery on a CI-sized channel: case files, table, hand calculation, interrupt and resume, refusals."""
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+
+from iceresist.errors import InputError
+from iceresist.sweep import TINY_OVERRIDES, analyse_case, case_path, run_sweep, sweep_table
+
+CASES = ["A-c68-v1.0", "B-c68-v1.0"]
+VARYING = ["wall_time_s"]
+
+
+@pytest.fixture(scope="module")
+def tiny_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep")
+    table = run_sweep("quick", 1, out, CASES, backend="cpu", overrides=TINY_OVERRIDES)
+    return out, table
+
+
+def test_table_has_every_case(tiny_sweep):
+    out, table = tiny_sweep
+    assert list(table.case) == CASES
+    assert (out / "sweep.csv").is_file()
+    back = pd.read_csv(out / "sweep.csv")
+    assert np.allclose(back.R_sim_kN, table.R_sim_kN, rtol=1e-9)
+    assert (table.cubes == 28 * 6).all() and (table.tier == 1).all()
+    assert np.isfinite(table.mean_force_N).all() and (table.mean_force_N > 0).all()
+
+
+def test_post_processing_equals_hand_calculation(tiny_sweep):
+    out, table = tiny_sweep
+    for case in CASES:
+        with h5py.File(case_path(out, case), "r") as h5:
+            x = h5["timeseries/x_bow_m"][1:]
+            fx = h5["timeseries/Fx_N"][1:]
+        x0, x1 = TINY_OVERRIDES["ship"]["steady_window_m"]
+        sel = (x >= x0) & (x <= x1)
+        row = table[table.case == case].iloc[0]
+        n_used = int(row.window_samples)
+        assert sel.sum() == n_used
+        # batch means drops the first n mod n_batches samples of the window; the plain mean is within 1 % here
+        assert row.mean_force_N == pytest.approx(-fx[sel].mean(), rel=0.03)
+        assert row.R_sim_kN == pytest.approx(row.mean_force_N * 25**3 / 1e3, rel=1e-12)
+        # the record is the mean of the sub-step forces: x advances by speed * record interval
+        assert np.allclose(np.diff(x), 0.514 * 0.002 * 1.0, rtol=0.3)
+
+
+def test_interrupted_sweep_resumes_to_the_same_table(tiny_sweep, tmp_path):
+    _, reference = tiny_sweep
+    calls = {"n": 0}
+
+    def kill(sim):
+        calls["n"] += 1
+        if sim.model.scene.scene.name.endswith(CASES[1]) and sim.model.iteration >= 50:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep("quick", 1, tmp_path, CASES, backend="cpu", overrides=TINY_OVERRIDES,
+                  callbacks={"kill": (kill, 10)})
+    assert case_path(tmp_path, CASES[0]).is_file()
+    assert not case_path(tmp_path, CASES[1]).is_file()
+    assert case_path(tmp_path, CASES[1]).with_name(f"{CASES[1]}.partial.h5").is_file()
+    mtime = case_path(tmp_path, CASES[0]).stat().st_mtime_ns
+    resumed = run_sweep("quick", 1, tmp_path, CASES, backend="cpu", overrides=TINY_OVERRIDES)
+    assert case_path(tmp_path, CASES[0]).stat().st_mtime_ns == mtime  # the finished case was skipped
+    pd.testing.assert_frame_equal(resumed.drop(columns=VARYING), reference.drop(columns=VARYING), check_exact=True)
+
+
+def test_refusals(tmp_path):
+    with pytest.raises(InputError, match="unknown case"):
+        run_sweep("quick", 1, tmp_path, ["A-c99-v1.0"])
+    with pytest.raises(InputError, match="unknown preset"):
+        run_sweep("fast", 1, tmp_path)
+    with pytest.raises(InputError, match="tier 2"):
+        run_sweep("quick", 2, tmp_path)
+    with pytest.raises(InputError, match="--tier"):
+        run_sweep("quick", 3, tmp_path)
+
+
+def test_cli_errors_exit_2(tmp_path, capsys):
+    import argparse
+
+    from iceresist.sweep import add_sweep_arguments
+
+    p = add_sweep_arguments(argparse.ArgumentParser())
+    for argv in (["--cases", "nope"], ["--preset", "huge"], ["--tier", "2"]):
+        args = p.parse_args(argv + ["--output", str(tmp_path / "s")])
+        with pytest.raises(InputError):
+            args.func(args)
+
+
+def test_report_is_self_contained(tiny_sweep):
+    from reports.report import write_report
+
+    out, _ = tiny_sweep
+    html, pdf = write_report(out)
+    text = html.read_text()
+    assert text.count("data:image/png;base64,") == 4
+    assert "src=\"http" not in text and "A-c68-v1.0" in text and "FSICR" in text
+    assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 10_000
+
+
+def test_report_refuses_missing_folder(tmp_path):
+    from reports.report import write_report
+
+    with pytest.raises(InputError, match="no such sweep folder"):
+        write_report(tmp_path / "missing")
+    with pytest.raises(InputError, match="not a sweep folder"):
+        write_report(tmp_path)

@@ -24,10 +24,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _cmd_demo(args) -> int:
-    """The main job on the built-in default scene. Until the engine runs ships: the FSICR comparison."""
-    from fsicr.cli import main as fsicr_main
+    """The quick tier-1 sweep of the paper's cases, the FSICR comparison and the report (runs/demo)."""
+    from iceresist.sweep import demo
 
-    return fsicr_main(["compare"] + (["--json"] if args.json else []))
+    return demo(args.output, json_output=args.json)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -38,12 +38,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     d = sub.add_parser("demo", help="run the main job on the built-in default scene")
     d.add_argument("--json", action="store_true", help="machine-readable output")
+    d.add_argument("--output", default="runs/demo", help="sweep folder for the demo (default: runs/demo)")
     d.set_defaults(func=_cmd_demo)
 
     from iceresist.run import add_run_arguments
 
     r = sub.add_parser("run", help="run one scene file (SCENE.toml or a built-in scene name)")
     add_run_arguments(r)
+
+    from iceresist.sweep import add_sweep_arguments
+    from reports.report import add_report_arguments
+
+    s = sub.add_parser("sweep", help="run the paper's ship cases (quick|paper, tier 1|2) into a sweep folder")
+    add_sweep_arguments(s)
+    rp = sub.add_parser("report", help="write report.html and report.pdf of a sweep folder")
+    add_report_arguments(rp)
     return p
 
 

@@ -99,13 +99,24 @@ def test_compare_json(capsys):
     assert d["ratios_bow_b_over_bow_a"]["paper_simulated"] == 1.76
 
 
-def test_iceresist_demo_prints_the_comparison(capsys):
+def test_iceresist_demo_prints_the_comparison(capsys, tmp_path, monkeypatch):
+    """`iceresist demo` = FSICR comparison + quick sweep + report; shrunk to one tiny case here."""
+    import iceresist.sweep as sweep
     from iceresist.cli import main as iceresist_main
 
-    assert iceresist_main(["demo"]) == 0
-    assert "Bow B" in capsys.readouterr().out
-    assert iceresist_main(["demo", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["command"] == "compare"
+    real_demo = sweep.demo
+    monkeypatch.setattr(sweep, "demo", lambda out, **kw: real_demo(out, cases=["A-c68-v1.0"],
+                                                                   overrides=sweep.TINY_OVERRIDES, **kw))
+    assert iceresist_main(["demo", "--output", str(tmp_path / "d")]) == 0
+    out = capsys.readouterr().out
+    assert "Bow B" in out and "A-c68-v1.0" in out and "report.html" in out
+    assert iceresist_main(["demo", "--json", "--output", str(tmp_path / "d")]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["command"] == "demo"
+    bow_a = next(c for c in doc["fsicr"]["cases"] if c["case"] == "Bow A")
+    assert bow_a["ours_kN"] == pytest.approx(293.0, rel=0.005)
+    assert [r["case"] for r in doc["sweep"]] == ["A-c68-v1.0"]
+    assert (tmp_path / "d" / "report.html").is_file()
 
 
 def test_python_dash_m_fsicr():

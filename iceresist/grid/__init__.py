@@ -1,1 +1,5 @@
-"""grid."""
+"""Block forest: 8x8x8-cell blocks, neighbour table, Morton order (DESIGN.md section 4, paper section 2.5)."""
+
+from iceresist.grid.forest import BlockForest, Face
+
+__all__ = ["BlockForest", "Face"]

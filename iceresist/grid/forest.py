@@ -1,0 +1,269 @@
+"""A forest of 8x8x8-cell blocks ordered along the Morton curve (paper section 2.5, fig. 1).
+
+A uniform grid is a forest of blocks of one level; adaptive refinement adds
+levels to the same structure: every block stores its level and integer block
+coordinates, and the neighbour table is built from a dictionary keyed by
+``(level, bx, by, bz)``. Only one level is built today.
+
+Layout: values live per block, ``v[block, cell]`` with ``cell = x + 8*(y + 8*z)``
+(x fastest). Populations are ``f[block, q, cell]``. Blocks without any fluid
+cell are not allocated, so memory follows the fluid.
+
+Neighbour tables:
+
+* ``nbr[block, q]``: the block in lattice direction ``C[q]`` (``iceresist.lattice``
+  order), -1 where it lies outside the domain or is not allocated;
+* ``nbr_key[block, k]``: the same in the order ``k = 13 + ox + 3*oy + 9*oz`` that
+  the kernels compute from a cell offset (``ox = sx >> 3`` for ``sx`` in [-1, 8]);
+* ``link_bc[block, k]``: where ``nbr_key`` is -1, the row of the boundary table
+  (``bc_kind``, ``bc_velocity``, ``bc_density``) that applies: row 0 is a resting
+  wall (solid, unallocated block), rows 1-6 the faces x-, x+, y-, y+, z-, z+.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.grid import flags as FL
+from iceresist.lattice import C, Q, index_of
+
+BLOCK = 8
+CELLS = BLOCK ** 3
+FACE_NAMES = ("x-", "x+", "y-", "y+", "z-", "z+")
+FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet")
+
+#: Lattice index q of the block offset with key k = (ox+1) + 3*(oy+1) + 9*(oz+1).
+Q_OF_KEY = np.array([index_of(ox, oy, oz) for oz in (-1, 0, 1) for oy in (-1, 0, 1) for ox in (-1, 0, 1)],
+                    dtype=np.int64)
+
+_LOCAL = np.arange(CELLS)
+LX, LY, LZ = _LOCAL & 7, (_LOCAL >> 3) & 7, _LOCAL >> 6
+
+
+@dataclass(frozen=True)
+class Face:
+    """Boundary condition on one domain face; ``velocity`` and ``density`` in lattice units."""
+
+    kind: str
+    velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    density: float = 1.0
+
+    def __post_init__(self):
+        if self.kind not in FACE_KINDS:
+            raise InputError(f"face kind {self.kind!r} is not one of {', '.join(FACE_KINDS)}")
+        if len(tuple(self.velocity)) != 3:
+            raise InputError(f"face velocity must have 3 components, got {self.velocity!r}")
+        if not self.density > 0.0:
+            raise InputError(f"face density must be positive (lattice units), got {self.density!r}")
+
+
+def morton_key(bx, by, bz, bits: int = 21):
+    """Z-order key interleaving the bits of the block coordinates (x lowest)."""
+    bx, by, bz = (np.asarray(a, dtype=np.uint64) for a in (bx, by, bz))
+    key = np.zeros(np.broadcast(bx, by, bz).shape, dtype=np.uint64)
+    for i in range(bits):
+        one = np.uint64(1)
+        for a, arr in enumerate((bx, by, bz)):
+            key |= ((arr >> np.uint64(i)) & one) << np.uint64(3 * i + a)
+    return key
+
+
+def _check_faces(faces):
+    faces = dict(faces or {})
+    unknown = set(faces) - set(FACE_NAMES)
+    if unknown:
+        raise InputError(f"faces: unknown key(s) {sorted(unknown)}; use {', '.join(FACE_NAMES)}")
+    out = {}
+    for name in FACE_NAMES:
+        face = faces.get(name, Face("periodic"))
+        if not isinstance(face, Face):
+            raise InputError(f"faces[{name!r}] must be a Face, got {type(face).__name__}")
+        out[name] = face
+    for axis in "xyz":
+        lo, hi = out[axis + "-"], out[axis + "+"]
+        if (lo.kind == "periodic") != (hi.kind == "periodic"):
+            raise InputError(f"faces {axis}- and {axis}+: periodic faces must be paired "
+                             f"(got {lo.kind!r} and {hi.kind!r})")
+    return out
+
+
+class BlockForest:
+    """Blocks of 8x8x8 cells, Morton-ordered, with a D3Q27 neighbour table and cell flags."""
+
+    block_size = BLOCK
+
+    def __init__(self, shape_cells, faces, levels, origin, fluid_mask):
+        self.shape_cells = tuple(int(n) for n in shape_cells)
+        self.shape_blocks = tuple(n // BLOCK for n in self.shape_cells)
+        self.faces = faces
+        self.levels = np.asarray(levels, dtype=np.int32)
+        self.level = int(self.levels.max()) if self.levels.size else 0
+        self.origin = np.asarray(origin, dtype=np.int64).reshape(-1, 3)
+        self.nblocks = len(self.origin)
+        self.morton = morton_key(self.origin[:, 0], self.origin[:, 1], self.origin[:, 2])
+        self.index = {(int(lv), *map(int, o)): i for i, (lv, o) in enumerate(zip(self.levels, self.origin))}
+        self._build_boundary_table()
+        self._build_neighbours()
+        self._build_flags(np.asarray(fluid_mask, dtype=bool))
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def uniform(cls, shape_cells, faces: dict | None = None, solid: Callable | None = None, level: int = 0):
+        """A uniform forest of ``shape_cells`` (multiples of 8) cells.
+
+        ``faces``: {"x-": Face(...), ...}, default all periodic. ``solid(x, y, z)``: optional
+        callable on integer cell-index arrays returning True for solid cells; blocks
+        without fluid are not allocated.
+        """
+        shape_cells = tuple(shape_cells)
+        if len(shape_cells) != 3:
+            raise InputError(f"shape_cells must have 3 entries (nx, ny, nz), got {shape_cells!r}")
+        for axis, n in zip("xyz", shape_cells):
+            if int(n) != n or n <= 0 or n % BLOCK:
+                raise InputError(f"shape_cells {axis}: {n} cells is not a positive multiple of {BLOCK}; "
+                                 f"round the {axis} resolution to a multiple of {BLOCK}")
+        faces = _check_faces(faces)
+        nbx, nby, nbz = (int(n) // BLOCK for n in shape_cells)
+        nx, ny, _ = (int(n) for n in shape_cells)
+        if solid is None:
+            fluid_blocks = np.ones((nbx, nby, nbz, CELLS), dtype=bool)
+        else:
+            fluid_blocks = np.empty((nbx, nby, nbz, CELLS), dtype=bool)
+            x, y = np.meshgrid(np.arange(nx), np.arange(ny), indexing="ij")
+            for bz in range(nbz):   # one layer of blocks at a time bounds the memory
+                xs = np.repeat(x[:, :, None], BLOCK, axis=2)
+                ys = np.repeat(y[:, :, None], BLOCK, axis=2)
+                zs = np.broadcast_to(np.arange(bz * BLOCK, (bz + 1) * BLOCK), xs.shape)
+                mask = np.asarray(solid(xs, ys, zs), dtype=bool)
+                if mask.shape != xs.shape:
+                    raise InputError(f"solid(x, y, z) must return a mask of the shape of its inputs {xs.shape}, "
+                                     f"got {mask.shape}")
+                m = (~mask).reshape(nbx, BLOCK, nby, BLOCK, BLOCK)          # (bx, lx, by, ly, lz)
+                fluid_blocks[:, :, bz] = m.transpose(0, 2, 4, 3, 1).reshape(nbx, nby, CELLS)
+        bx, by, bz = np.meshgrid(np.arange(nbx), np.arange(nby), np.arange(nbz), indexing="ij")
+        keep = fluid_blocks.any(axis=3)
+        origin = np.stack([bx[keep], by[keep], bz[keep]], axis=1)
+        order = np.argsort(morton_key(origin[:, 0], origin[:, 1], origin[:, 2]), kind="stable")
+        origin = origin[order]
+        fluid = fluid_blocks[keep][order]
+        return cls(shape_cells, faces, np.full(len(origin), level), origin, fluid)
+
+    def _build_boundary_table(self):
+        """Rows: 0 resting wall (solids), 1-6 the faces x-, x+, y-, y+, z-, z+."""
+        kinds, vel, rho = [FL.BC_WALL], [(0.0, 0.0, 0.0)], [1.0]
+        for name in FACE_NAMES:
+            face = self.faces[name]
+            kinds.append(FL.BC_OF_KIND.get(face.kind, FL.BC_WALL))
+            vel.append(tuple(float(v) for v in face.velocity))
+            rho.append(float(face.density))
+        self.bc_kind = np.array(kinds, dtype=np.int32)
+        self.bc_velocity = np.array(vel, dtype=np.float64)
+        self.bc_density = np.array(rho, dtype=np.float64)
+
+    def _build_neighbours(self):
+        """nbr[b, q] from the (level, bx, by, bz) dictionary; periodic faces wrap, others give -1."""
+        n = np.array(self.shape_blocks)
+        nbr = np.full((self.nblocks, Q), -1, dtype=np.int32)
+        link_bc = np.zeros((self.nblocks, Q), dtype=np.int32)
+        periodic = [self.faces[a + "-"].kind == "periodic" for a in "xyz"]
+        for i in range(self.nblocks):
+            level, o = int(self.levels[i]), self.origin[i]
+            for q in range(Q):
+                t = o + C[q]
+                crossed = []
+                for a in range(3):
+                    if 0 <= t[a] < n[a]:
+                        continue
+                    if periodic[a]:
+                        t[a] %= n[a]
+                    else:
+                        crossed.append(2 * a + (1 if t[a] >= n[a] else 0))
+                if crossed:
+                    face = min(crossed, key=lambda k: (FL.FACE_PRIORITY[self.faces[FACE_NAMES[k]].kind], k))
+                    link_bc[i, q] = 1 + face
+                else:
+                    nbr[i, q] = self.index.get((level, int(t[0]), int(t[1]), int(t[2])), -1)
+        self.nbr = nbr
+        self.nbr_key = np.ascontiguousarray(nbr[:, Q_OF_KEY])
+        self.link_bc = np.ascontiguousarray(link_bc[:, Q_OF_KEY])
+
+    def pull_source(self, q: int):
+        """For every (block, cell): the block and cell that direction q pulls from (x - c_q).
+
+        Returns ``(nb, sc, bc)`` int arrays (nblocks, 512): the source block (-1 where the
+        link leaves the domain or reaches an unallocated block), the source cell, and the
+        boundary-table row used where ``nb`` is -1.
+        """
+        cx, cy, cz = (int(v) for v in C[q])
+        sx, sy, sz = LX - cx, LY - cy, LZ - cz
+        key = 13 + (sx >> 3) + 3 * (sy >> 3) + 9 * (sz >> 3)
+        sc = (sx & 7) + 8 * ((sy & 7) + 8 * (sz & 7))
+        nb = self.nbr_key[:, key]
+        bc = self.link_bc[:, key]
+        return nb, np.broadcast_to(sc, nb.shape), bc
+
+    def _build_flags(self, fluid):
+        flags = np.where(fluid, FL.FLUID, FL.SOLID).astype(np.uint8)
+        near_wall = np.zeros(fluid.shape, dtype=bool)
+        near_outlet = np.zeros(fluid.shape, dtype=bool)
+        for q in range(1, Q):
+            nb, sc, bc = self.pull_source(q)
+            inside = nb >= 0
+            src_fluid = np.zeros(fluid.shape, dtype=bool)
+            src_fluid[inside] = fluid[nb[inside], sc[inside]]
+            outlet = ~inside & (self.bc_kind[bc] == FL.BC_OUTLET)
+            near_outlet |= outlet
+            near_wall |= ~src_fluid & ~outlet
+        flags[fluid & near_wall] |= FL.NEAR_WALL
+        flags[fluid & near_outlet] |= FL.NEAR_OUTLET
+        self.flags = flags
+        self.fluid = fluid
+        self.cells = int(fluid.sum())
+
+    # ------------------------------------------------------------------ dense views
+    def to_dense(self, values):
+        """Per-block values (nblocks, 512) or (k, nblocks, 512) -> dense (nx, ny, nz) or (k, nx, ny, nz),
+        float64, NaN where no block is allocated."""
+        v = np.asarray(values, dtype=np.float64)
+        single = v.ndim == 2
+        if single:
+            v = v[None]
+        if v.shape[1:] != (self.nblocks, CELLS):
+            raise InputError(f"to_dense: values must have shape (nblocks={self.nblocks}, {CELLS}) "
+                             f"or (k, {self.nblocks}, {CELLS}), got {np.shape(values)}")
+        k = v.shape[0]
+        nbx, nby, nbz = self.shape_blocks
+        dense = np.full((k, nbx, nby, nbz, BLOCK, BLOCK, BLOCK), np.nan)
+        o = self.origin
+        dense[:, o[:, 0], o[:, 1], o[:, 2]] = v.reshape(k, self.nblocks, BLOCK, BLOCK, BLOCK).transpose(0, 1, 4, 3, 2)
+        dense = dense.transpose(0, 1, 4, 2, 5, 3, 6).reshape(k, *self.shape_cells)
+        return dense[0] if single else dense
+
+    def from_dense(self, array):
+        """Dense (nx, ny, nz) or (k, nx, ny, nz) -> per-block (nblocks, 512) or (k, nblocks, 512)."""
+        a = np.asarray(array)
+        single = a.ndim == 3
+        if single:
+            a = a[None]
+        if a.shape[1:] != self.shape_cells:
+            raise InputError(f"from_dense: array must have shape {self.shape_cells} or (k, *{self.shape_cells}), "
+                             f"got {np.shape(array)}")
+        k = a.shape[0]
+        nbx, nby, nbz = self.shape_blocks
+        b = a.reshape(k, nbx, BLOCK, nby, BLOCK, nbz, BLOCK).transpose(0, 1, 3, 5, 6, 4, 2)
+        o = self.origin
+        out = np.ascontiguousarray(b[:, o[:, 0], o[:, 1], o[:, 2]].reshape(k, self.nblocks, CELLS))
+        return out[0] if single else out
+
+    def cell_coordinates(self):
+        """Global integer cell coordinates (x, y, z), each (nblocks, 512)."""
+        o = self.origin * BLOCK
+        return o[:, 0:1] + LX, o[:, 1:2] + LY, o[:, 2:3] + LZ
+
+    def __repr__(self):
+        return (f"BlockForest(shape_cells={self.shape_cells}, nblocks={self.nblocks}, cells={self.cells}, "
+                f"level={self.level})")

@@ -1,0 +1,193 @@
+"""The LBM solver on a block forest: state, fused stream-collide steps, macroscopic fields.
+
+State is two population buffers ``f[block, q, cell]`` in the well-conditioned form
+f - w (rho0 = 1, DESIGN.md section 3), float32 by default. On CUDA the buffers
+and tables are copied to the device once and stay there; only ``macroscopic()``
+and ``mass()`` copy populations back. The buffer holds post-collision
+populations, so macroscopic values subtract half the force:
+u = (sum c f* - F/2) / rho (the half-force shift of ``iceresist.lbm.collide``).
+"""
+
+from __future__ import annotations
+
+import logging
+from functools import lru_cache
+
+import numpy as np
+
+from iceresist.backends import jit
+from iceresist.backends.launch import CellLauncher
+from iceresist.errors import InputError, StabilityError
+from iceresist.lattice import C, Q, W
+from iceresist.lbm.stream import ARGS, build_stream_collide, build_stream_collide_block
+
+log = logging.getLogger(__name__)
+
+OPERATORS = ("cumulant", "bgk")
+
+
+def collide_builder(operator: str):
+    """The collision builder ``build_collide_*(target, real)`` of an operator name."""
+    if operator == "bgk":
+        from iceresist.lbm.collide import build_collide_bgk
+
+        return build_collide_bgk
+    if operator == "cumulant":
+        try:
+            from iceresist.lbm.operators import get_collide_builder
+        except ImportError:
+            try:
+                from iceresist.lbm.cumulant import build_collide_cumulant
+            except ImportError:
+                raise InputError("operator 'cumulant' is not available in this installation; "
+                                 "use operator='bgk'") from None
+            return build_collide_cumulant
+        return get_collide_builder("cumulant")
+    raise InputError(f"operator must be one of {', '.join(OPERATORS)}, not {operator!r}")
+
+
+def operator_available(operator: str) -> bool:
+    """True where ``collide_builder(operator)`` succeeds."""
+    try:
+        collide_builder(operator)
+    except InputError:
+        return False
+    return True
+
+
+@lru_cache(maxsize=None)
+def fused_launcher(target, precision: str, operator: str) -> CellLauncher:
+    """Compile (once per target, precision, operator) the fused stream-collide launcher."""
+    real = jit.real_type(precision)
+    collide = collide_builder(operator)(target, real)
+    if target.is_cuda:
+        return CellLauncher(target, build_stream_collide(target, real, collide), ARGS)
+    return CellLauncher(target, build_stream_collide_block(target, real, collide), ARGS, per_block=True)
+
+
+def _equilibrium_minus_w(rho, ux, uy, uz):
+    """f_eq - w (paper eq. 12) computed without forming f_eq: well-conditioned for rho ~ 1."""
+    cu = [C[q, 0] * ux + C[q, 1] * uy + C[q, 2] * uz for q in range(Q)]
+    uu = ux * ux + uy * uy + uz * uz
+    return np.stack([W[q] * ((rho - 1.0) + rho * (3.0 * cu[q] + 4.5 * cu[q] ** 2 - 1.5 * uu)) for q in range(Q)])
+
+
+class LBMSolver:
+    """Fused pull stream-collide LBM (paper eqs. 1-3) on a :class:`~iceresist.grid.BlockForest`.
+
+    ``tau``: relaxation time (lattice units, > 1/2); ``force``: uniform body-force density
+    (lattice units); ``operator``: "cumulant" or "bgk"; ``precision``: storage and
+    arithmetic, "float32" or "float64"; ``target``: ``jit.cpu`` or ``jit.cuda()``.
+    """
+
+    def __init__(self, forest, *, tau: float, force=(0.0, 0.0, 0.0), operator: str = "cumulant",
+                 precision: str = "float32", target=jit.cpu):
+        if not tau > 0.5:
+            raise StabilityError(f"tau = {tau} must exceed 1/2 (lattice viscosity (tau - 1/2)/3 > 0); "
+                                 "raise the viscosity or coarsen the time step")
+        if len(tuple(force)) != 3:
+            raise InputError(f"force must have 3 components (lattice units), got {force!r}")
+        self.forest = forest
+        self.tau = float(tau)
+        self.force = tuple(float(v) for v in force)
+        self.operator = operator
+        self.precision = precision
+        self.real = jit.real_type(precision)
+        self.target = target
+        self.iteration = 0
+        self.cells = forest.cells
+        #: Bytes of population storage per cell (two buffers), also the memory traffic of one update.
+        self.bytes_per_cell = 2 * Q * np.dtype(self.real).itemsize
+        self._launch = fused_launcher(target, precision, operator)
+        real = self.real
+        tables = dict(nbr_key=forest.nbr_key.astype(np.int32), link_bc=forest.link_bc.astype(np.int32),
+                      flags=forest.flags.astype(np.uint8), bc_kind=forest.bc_kind.astype(np.int32),
+                      bc_u=forest.bc_velocity.astype(real), bc_rho=forest.bc_density.astype(real))
+        self._tables = {k: self._to_device(np.ascontiguousarray(v)) for k, v in tables.items()}
+        shape = (forest.nblocks, Q, 512)
+        self._f = [self._to_device(np.zeros(shape, dtype=real)) for _ in range(2)]
+        self._scalars = (real(1.0 / self.tau), *(real(v) for v in self.force))
+        log.info("LBM solver: %d cells in %d blocks, %s %s on %s", self.cells, forest.nblocks, operator,
+                 precision, target.name)
+
+    def _to_device(self, a):
+        if self.target.is_cuda:
+            from numba import cuda
+
+            return cuda.to_device(a)
+        return a
+
+    def _host_f(self) -> np.ndarray:
+        f = self._f[0]
+        return f.copy_to_host() if self.target.is_cuda else f
+
+    # ------------------------------------------------------------------ state
+    def initialize(self, rho=1.0, u=(0.0, 0.0, 0.0)):
+        """Set the equilibrium of density ``rho`` and velocity ``u`` (scalars or dense (nx,ny,nz) / (3,nx,ny,nz))."""
+        fo = self.forest
+        nshape = (fo.nblocks, 512)
+        rho_b = fo.from_dense(np.broadcast_to(np.asarray(rho, dtype=float), fo.shape_cells)) \
+            if np.ndim(rho) else np.full(nshape, float(rho))
+        u = np.asarray(u, dtype=float)
+        if u.shape == (3,):
+            ub = [np.full(nshape, u[a]) for a in range(3)]
+        elif u.shape == (3, *fo.shape_cells):
+            ub = list(fo.from_dense(u))
+        else:
+            raise InputError(f"initialize: u must be 3 numbers or an array (3, {', '.join(map(str, fo.shape_cells))}), "
+                             f"got shape {u.shape}")
+        feq = _equilibrium_minus_w(rho_b, *ub).transpose(1, 0, 2)      # (nblocks, 27, 512)
+        feq[np.broadcast_to(~fo.fluid[:, None, :], feq.shape)] = 0.0
+        host = np.ascontiguousarray(feq.astype(self.real))
+        if self.target.is_cuda:
+            self._f[0].copy_to_device(host)
+            self._f[1].copy_to_device(host)
+        else:
+            self._f[0][...] = host
+            self._f[1][...] = host
+        self.iteration = 0
+
+    def step(self, n: int = 1):
+        """Advance ``n`` fused stream-collide steps; the buffers swap after each."""
+        t = self._tables
+        nb = self.forest.nblocks
+        for _ in range(int(n)):
+            src, dst = self._f
+            self._launch(nb, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
+                         t["bc_rho"], *self._scalars)
+            self._f = [dst, src]
+            self.iteration += 1
+
+    def synchronize(self):
+        """Wait for the device (CUDA); a no-op on the CPU."""
+        if self.target.is_cuda:
+            from numba import cuda
+
+            cuda.synchronize()
+
+    # ------------------------------------------------------------------ diagnostics
+    def populations(self) -> np.ndarray:
+        """Host copy of the post-collision populations f - w, (nblocks, 27, 512), float64."""
+        return self._host_f().astype(np.float64)
+
+    def macroscopic_blocks(self):
+        """rho (nblocks, 512) and u (3, nblocks, 512), float64, NaN outside fluid."""
+        f = self.populations()
+        rho = 1.0 + f.sum(axis=1)
+        j = np.einsum("qa,bqc->abc", C.astype(np.float64), f)
+        u = (j - 0.5 * np.asarray(self.force)[:, None, None]) / rho
+        fluid = self.forest.fluid
+        rho[~fluid] = np.nan
+        u[:, ~fluid] = np.nan
+        return rho, u
+
+    def macroscopic(self):
+        """Density (nx, ny, nz) and velocity (3, nx, ny, nz), lattice units, float64, NaN outside fluid."""
+        rho, u = self.macroscopic_blocks()
+        return self.forest.to_dense(rho), self.forest.to_dense(u)
+
+    def mass(self) -> float:
+        """Sum of rho over the fluid cells (float64)."""
+        f = self._host_f()
+        fluid = self.forest.fluid
+        return float(self.cells + f.sum(axis=1, dtype=np.float64)[fluid].sum())

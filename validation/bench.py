@@ -1,0 +1,79 @@
+"""Benchmark dispatcher: ``python -m validation.bench NAME [--backend cpu|cuda] [--precision ...] [--n N]
+[--steps S] [--json]`` (DESIGN.md section 11).
+
+NAME selects the module ``validation.bench_NAME``, which provides ``add_arguments(parser)`` and
+``run(args) -> list[dict]``. With ``--json`` every measurement is printed as one JSON object per
+line; otherwise as a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+
+#: Benchmarks with a module of their own; any ``validation.bench_NAME`` module is found as well.
+REGISTRY = {"lbm": "validation.bench_lbm"}
+
+COLUMNS = ("name", "backend", "precision", "cells", "steps", "seconds", "mlups", "bandwidth_GBps",
+           "compile_seconds")
+
+
+def _module(name):
+    modname = REGISTRY.get(name, f"validation.bench_{name}")
+    try:
+        return importlib.import_module(modname)
+    except ModuleNotFoundError as exc:
+        if exc.name != modname:
+            raise
+        raise SystemExit(f"unknown benchmark {name!r}; known: {', '.join(sorted(REGISTRY))}") from None
+
+
+def common_parser(name: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=f"python -m validation.bench {name}")
+    p.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="cpu")
+    p.add_argument("--precision", choices=("float32", "float64"), action="append",
+                   help="repeatable; default: both")
+    p.add_argument("--n", type=int, default=64, help="cells per side of the cubic case")
+    p.add_argument("--steps", type=int, default=20, help="timed steps per measurement")
+    p.add_argument("--json", action="store_true", help="one JSON object per measurement")
+    return p
+
+
+def format_table(rows) -> str:
+    cols = [c for c in COLUMNS if any(c in r for r in rows)]
+    cols += [c for r in rows for c in r if c not in cols]
+    cols = list(dict.fromkeys(cols))
+
+    def fmt(v):
+        return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+    table = [[fmt(r.get(c, "")) for c in cols] for r in rows]
+    widths = [max(len(c), *(len(t[i]) for t in table)) for i, c in enumerate(cols)]
+    lines = ["  ".join(c.rjust(w) for c, w in zip(cols, widths))]
+    lines += ["  ".join(v.rjust(w) for v, w in zip(t, widths)) for t in table]
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0].startswith("-"):
+        raise SystemExit(f"usage: python -m validation.bench NAME [options]; NAME in {', '.join(sorted(REGISTRY))}")
+    name = argv.pop(0)
+    mod = _module(name)
+    parser = common_parser(name)
+    mod.add_arguments(parser)
+    args = parser.parse_args(argv)
+    args.precision = args.precision or ["float32", "float64"]
+    rows = mod.run(args)
+    if args.json:
+        for r in rows:
+            print(json.dumps(r))
+    else:
+        print(format_table(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

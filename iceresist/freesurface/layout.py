@@ -1,10 +1,9 @@
 """The block layout the free-surface kernels run on, and the neighbour look-up they share.
 
-Layout (DESIGN.md section 4, the same as :mod:`iceresist.grid`): 8x8x8-cell blocks,
-cell index ``c = x + 8 * (y + 8 * z)``, arrays ``a[block, component, cell]``, and a
-neighbour table ``nbr[block, q]`` giving the block at offset ``lattice.C[q]``
-(-1 outside the domain; ``nbr[b, 0] == b``). :func:`uniform_neighbours` builds
-that table for a box of equal blocks with optional periodic axes.
+Layout (DESIGN.md section 4, :class:`iceresist.grid.BlockForest`): 8x8x8-cell blocks,
+cell index ``c = x + 8 * (y + 8 * z)``, arrays ``a[block, component, cell]``, and the
+neighbour table ``forest.nbr[block, q]`` giving the block at offset ``lattice.C[q]``
+(-1 outside the domain; ``nbr[b, 0] == b``).
 
 :func:`build_neighbour` compiles the cell look-up used by every kernel here:
 ``neighbour(nbr, b, x, y, z, dx, dy, dz) -> (b2, c2)`` with ``b2 = -1`` outside, and
@@ -18,56 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from iceresist import lattice as L
+from iceresist.grid.forest import CELLS  # noqa: F401  (re-exported for the kernels)
 
-B = 8
-CELLS = B * B * B
 
 #: D3Q27 index of the offset (dx, dy, dz), stored at (dx+1) + 3 (dy+1) + 9 (dz+1).
 DIR_OF_OFFSET = np.array([L.index_of(dx, dy, dz) for dz in (-1, 0, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1)],
                          dtype=np.int64)
-
-
-def uniform_neighbours(blocks_xyz, periodic=(False, False, False)) -> np.ndarray:
-    """Neighbour table ``nbr[nblocks, 27]`` of a box of blocks, block id ``bx + nx (by + ny bz)``."""
-    nx, ny, nz = (int(v) for v in blocks_xyz)
-    n = np.array([nx, ny, nz])
-    nbr = np.full((nx * ny * nz, L.Q), -1, dtype=np.int64)
-    for bz in range(nz):
-        for by in range(ny):
-            for bx in range(nx):
-                b = bx + nx * (by + ny * bz)
-                for q in range(L.Q):
-                    p = np.array([bx, by, bz]) + L.C[q]
-                    ok = True
-                    for a in range(3):
-                        if p[a] < 0 or p[a] >= n[a]:
-                            if periodic[a]:
-                                p[a] %= n[a]
-                            else:
-                                ok = False
-                    if ok:
-                        nbr[b, q] = p[0] + nx * (p[1] + ny * p[2])
-    return nbr
-
-
-def to_dense(a: np.ndarray, blocks_xyz) -> np.ndarray:
-    """``a[block, cell]`` or ``a[block, k, cell]`` -> dense ``[x, y, z]`` or ``[k, x, y, z]``."""
-    nx, ny, nz = blocks_xyz
-    lead = a.shape[1:-1]
-    t = a.reshape((nz, ny, nx) + lead + (B, B, B))  # bz, by, bx, lead, z, y, x
-    k = len(lead)
-    axes = tuple(range(3, 3 + k)) + (2, 5 + k, 1, 4 + k, 0, 3 + k)
-    return np.ascontiguousarray(t.transpose(axes)).reshape(lead + (nx * B, ny * B, nz * B))
-
-
-def from_dense(d: np.ndarray, blocks_xyz) -> np.ndarray:
-    """Inverse of :func:`to_dense`."""
-    nx, ny, nz = blocks_xyz
-    lead = d.shape[:-3]
-    k = len(lead)
-    t = d.reshape(lead + (nx, B, ny, B, nz, B))  # lead, bx, x, by, y, bz, z
-    axes = (k + 4, k + 2, k) + tuple(range(k)) + (k + 5, k + 3, k + 1)
-    return np.ascontiguousarray(t.transpose(axes)).reshape((nx * ny * nz,) + lead + (CELLS,))
 
 
 def build_neighbour(target):

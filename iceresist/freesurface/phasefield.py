@@ -28,6 +28,7 @@ contact angle.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
@@ -36,8 +37,9 @@ from iceresist.backends import jit
 from iceresist.errors import InputError
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
-from iceresist.freesurface.launch import build_launcher
-from iceresist.freesurface.layout import CELLS, build_neighbour
+from iceresist.backends.launch import CellLauncher
+from iceresist.freesurface.layout import build_neighbour
+from iceresist.grid.forest import CELLS
 
 PHI_AVE = 0.5
 
@@ -71,6 +73,7 @@ def build_phase_cells(target, real, lat: HLattice):
     cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
     tiny = real(1e-24) if real == np.float64 else real(1e-18)
     dev = target.device
+    int64 = np.int64
 
     @dev
     def pulled(h_in, nbr, b, c, x, y, z, k):
@@ -107,6 +110,7 @@ def build_phase_cells(target, real, lat: HLattice):
 
     @dev
     def phi_cell(b, c, h_in, phi, nbr):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -117,6 +121,7 @@ def build_phase_cells(target, real, lat: HLattice):
 
     @dev
     def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -134,6 +139,7 @@ def build_phase_cells(target, real, lat: HLattice):
 
     @dev
     def init_cell(b, c, h_out, phi, u, nbr, kappa):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -151,10 +157,20 @@ def build_phase_cells(target, real, lat: HLattice):
     return phi_cell, stream_collide_cell, init_cell
 
 
+@lru_cache(maxsize=None)
+def phase_launchers(target, precision: str, lattice_name: str):
+    """Compile (once per target, precision and h lattice) the launchers ``(phi, stream_collide, init)``."""
+    phi_cell, sc_cell, init_cell = build_phase_cells(target, jit.real_type(precision), lookup_h_lattice(lattice_name))
+    return (CellLauncher(target, phi_cell, ("h_in", "phi", "nbr")),
+            CellLauncher(target, sc_cell, ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa")),
+            CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa")))
+
+
 class PhaseField:
     """Phase field phi on a block forest, advanced by the conservative Allen-Cahn LBM (eqs. 5-10).
 
-    ``nbr``: neighbour table (see :mod:`iceresist.freesurface.layout`); ``mobility`` M and
+    ``forest``: the :class:`~iceresist.grid.BlockForest` (its ``nbr`` table; every block carries
+    h and phi, gas blocks included); ``mobility`` M and
     ``width`` W in lattice units; ``h_lattice`` one of D3Q7/D3Q15/D3Q19/D3Q27.
     Arrays live on the target: ``h`` (two buffers ``[block, k, cell]``) and ``phi[block, cell]``.
     ``step(u)`` takes the velocity ``u[block, 3, cell]`` (lattice units) the interface is
@@ -162,22 +178,21 @@ class PhaseField:
     (:mod:`iceresist.freesurface.extension`).
     """
 
-    def __init__(self, nbr, *, mobility=0.1, width=3.0, h_lattice="D3Q19", precision="float32", target=jit.cpu):
+    def __init__(self, forest, *, mobility=0.1, width=3.0, h_lattice="D3Q15", precision="float32", target=jit.cpu):
         if mobility <= 0:
             raise InputError(f"free_surface.mobility must be > 0 (lattice units), not {mobility}")
         if width < 2:
             raise InputError(f"free_surface.width must be >= 2 cells, not {width}")
-        self.lat = h_lattice if isinstance(h_lattice, HLattice) else lookup_h_lattice(h_lattice)
+        self.lat = lookup_h_lattice(h_lattice.name if isinstance(h_lattice, HLattice) else h_lattice)
         self.real = jit.real_type(precision)
         self.target = target
         self.mobility = float(mobility)
         self.width = float(width)
         self.tau = tau_phi(mobility, self.lat)
+        self.forest = forest
+        nbr = forest.nbr
         self.nblocks = int(nbr.shape[0])
-        phi_cell, sc_cell, init_cell = build_phase_cells(target, self.real, self.lat)
-        self._phi = build_launcher(target, phi_cell, 3)
-        self._sc = build_launcher(target, sc_cell, 7)
-        self._init = build_launcher(target, init_cell, 5)
+        self._phi, self._sc, self._init = phase_launchers(target, precision, self.lat.name)
         self.nbr = self._to_target(np.ascontiguousarray(nbr, dtype=np.int64))
         shape = (self.nblocks, self.lat.q, CELLS)
         self.h = self._to_target(np.zeros(shape, self.real))

@@ -178,7 +178,7 @@ class PhaseField:
     (:mod:`iceresist.freesurface.extension`).
     """
 
-    def __init__(self, forest, *, mobility=0.1, width=3.0, h_lattice="D3Q15", precision="float32", target=jit.cpu):
+    def __init__(self, forest, *, mobility=0.05, width=3.0, h_lattice="D3Q15", precision="float32", target=jit.cpu):
         if mobility <= 0:
             raise InputError(f"free_surface.mobility must be > 0 (lattice units), not {mobility}")
         if width < 2:

@@ -1,0 +1,241 @@
+"""Phase-field LBM for the conservative Allen-Cahn equation (paper section 2.2, eqs. 4-10).
+
+phi = sum_k h_k (eq. 5); h relaxes by BGK (eq. 6) towards
+
+    h_k^eq = phi Gamma_k(u) + theta w_k c_k . n,                 (eqs. 7-8)
+    theta  = (M / c_s^2) (1 - 4 (phi - phi_ave)^2) / W,          (eq. 9)
+    tau_phi = 1/2 + M / c_s^2,                                   (eq. 10)
+
+with phi_ave = 1/2 and n = grad phi / |grad phi| from the isotropic D3Q27
+finite-difference stencil grad phi = (1/c_s^2) sum_q w_q c_q phi(x + c_q)
+(Fakhari, Geier and Lee 2016; Fakhari et al. 2017, "improved locality" form with
+the interface term inside h^eq). Its steady profile across a flat interface is
+phi = 1/2 + 1/2 tanh(2 z / W).
+
+One time step is two passes over the cells, so that the normal is taken from
+phi at the new time level:
+
+1. ``phi_cell``: phi(x, t+1) = sum_k h_k^post(x - c_k, t)  (pull streaming);
+2. ``stream_collide_cell``: pull h again, take n from the phi of pass 1,
+   collide (eq. 6) and write the post-collision h into the other buffer.
+
+Walls (``nbr == -1``): h bounces back half-way (no flux of phi through a wall, so
+sum phi is conserved to round-off), and the gradient stencil clamps to the
+boundary cell along the wall normal: zero normal gradient, a neutral (90 degree)
+contact angle.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from iceresist import lattice as L
+from iceresist.backends import jit
+from iceresist.errors import InputError
+from iceresist.freesurface.hlattice import HLattice
+from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
+from iceresist.backends.launch import CellLauncher
+from iceresist.freesurface.layout import build_neighbour
+from iceresist.grid.forest import CELLS
+
+PHI_AVE = 0.5
+
+
+def tau_phi(mobility: float, lat: HLattice) -> float:
+    """Relaxation time of h, paper eq. (10), lattice units (dt = 1)."""
+    return 0.5 + mobility / lat.cs2
+
+
+def build_phase_cells(target, real, lat: HLattice):
+    """Compile the cell functions ``(phi_cell, stream_collide_cell, init_cell)`` for ``target``.
+
+    * ``phi_cell(b, c, h_in, phi, nbr)``: phi = sum of pulled h (pass 1);
+    * ``stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa)``: pass 2, with
+      omega = 1/tau_phi and kappa = M / (c_s^2 W);
+    * ``init_cell(b, c, h_out, phi, u, nbr, kappa)``: h = h^eq(phi, u, n).
+
+    Loops over the directions (one inlined neighbour look-up each) rather than
+    unrolled code: 26 unrolled look-ups with their branches take minutes to compile
+    and are memory bound anyway.
+    """
+    neighbour, neighbour_clamped = build_neighbour(target)
+    nq = lat.q
+    hc = np.ascontiguousarray(lat.c, dtype=np.int64)
+    hcx, hcy, hcz = (np.ascontiguousarray(hc[:, a]) for a in range(3))
+    hw = np.array(lat.w, dtype=real)
+    hopp = np.array(lat.opp, dtype=np.int64)
+    gcx, gcy, gcz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
+    gw = (L.W / L.CS2).astype(real)
+    zero, one, half, four = real(0.0), real(1.0), real(0.5), real(4.0)
+    cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
+    tiny = real(1e-24) if real == np.float64 else real(1e-18)
+    dev = target.device
+    int64 = np.int64
+
+    @dev
+    def pulled(h_in, nbr, b, c, x, y, z, k):
+        """h_k(x - c_k) from the post-collision buffer; half-way bounce-back where x - c_k is outside."""
+        bs, cs_ = neighbour(nbr, b, x, y, z, -hcx[k], -hcy[k], -hcz[k])
+        if bs >= 0:
+            return h_in[bs, k, cs_]
+        return h_in[b, hopp[k], c]
+
+    @dev
+    def normal(phi, nbr, b, x, y, z):
+        """n = grad phi / |grad phi| by the isotropic D3Q27 stencil, walls clamped (zero normal gradient)."""
+        gx = zero
+        gy = zero
+        gz = zero
+        for q in range(1, 27):
+            bn, cn_ = neighbour_clamped(nbr, b, x, y, z, gcx[q], gcy[q], gcz[q])
+            pn = gw[q] * phi[bn, cn_]
+            gx += gcx[q] * pn
+            gy += gcy[q] * pn
+            gz += gcz[q] * pn
+        g2 = gx * gx + gy * gy + gz * gz
+        if g2 > tiny:
+            ig = one / math.sqrt(g2)
+            return gx * ig, gy * ig, gz * ig
+        return zero, zero, zero
+
+    @dev
+    def h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu):
+        """h_k^eq = phi Gamma_k(u) + theta w_k c_k . n (eqs. 7-8)."""
+        cu = hcx[k] * ux + hcy[k] * uy + hcz[k] * uz
+        cn = hcx[k] * nx + hcy[k] * ny + hcz[k] * nz
+        return hw[k] * (p * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu)) + th * cn)
+
+    @dev
+    def phi_cell(b, c, h_in, phi, nbr):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+        z = c // 64
+        y = (c // 8) % 8
+        x = c % 8
+        s = zero
+        for k in range(nq):
+            s += pulled(h_in, nbr, b, c, x, y, z, k)
+        phi[b, c] = s
+
+    @dev
+    def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+        z = c // 64
+        y = (c // 8) % 8
+        x = c % 8
+        p = phi[b, c]
+        nx, ny, nz = normal(phi, nbr, b, x, y, z)
+        dp = p - half
+        th = kappa * (one - four * dp * dp)
+        ux = u[b, 0, c]
+        uy = u[b, 1, c]
+        uz = u[b, 2, c]
+        uu = ux * ux + uy * uy + uz * uz
+        for k in range(nq):
+            hk = pulled(h_in, nbr, b, c, x, y, z, k)
+            h_out[b, k, c] = hk + omega * (h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu) - hk)
+
+    @dev
+    def init_cell(b, c, h_out, phi, u, nbr, kappa):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+        z = c // 64
+        y = (c // 8) % 8
+        x = c % 8
+        p = phi[b, c]
+        nx, ny, nz = normal(phi, nbr, b, x, y, z)
+        dp = p - half
+        th = kappa * (one - four * dp * dp)
+        ux = u[b, 0, c]
+        uy = u[b, 1, c]
+        uz = u[b, 2, c]
+        uu = ux * ux + uy * uy + uz * uz
+        for k in range(nq):
+            h_out[b, k, c] = h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu)
+
+    return phi_cell, stream_collide_cell, init_cell
+
+
+@lru_cache(maxsize=None)
+def phase_launchers(target, precision: str, lattice_name: str):
+    """Compile (once per target, precision and h lattice) the launchers ``(phi, stream_collide, init)``."""
+    phi_cell, sc_cell, init_cell = build_phase_cells(target, jit.real_type(precision), lookup_h_lattice(lattice_name))
+    return (CellLauncher(target, phi_cell, ("h_in", "phi", "nbr")),
+            CellLauncher(target, sc_cell, ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa")),
+            CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa")))
+
+
+class PhaseField:
+    """Phase field phi on a block forest, advanced by the conservative Allen-Cahn LBM (eqs. 5-10).
+
+    ``forest``: the :class:`~iceresist.grid.BlockForest` (its ``nbr`` table; every block carries
+    h and phi, gas blocks included); ``mobility`` M and
+    ``width`` W in lattice units; ``h_lattice`` one of D3Q7/D3Q15/D3Q19/D3Q27.
+    Arrays live on the target: ``h`` (two buffers ``[block, k, cell]``) and ``phi[block, cell]``.
+    ``step(u)`` takes the velocity ``u[block, 3, cell]`` (lattice units) the interface is
+    advected with; in the gas it must hold the velocity extended from the liquid
+    (:mod:`iceresist.freesurface.extension`).
+    """
+
+    def __init__(self, forest, *, mobility=0.05, width=3.0, h_lattice="D3Q15", precision="float32", target=jit.cpu):
+        if mobility <= 0:
+            raise InputError(f"free_surface.mobility must be > 0 (lattice units), not {mobility}")
+        if width < 2:
+            raise InputError(f"free_surface.width must be >= 2 cells, not {width}")
+        self.lat = lookup_h_lattice(h_lattice.name if isinstance(h_lattice, HLattice) else h_lattice)
+        self.real = jit.real_type(precision)
+        self.target = target
+        self.mobility = float(mobility)
+        self.width = float(width)
+        self.tau = tau_phi(mobility, self.lat)
+        self.forest = forest
+        nbr = forest.nbr
+        self.nblocks = int(nbr.shape[0])
+        self._phi, self._sc, self._init = phase_launchers(target, precision, self.lat.name)
+        self.nbr = self._to_target(np.ascontiguousarray(nbr, dtype=np.int64))
+        shape = (self.nblocks, self.lat.q, CELLS)
+        self.h = self._to_target(np.zeros(shape, self.real))
+        self.h_next = self._to_target(np.zeros(shape, self.real))
+        self.phi = self._to_target(np.zeros((self.nblocks, CELLS), self.real))
+
+    @property
+    def omega(self):
+        return self.real(1.0 / self.tau)
+
+    @property
+    def kappa(self):
+        return self.real(self.mobility / (self.lat.cs2 * self.width))
+
+    def _to_target(self, a):
+        if self.target.is_cuda:
+            from numba import cuda
+
+            return cuda.to_device(a)
+        return a
+
+    def _host(self, a) -> np.ndarray:
+        return a.copy_to_host() if self.target.is_cuda else np.array(a)
+
+    def _u(self, u):
+        u = self._to_target(np.ascontiguousarray(u, dtype=self.real)) if isinstance(u, np.ndarray) else u
+        return u
+
+    def initialize(self, phi0: np.ndarray, u: np.ndarray) -> None:
+        """Set phi (``[block, cell]``) and h = h^eq(phi, u, n)."""
+        self.phi = self._to_target(np.array(phi0, dtype=self.real, order="C"))  # a copy: phi is state
+        self._init(self.nblocks, self.h, self.phi, self._u(u), self.nbr, self.kappa)
+
+    def step(self, u) -> None:
+        """One time step: phi(t+1) by pull streaming, then stream + collide h with u (``[block, 3, cell]``)."""
+        self._phi(self.nblocks, self.h, self.phi, self.nbr)
+        self._sc(self.nblocks, self.h, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa)
+        self.h, self.h_next = self.h_next, self.h
+
+    def phi_host(self) -> np.ndarray:
+        """phi at the last completed pass 1, ``[block, cell]``, on the host."""
+        return self._host(self.phi)
+
+    def volume(self) -> float:
+        """sum_k h_k over all cells (the conserved phase volume, cells^3), in float64."""
+        return float(self._host(self.h).astype(np.float64).sum())

@@ -1,0 +1,31 @@
+"""Velocity extension into the gas: the phase field's interface velocity (iceresist.freesurface.extension)."""
+
+import numpy as np
+
+from iceresist.backends import jit
+from iceresist.freesurface.extension import UNFILLED, extend_velocity, extension_launcher
+from iceresist.grid.forest import CELLS, BlockForest, Face
+
+
+def test_liquid_velocity_extended_three_layers_then_zero():
+    fo = BlockForest.uniform((8, 8, 16), {f: Face("wall") for f in ("x-", "x+", "z-", "z+")})
+    z = np.arange(16)
+    x = np.arange(8)
+    phi = fo.from_dense(np.broadcast_to((z < 8).astype(float), (8, 8, 16)).copy())   # liquid z < 8
+    u_dense = np.zeros((3, 8, 8, 16))
+    u_dense[0] = 0.01 * (1 + x[:, None, None])          # shear along x, varies with x only
+    u_dense[2] = 0.02
+    u_dense[:, :, :, 8:] = 7.0                           # garbage in the gas: must be overwritten
+    u = np.ascontiguousarray(fo.from_dense(u_dense).transpose(1, 0, 2))   # (nblocks, 3, cell)
+    dist = np.zeros((fo.nblocks, CELLS), np.int8)
+    extend_velocity(extension_launcher(jit.cpu, "float64"), fo.nblocks, phi, u, dist, fo.nbr.astype(np.int64))
+    ud = fo.to_dense(u.transpose(1, 0, 2))
+    dd = fo.to_dense(dist)
+    assert np.array_equal(dd[0, 0], [0] * 8 + [1, 2, 3] + [UNFILLED] * 5)
+    # a uniform-in-z liquid velocity is carried unchanged into the three gas layers
+    for k in (8, 9, 10):
+        assert np.allclose(ud[2, :, :, k], 0.02, atol=1e-15)
+        # linear in x: the symmetric mean keeps it, away from the x walls (one cell of bias per layer)
+        assert np.allclose(ud[0, 3:5, :, k], u_dense[0, 3:5, :, 0], atol=1e-15)
+    assert np.all(ud[:, :, :, 11:] == 0.0)
+    assert np.array_equal(ud[:, :, :, :8], u_dense[:, :, :, :8])

@@ -1,0 +1,280 @@
+"""Rigid bodies made of spheres placed on the body surface (Bell, Yu and Mucha 2005; paper section 2.3).
+
+A :class:`RigidShape` carries what the DEM needs of one body, all in SI units:
+
+* mass, volume and the principal moments of inertia of the *solid* (not of the spheres);
+* the sphere centres in the principal (body) frame, origin at the centre of mass, and one radius;
+* volume samples (sub-cells) in the body frame for the tier-1 buoyancy of :mod:`iceresist.dem.hydro`;
+* ``model_com_m`` and ``model_to_body``: where the centre of mass sits in the frame the shape was
+  described in (box centre, ship coordinates) and the rotation from that frame to the principal one.
+
+Sphere centres are set back from the surface by one radius, so that the envelope of the spheres is the
+solid's surface with rounded edges: a box of side ``a`` with ``n`` spheres per edge has ``r = a / (2 n)``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from iceresist.errors import InputError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RigidShape:
+    """Mass properties and sphere/volume samples of one rigid body (SI units)."""
+
+    name: str
+    mass_kg: float
+    volume_m3: float
+    inertia_kg_m2: np.ndarray  # (3,) principal moments of the solid
+    sphere_offsets_m: np.ndarray  # (n, 3) sphere centres, body (principal) frame, origin at the centre of mass
+    sphere_radius_m: float
+    sample_offsets_m: np.ndarray  # (m, 3) volume-sample centres, body frame
+    sample_volumes_m3: np.ndarray  # (m,) volume of each sample; they sum to volume_m3
+    sample_half_extent_m: np.ndarray  # (3,) half size of a sample box along the body axes
+    model_com_m: np.ndarray = field(default_factory=lambda: np.zeros(3))  # centre of mass in the model frame
+    model_to_body: np.ndarray = field(default_factory=lambda: np.eye(3))  # columns: principal axes in the model frame
+
+    @property
+    def n_spheres(self) -> int:
+        return len(self.sphere_offsets_m)
+
+    @property
+    def density_kg_m3(self) -> float:
+        return self.mass_kg / self.volume_m3
+
+    def inertia_tensor_model(self) -> np.ndarray:
+        """Inertia tensor about the centre of mass in the model frame (kg m^2)."""
+        V = self.model_to_body
+        return V @ np.diag(self.inertia_kg_m2) @ V.T
+
+
+def _principal_frame(inertia: np.ndarray):
+    """Principal moments and a proper rotation whose columns are the principal axes.
+
+    A tensor that is already diagonal keeps the model axes (so a box stays aligned with its own axes even when
+    moments are equal and any frame would do).
+    """
+    off = inertia - np.diag(np.diag(inertia))
+    if np.abs(off).max() <= 1e-12 * np.abs(np.diag(inertia)).max():
+        return np.diag(inertia).copy(), np.eye(3)
+    moments, axes = np.linalg.eigh(inertia)
+    if np.linalg.det(axes) < 0:
+        axes[:, 2] *= -1
+    return moments, axes
+
+
+def _check_positive(name: str, value: float) -> float:
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"{name} must be a positive number, got {value!r}")
+    return float(value)
+
+
+def box(size_m, density_kg_m3: float, spacing_m: float | None = None, samples_per_edge: int = 4,
+        spheres_per_edge: int | None = None, name: str = "box") -> RigidShape:
+    """A box ``size_m = (lx, ly, lz)`` of uniform density, spheres on its surface.
+
+    Give either ``spacing_m`` (sphere diameter; edges get ``round(l / spacing)`` spheres, at least 2) or
+    ``spheres_per_edge`` (the same number on every edge, radius from the shortest edge). Inertia is the
+    analytic solid box: I_x = m (ly^2 + lz^2) / 12 and cyclic. ``samples_per_edge`` sets the volume samples.
+    """
+    size = np.asarray(size_m, dtype=float).reshape(3)
+    for k, v in enumerate(size):
+        _check_positive(f"box size[{k}] (m)", v)
+    rho = _check_positive("density_kg_m3", density_kg_m3)
+    if spheres_per_edge is not None:
+        n = np.full(3, max(2, int(spheres_per_edge)))
+        radius = float((size / (2 * n)).min())
+    else:
+        spacing = _check_positive("spacing_m", spacing_m if spacing_m is not None else size.min() / 3)
+        n = np.maximum(2, np.rint(size / spacing).astype(int))
+        radius = float((size / (2 * n)).min())
+    axes = [np.linspace(-size[k] / 2 + radius, size[k] / 2 - radius, n[k]) for k in range(3)]
+    gx, gy, gz = np.meshgrid(*axes, indexing="ij")
+    on_surface = np.zeros(gx.shape, dtype=bool)
+    for k, g in enumerate((gx, gy, gz)):
+        idx = np.indices(gx.shape)[k]
+        on_surface |= (idx == 0) | (idx == n[k] - 1)
+    offsets = np.stack([gx[on_surface], gy[on_surface], gz[on_surface]], axis=1)
+
+    volume = float(np.prod(size))
+    mass = rho * volume
+    lx, ly, lz = size
+    inertia = mass / 12.0 * np.array([ly**2 + lz**2, lx**2 + lz**2, lx**2 + ly**2])
+
+    ns = max(1, int(samples_per_edge))
+    cell = size / ns
+    c = [(-size[k] / 2 + cell[k] * (np.arange(ns) + 0.5)) for k in range(3)]
+    sx, sy, sz = np.meshgrid(*c, indexing="ij")
+    samples = np.stack([sx.ravel(), sy.ravel(), sz.ravel()], axis=1)
+    sample_vol = np.full(len(samples), volume / len(samples))
+    return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=inertia,
+                      sphere_offsets_m=offsets, sphere_radius_m=radius, sample_offsets_m=samples,
+                      sample_volumes_m3=sample_vol, sample_half_extent_m=cell / 2)
+
+
+def sphere(radius_m: float, density_kg_m3: float, name: str = "sphere") -> RigidShape:
+    """A solid sphere represented by one DEM sphere of the same radius (I = 2/5 m r^2)."""
+    r = _check_positive("radius_m", radius_m)
+    rho = _check_positive("density_kg_m3", density_kg_m3)
+    volume = 4.0 / 3.0 * np.pi * r**3
+    mass = rho * volume
+    inertia = np.full(3, 0.4 * mass * r**2)
+    half = np.full(3, 0.5 * volume ** (1 / 3))
+    return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=inertia,
+                      sphere_offsets_m=np.zeros((1, 3)), sphere_radius_m=r, sample_offsets_m=np.zeros((1, 3)),
+                      sample_volumes_m3=np.array([volume]), sample_half_extent_m=half)
+
+
+def _tetra_mass_properties(vertices: np.ndarray, triangles: np.ndarray, apex: np.ndarray):
+    """Volume, centroid and second moment ``int x x^T dV`` of a convex solid split into tetrahedra (apex, tri).
+
+    For a tetrahedron with vertices v_k: int x_i x_j dV = V/20 (sum_k v_ki v_kj + s_i s_j), s = sum_k v_k
+    (Tonon 2004, J. Math. Stat. 1, 8-11).
+    """
+    a = np.broadcast_to(apex, (len(triangles), 3))
+    b, c, d = (vertices[triangles[:, k]] for k in range(3))
+    vols = np.abs(np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))) / 6.0
+    volume = vols.sum()
+    centroid = (vols[:, None] * (a + b + c + d) / 4.0).sum(axis=0) / volume
+    second = np.zeros((3, 3))
+    for v, pts in zip(vols, np.stack([a, b, c, d], axis=1)):
+        s = pts.sum(axis=0)
+        second += v / 20.0 * (pts.T @ pts + np.outer(s, s))
+    return volume, centroid, second
+
+
+def _sample_triangle(p0, p1, p2, spacing):
+    """Points on a triangle: its vertices, edge points and an interior lattice, all about ``spacing`` apart."""
+    pts = [p0, p1, p2]
+    for a, b in ((p0, p1), (p1, p2), (p2, p0)):
+        m = int(np.ceil(np.linalg.norm(b - a) / spacing))
+        for t in np.arange(1, m) / m:
+            pts.append(a + t * (b - a))
+    e1 = p1 - p0
+    u = e1 / np.linalg.norm(e1)
+    nrm = np.cross(e1, p2 - p0)
+    nrm /= np.linalg.norm(nrm)
+    v = np.cross(nrm, u)
+    loc = np.array([[(q - p0) @ u, (q - p0) @ v] for q in (p0, p1, p2)])
+    lo, hi = loc.min(axis=0), loc.max(axis=0)
+    gu = np.arange(lo[0] + spacing, hi[0], spacing)
+    gv = np.arange(lo[1] + spacing, hi[1], spacing)
+    if len(gu) and len(gv):
+        UU, VV = np.meshgrid(gu, gv, indexing="ij")
+        q = np.stack([UU.ravel(), VV.ravel()], axis=1)
+        # inside test with a margin of half a spacing from every edge
+        inside = np.ones(len(q), dtype=bool)
+        for k in range(3):
+            a, b = loc[k], loc[(k + 1) % 3]
+            c = loc[(k + 2) % 3]
+            t = b - a
+            en = np.array([-t[1], t[0]]) / np.linalg.norm(t)
+            if (c - a) @ en < 0:
+                en = -en
+            inside &= (q - a) @ en >= 0.5 * spacing
+        for qq in q[inside]:
+            pts.append(p0 + qq[0] * u + qq[1] * v)
+    return pts
+
+
+def _dedupe(points: np.ndarray, tol: float) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    keep = np.ones(len(points), dtype=bool)
+    tree = cKDTree(points)
+    for i, j in sorted(tree.query_pairs(tol)):
+        if keep[i] and keep[j]:
+            keep[j] = False
+    return points[keep]
+
+
+def convex_polyhedron(vertices_m, density_kg_m3: float, spacing_m: float, sample_spacing_m: float | None = None,
+                      name: str = "hull") -> RigidShape:
+    """A convex solid given by its vertices (scipy ConvexHull), e.g. a ship hull in ship coordinates.
+
+    Mass properties by tetrahedral decomposition from an interior point. Spheres of radius ``spacing/2`` are
+    placed on the faces of the solid shrunk inward by one radius (half-space intersection), so their envelope
+    is the given hull. Volume samples: a cubic lattice of ``sample_spacing_m`` inside the hull.
+    """
+    from scipy.spatial import ConvexHull, HalfspaceIntersection
+
+    verts = np.asarray(vertices_m, dtype=float)
+    if verts.ndim != 2 or verts.shape[1] != 3 or len(verts) < 4:
+        raise InputError("hull vertices must be an (n >= 4, 3) array of points in metres")
+    rho = _check_positive("density_kg_m3", density_kg_m3)
+    spacing = _check_positive("spacing_m", spacing_m)
+    radius = spacing / 2
+    hull = ConvexHull(verts)
+    inner_pt = verts[hull.vertices].mean(axis=0)
+    volume, com, second = _tetra_mass_properties(verts, hull.simplices, inner_pt)
+    mass = rho * volume
+    # second moment about the centre of mass -> inertia tensor of the solid
+    c_com = rho * (second - volume * np.outer(com, com))
+    inertia_model = np.trace(c_com) * np.eye(3) - c_com
+    moments, axes = _principal_frame(inertia_model)
+
+    eq = hull.equations.copy()  # n.x + d <= 0 inside, |n| = 1
+    if (eq[:, :3] @ com + eq[:, 3]).max() > -radius:
+        raise InputError(f"sphere spacing {spacing} m is too coarse for this hull: use a spacing below "
+                         f"the hull's smallest thickness")
+    shrunk = eq.copy()
+    shrunk[:, 3] += radius
+    inner = HalfspaceIntersection(shrunk, com).intersections
+    inner_hull = ConvexHull(inner)
+    pts = []
+    for tri in inner_hull.simplices:
+        pts.extend(_sample_triangle(*(inner[k] for k in tri), spacing))
+    centres = _dedupe(np.array(pts), 0.5 * spacing)
+    offsets = (centres - com) @ axes
+
+    ss = sample_spacing_m or max(spacing, volume ** (1 / 3) / 8)
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    grids = [np.arange(lo[k] + ss / 2, hi[k], ss) for k in range(3)]
+    gx, gy, gz = np.meshgrid(*grids, indexing="ij")
+    cand = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)
+    inside = (cand @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 0
+    samples = cand[inside]
+    if len(samples) == 0:
+        samples = com[None, :]
+    sample_vol = np.full(len(samples), volume / len(samples))
+    log.debug("convex polyhedron %s: %d spheres, %d volume samples", name, len(offsets), len(samples))
+    return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=moments,
+                      sphere_offsets_m=offsets, sphere_radius_m=radius, sample_offsets_m=(samples - com) @ axes,
+                      sample_volumes_m3=sample_vol, sample_half_extent_m=np.full(3, ss / 2),
+                      model_com_m=com, model_to_body=axes)
+
+
+def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a proper rotation matrix (Shepperd's method)."""
+    R = np.asarray(R, dtype=float)
+    tr = np.trace(R)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = np.array([0.25 * s, (R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s])
+    else:
+        k = int(np.argmax(np.diag(R)))
+        i, j = (k + 1) % 3, (k + 2) % 3
+        s = 2.0 * np.sqrt(1.0 + R[k, k] - R[i, i] - R[j, j])
+        q = np.empty(4)
+        q[0] = (R[j, i] - R[i, j]) / s
+        q[1 + k] = 0.25 * s
+        q[1 + i] = (R[i, k] + R[k, i]) / s
+        q[1 + j] = (R[j, k] + R[k, j]) / s
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+def matrix_from_quaternion(q) -> np.ndarray:
+    """Rotation matrix (body -> world) of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])

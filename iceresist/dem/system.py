@@ -1,0 +1,455 @@
+"""``DEMSystem``: rigid bodies of spheres, walls, contact laws, tier-1 water, and the sub-stepped time step.
+
+State lives in structure-of-arrays on the chosen backend (NumPy arrays on the CPU, device arrays on CUDA) and is
+copied to the host only when a property asks for it. All quantities are SI.
+
+Sub-step rule (DESIGN.md section 7): the critical step of a linear contact is dt_crit = 2 sqrt(m / k) with the
+largest stiffness k = max(k_n, k_t) and the smallest pair mass m = m_s,min / 2, where m_s = 1 / (1/m + r^2 / I_min)
+is the effective mass a body shows at its sphere at lever arm r (translation plus the softest rotation). A step
+``dt`` is cut into ceil(dt / (safety dt_crit)) sub-steps; a forced sub-step above dt_crit is refused with
+:class:`~iceresist.errors.StabilityError`.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from iceresist.backends import jit
+from iceresist.dem.bodies import RigidShape, matrix_from_quaternion, quaternion_from_matrix
+from iceresist.dem.contact import ContactParameters
+from iceresist.dem.hydro import Water
+from iceresist.dem.kernels import build_launchers
+from iceresist.dem.search import table_size
+from iceresist.errors import InputError, StabilityError
+
+log = logging.getLogger(__name__)
+
+MATERIALS = {"ice": 0, "ship": 1, "structure": 1}
+
+_LAUNCHERS: dict = {}
+
+
+def _launchers(target, real):
+    key = (target.name, target.simulator, np.dtype(real).name)
+    if key not in _LAUNCHERS:
+        _LAUNCHERS[key] = build_launchers(target, real)
+    return _LAUNCHERS[key]
+
+
+@dataclass
+class _Body:
+    shape: RigidShape
+    position: np.ndarray
+    quat: np.ndarray
+    velocity: np.ndarray
+    omega: np.ndarray
+    kinematic: bool
+    material: int
+    name: str = ""
+    ext_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ext_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+class DEMSystem:
+    """Rigid ice floes and a ship of clumped spheres with Cundall-Strack contacts (paper section 2.3).
+
+    Parameters: ``backend`` ``'cpu'|'cuda'|'auto'``; ``precision`` ``'float64'`` (default: metre positions over
+    11 m domains need it) or ``'float32'``; ``gravity_m_s2``; ``ice_ice`` and ``ice_ship`` contact parameter sets
+    (``ice_ship`` also serves walls); ``safety`` the sub-step fraction of the critical step; ``history_slots`` the
+    number of contacts per sphere whose tangential history is kept.
+    """
+
+    def __init__(self, backend: str = "cpu", precision: str = "float64", gravity_m_s2=(0.0, 0.0, -9.81),
+                 ice_ice: ContactParameters | None = None, ice_ship: ContactParameters | None = None,
+                 safety: float = 0.05, history_slots: int = 12):
+        self.target = jit.resolve_backend(backend)
+        self.real = jit.real_type(precision)
+        self.precision = precision
+        self.gravity = np.asarray(gravity_m_s2, dtype=float).reshape(3)
+        self.ice_ice = ice_ice or ContactParameters()
+        self.ice_ship = ice_ship or ContactParameters()
+        if not (0 < safety <= 1):
+            raise InputError(f"safety must lie in (0, 1], got {safety}")
+        self.safety = float(safety)
+        self.history_slots = int(history_slots)
+        self.water: Water | None = None
+        self._bodies: list[_Body] = []
+        self._walls: list[np.ndarray] = []
+        self._built = False
+        self._dirty = True
+        self.time_s = 0.0
+        self.substeps_taken = 0
+        self.last_substeps = 0
+
+    # ------------------------------------------------------------------ scene
+    def add_body(self, shape: RigidShape, position_m=(0.0, 0.0, 0.0), velocity_m_s=(0.0, 0.0, 0.0),
+                 angular_velocity_rad_s=(0.0, 0.0, 0.0), orientation=None, kinematic: bool = False,
+                 material: str = "ice", name: str = "") -> int:
+        """Add a body; ``position_m`` places the origin of the shape's model frame, ``orientation`` (w, x, y, z)
+        rotates the model frame into the world. Returns the body index."""
+        if self._built:
+            raise InputError("bodies must be added before the first step of a DEMSystem")
+        if material not in MATERIALS:
+            raise InputError(f"material must be one of {sorted(MATERIALS)}, got {material!r}")
+        q_user = np.array([1.0, 0, 0, 0]) if orientation is None else np.asarray(orientation, dtype=float)
+        R_user = matrix_from_quaternion(q_user)
+        R_body = R_user @ shape.model_to_body
+        com = np.asarray(position_m, dtype=float) + R_user @ shape.model_com_m
+        self._bodies.append(_Body(shape=shape, position=com, quat=quaternion_from_matrix(R_body),
+                                  velocity=np.asarray(velocity_m_s, dtype=float).copy(),
+                                  omega=np.asarray(angular_velocity_rad_s, dtype=float).copy(),
+                                  kinematic=bool(kinematic), material=MATERIALS[material], name=name))
+        return len(self._bodies) - 1
+
+    def add_wall(self, point_m, normal) -> int:
+        """A static plane through ``point_m``; ``normal`` points to the side where bodies live."""
+        if self._built:
+            raise InputError("walls must be added before the first step of a DEMSystem")
+        n = np.asarray(normal, dtype=float)
+        n = n / np.linalg.norm(n)
+        self._walls.append(np.concatenate([np.asarray(point_m, dtype=float), n]))
+        return len(self._walls) - 1
+
+    def set_water(self, water: Water | None = Water()):
+        """Switch on (or off with ``None``) tier-1 hydrodynamics for dynamic bodies."""
+        self.water = water
+        if self._built:
+            self._put("env", self._env_row())
+            self._dirty = True
+
+    def set_external(self, body: int, force_N=None, torque_N_m=None):
+        """Hold F_fluid and M_fluid (paper eqs. 13-14) on a body over the sub-steps of the following steps."""
+        if self._built:
+            ext = self._h["ext"].copy()
+            if force_N is not None:
+                ext[body, :3] = force_N
+            if torque_N_m is not None:
+                ext[body, 3:] = torque_N_m
+            self._put("ext", ext)
+            self._dirty = True
+        else:
+            if force_N is not None:
+                self._bodies[body].ext_force = np.asarray(force_N, dtype=float)
+            if torque_N_m is not None:
+                self._bodies[body].ext_torque = np.asarray(torque_N_m, dtype=float)
+
+    # ------------------------------------------------------------------ build
+    @property
+    def n_bodies(self) -> int:
+        return len(self._bodies)
+
+    @property
+    def n_spheres(self) -> int:
+        return sum(b.shape.n_spheres for b in self._bodies)
+
+    def _build(self):
+        if not self._bodies:
+            raise InputError("a DEMSystem needs at least one body")
+        real = self.real
+        nb = len(self._bodies)
+        sh = [b.shape for b in self._bodies]
+        counts = np.array([s.n_spheres for s in sh], dtype=np.int64)
+        vcounts = np.array([len(s.sample_volumes_m3) for s in sh], dtype=np.int64)
+        h = {}
+        h["pos"] = np.array([b.position for b in self._bodies], dtype=real)
+        h["vel"] = np.array([b.velocity for b in self._bodies], dtype=real)
+        h["vpred"] = h["vel"].copy()
+        h["quat"] = np.array([b.quat for b in self._bodies], dtype=real)
+        h["kin"] = np.array([int(b.kinematic) for b in self._bodies], dtype=np.int32)
+        h["mat"] = np.array([b.material for b in self._bodies], dtype=np.int32)
+        h["mass"] = np.array([s.mass_kg for s in sh], dtype=real)
+        h["inv_mass"] = np.where(h["kin"] != 0, 0.0, 1.0 / h["mass"]).astype(real)
+        h["inv_meff"] = h["inv_mass"].copy()
+        h["inertia"] = np.array([s.inertia_kg_m2 for s in sh], dtype=real)
+        h["volume"] = np.array([s.volume_m3 for s in sh], dtype=real)
+        h["blen"] = h["volume"] ** (1.0 / 3.0)
+        h["bhalf"] = np.array([s.sample_half_extent_m for s in sh], dtype=real)
+        h["angmom"] = np.zeros((nb, 3), dtype=real)
+        h["omega"] = np.zeros((nb, 3), dtype=real)
+        h["pvel"] = np.zeros((nb, 3), dtype=real)
+        h["pomega"] = np.zeros((nb, 3), dtype=real)
+        for k, b in enumerate(self._bodies):
+            R = matrix_from_quaternion(b.quat)
+            if b.kinematic:
+                h["pvel"][k] = b.velocity
+                h["pomega"][k] = b.omega
+            else:
+                h["angmom"][k] = R @ (b.shape.inertia_kg_m2 * (R.T @ b.omega))
+            h["omega"][k] = b.omega
+        h["ext"] = np.array([np.concatenate([b.ext_force, b.ext_torque]) for b in self._bodies], dtype=real)
+        h["force"] = np.zeros((nb, 3), dtype=real)
+        h["torque"] = np.zeros((nb, 3), dtype=real)
+        h["bcontact"] = np.zeros((nb, 6), dtype=real)
+        h["bfirst"] = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        h["bcount"] = counts
+        h["vfirst"] = np.concatenate([[0], np.cumsum(vcounts)[:-1]]).astype(np.int64)
+        h["vcount"] = vcounts
+        h["voff"] = np.concatenate([s.sample_offsets_m for s in sh]).astype(real)
+        h["vvol"] = np.concatenate([s.sample_volumes_m3 for s in sh]).astype(real)
+        ns = int(counts.sum())
+        h["soff"] = np.concatenate([s.sphere_offsets_m for s in sh]).astype(real)
+        h["srad"] = np.repeat([s.sphere_radius_m for s in sh], counts).astype(real)
+        h["sbody"] = np.repeat(np.arange(nb), counts).astype(np.int32)
+        h["xs"] = np.zeros((ns, 3), dtype=real)
+        nbk = table_size(ns)
+        self._mask = nbk - 1
+        h["key"] = np.zeros(ns, dtype=np.int32)
+        h["start"] = np.zeros(nbk, dtype=np.int32)
+        h["count"] = np.zeros(nbk, dtype=np.int32)
+        h["cursor"] = np.zeros(nbk, dtype=np.int32)
+        h["order"] = np.zeros(ns, dtype=np.int32)
+        K = self.history_slots
+        for tag in ("a", "b"):
+            h["hp_" + tag] = np.full((ns, K), -(2**40), dtype=np.int64)
+            h["hxi_" + tag] = np.zeros((ns, K, 3), dtype=real)
+            h["hn_" + tag] = np.zeros(ns, dtype=np.int32)
+        h["sforce"] = np.zeros((ns, 3), dtype=real)
+        h["storque"] = np.zeros((ns, 3), dtype=real)
+        h["senergy"] = np.zeros(ns, dtype=real)
+        h["snew"] = np.zeros(ns, dtype=np.int64)
+        h["sover"] = np.zeros(ns, dtype=np.int64)
+        walls = np.array(self._walls, dtype=real) if self._walls else np.zeros((1, 6), dtype=real)
+        h["walls"] = walls
+        h["params"] = np.array([self.ice_ice.row(), self.ice_ship.row()], dtype=real)
+        h["env"] = self._env_row().astype(real)
+        self._h = h
+        self._inv_cell = 1.0 / (2.0 * float(h["srad"].max()))
+        self._cur = "a"
+        if self.target.is_cuda:
+            from numba import cuda
+
+            self._d = {k: cuda.to_device(v) for k, v in h.items()}
+        else:
+            self._d = h
+        self._k = _launchers(self.target, self.real)
+        self._dt_crit = self._critical_step()
+        self._built = True
+        log.info("DEM system: %d bodies, %d spheres, %d hash buckets, critical step %.3g s", nb, ns, nbk,
+                 self._dt_crit)
+
+    def _env_row(self) -> np.ndarray:
+        water = self.water or Water()
+        return np.concatenate([water.row(enabled=self.water is not None), self.gravity])
+
+    def _put(self, name, value):
+        self._h[name][...] = value
+        if self.target.is_cuda:
+            self._d[name].copy_to_device(self._h[name])
+
+    def _get(self, name) -> np.ndarray:
+        if not self._built:
+            self._build()
+        if self.target.is_cuda:
+            return self._d[name].copy_to_host()
+        return self._h[name]
+
+    # ------------------------------------------------------------------ stability
+    def _critical_step(self) -> float:
+        m_min = math.inf
+        n_dyn = 0
+        for b in self._bodies:
+            if b.kinematic:
+                continue
+            n_dyn += 1
+            s = b.shape
+            r2 = (s.sphere_offsets_m ** 2).sum(axis=1)
+            m_s = 1.0 / (1.0 / s.mass_kg + r2 / s.inertia_kg_m2.min())
+            m_min = min(m_min, float(m_s.min()))
+        if n_dyn == 0:
+            return math.inf
+        m_pair = m_min / 2 if n_dyn > 1 else m_min
+        k_max = max(max(p.normal_stiffness_N_m, p.k_t) for p in (self.ice_ice, self.ice_ship))
+        return 2.0 * math.sqrt(m_pair / k_max)
+
+    def critical_step_s(self) -> float:
+        """dt_crit = 2 sqrt(m_pair,min / k_max) (see the module docstring)."""
+        if not self._built:
+            self._build()
+        return self._dt_crit
+
+    def substep_s(self) -> float:
+        """The automatic sub-step safety * dt_crit."""
+        return self.safety * self.critical_step_s()
+
+    def substeps_for(self, dt_s: float) -> int:
+        return max(1, int(math.ceil(dt_s / self.substep_s() - 1e-9)))
+
+    # ------------------------------------------------------------------ time stepping
+    def _hist(self, tag):
+        d = self._d
+        return d["hp_" + tag], d["hxi_" + tag], d["hn_" + tag]
+
+    def _forces(self, h: float, kick: int):
+        d, k, r = self._d, self._k, self.real
+        nb, ns = self.n_bodies, len(self._h["srad"])
+        k["place"](ns, d["soff"], d["sbody"], d["pos"], d["quat"], d["xs"], d["key"], r(self._inv_cell),
+                   np.int64(self._mask))
+        k["sort"](ns, d["key"], d["start"], d["count"], d["cursor"], d["order"])
+        old = self._hist(self._cur)
+        nxt = "b" if self._cur == "a" else "a"
+        new = self._hist(nxt)
+        k["contact"](ns, d["xs"], d["srad"], d["sbody"], d["pos"], d["vpred"], d["omega"], d["inv_mass"], d["kin"],
+                     d["mat"], d["start"], d["count"], d["order"], np.int64(self._mask), r(self._inv_cell),
+                     d["walls"], np.int64(len(self._walls)), d["params"], r(h), *old, *new, d["sforce"],
+                     d["storque"], d["senergy"], d["snew"], d["sover"])
+        self._cur = nxt
+        k["gather"](nb, r(h), np.int64(kick), d["bfirst"], d["bcount"], d["sforce"], d["storque"], d["mass"],
+                    d["kin"], d["ext"], d["env"], d["pos"], d["quat"], d["vel"], d["omega"], d["angmom"], d["volume"],
+                    d["blen"], d["bhalf"], d["vfirst"], d["vcount"], d["voff"], d["vvol"], d["bcontact"], d["force"],
+                    d["torque"], d["inv_meff"])
+
+    def _substep(self, h: float):
+        d, r = self._d, self.real
+        self._k["drift"](self.n_bodies, r(h), d["pos"], d["vel"], d["vpred"], d["quat"], d["angmom"], d["omega"],
+                         d["inertia"], d["inv_meff"], d["kin"], d["pvel"], d["pomega"], d["force"], d["torque"])
+        self._forces(h, 1)
+
+    def prime(self):
+        """Evaluate contacts and forces at the current state without moving (done before the first step)."""
+        if not self._built:
+            self._build()
+        self._forces(0.0, 0)
+        self._dirty = False
+
+    def step(self, dt_s: float, substeps: int | None = None) -> int:
+        """Advance by ``dt_s`` seconds in sub-steps (automatic from the stiffness, or ``substeps`` forced).
+
+        Returns the number of sub-steps. A forced sub-step above the critical step raises StabilityError."""
+        if not (dt_s > 0 and math.isfinite(dt_s)):
+            raise InputError(f"DEM step dt_s must be a positive number of seconds, got {dt_s}")
+        if not self._built:
+            self._build()
+        if substeps is None:
+            n = self.substeps_for(dt_s)
+        else:
+            n = int(substeps)
+            if n < 1:
+                raise InputError(f"substeps must be >= 1, got {substeps}")
+            h = dt_s / n
+            if h > self._dt_crit:
+                need = int(math.ceil(dt_s / (self.safety * self._dt_crit)))
+                raise StabilityError(
+                    f"DEM sub-step {h:.3e} s exceeds the critical step {self._dt_crit:.3e} s = 2 sqrt(m/k) for "
+                    f"k = {max(self.ice_ice.normal_stiffness_N_m, self.ice_ship.normal_stiffness_N_m):.3g} N/m: "
+                    f"use substeps >= {need} (or leave substeps unset), a smaller dt_s, or softer contacts")
+        if self._dirty:
+            self.prime()
+        h = dt_s / n
+        for _ in range(n):
+            self._substep(h)
+        self.time_s += dt_s
+        self.substeps_taken += n
+        self.last_substeps = n
+        return n
+
+    # ------------------------------------------------------------------ state and diagnostics
+    @property
+    def positions(self) -> np.ndarray:
+        """Centres of mass (n_bodies, 3), m."""
+        return self._get("pos").astype(float)
+
+    @property
+    def velocities(self) -> np.ndarray:
+        return self._get("vel").astype(float)
+
+    @property
+    def quaternions(self) -> np.ndarray:
+        """Orientations (w, x, y, z) of the principal frames."""
+        return self._get("quat").astype(float)
+
+    @property
+    def angular_momenta(self) -> np.ndarray:
+        """World-frame angular momenta (n_bodies, 3), kg m^2/s."""
+        return self._get("angmom").astype(float)
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        """World angular velocities omega = R I^-1 R^T L (n_bodies, 3), rad/s."""
+        return self._get("omega").astype(float)
+
+    def body_angular_velocities(self) -> np.ndarray:
+        """Angular velocities in each body's principal frame (n_bodies, 3), rad/s."""
+        q, L = self.quaternions, self.angular_momenta
+        inertia = self._h["inertia"].astype(float)
+        out = np.empty_like(L)
+        for b in range(len(q)):
+            out[b] = (matrix_from_quaternion(q[b]).T @ L[b]) / inertia[b]
+        return out
+
+    @property
+    def sphere_positions(self) -> np.ndarray:
+        return self._get("xs").astype(float)
+
+    def kinetic_energy(self) -> float:
+        """Translational plus rotational kinetic energy of the dynamic bodies, J."""
+        dyn = self._h["kin"] == 0
+        m = self._h["mass"].astype(float)
+        v = self.velocities
+        e = 0.5 * (m[dyn] * (v[dyn] ** 2).sum(axis=1)).sum()
+        q, L = self.quaternions, self.angular_momenta
+        inertia = self._h["inertia"].astype(float)
+        for b in np.flatnonzero(dyn):
+            lb = matrix_from_quaternion(q[b]).T @ L[b]
+            e += 0.5 * (lb**2 / inertia[b]).sum()
+        return float(e)
+
+    def potential_energy(self) -> float:
+        """Elastic energy stored in the contact springs plus gravity (-m g.x) of the dynamic bodies, J."""
+        dyn = self._h["kin"] == 0
+        m = self._h["mass"].astype(float)
+        grav = -(m[dyn] * (self.positions[dyn] @ self.gravity)).sum()
+        return float(self._get("senergy").astype(float).sum() + grav)
+
+    def contact_force_on(self, body: int) -> np.ndarray:
+        """Sum of the contact forces on a body's spheres (N) at the last sub-step."""
+        return self._get("bcontact")[body, :3].astype(float)
+
+    def contact_torque_on(self, body: int) -> np.ndarray:
+        return self._get("bcontact")[body, 3:].astype(float)
+
+    def ice_force_on(self, body: int) -> np.ndarray:
+        """Ice force on a (ship) body: the contact forces on its spheres, x y z in N (paper section 4.2)."""
+        return self.contact_force_on(body)
+
+    def contact_count(self) -> int:
+        """Contacts now: sphere pairs once, sphere-wall contacts once."""
+        hp, hn = self._get("hp_" + self._cur), self._get("hn_" + self._cur)
+        used = np.arange(hp.shape[1])[None, :] < hn[:, None]
+        p = hp[used]
+        return int((p >= 0).sum() // 2 + (p < 0).sum())
+
+    def collision_count(self) -> int:
+        """Contacts begun since the start (sphere pairs and sphere-wall), a count of collisions."""
+        return int(self._get("snew").sum())
+
+    def history_overflows(self) -> int:
+        """Contacts whose tangential history found no free slot (raise ``history_slots`` if non-zero)."""
+        return int(self._get("sover").sum())
+
+    def describe(self) -> dict:
+        """A summary of the system for logs and result files."""
+        if not self._built:
+            self._build()
+        return {
+            "backend": self.target.name + ("-simulator" if self.target.simulator else ""),
+            "precision": self.precision,
+            "bodies": self.n_bodies,
+            "kinematic_bodies": int(self._h["kin"].sum()),
+            "spheres": self.n_spheres,
+            "walls": len(self._walls),
+            "hash_buckets": self._mask + 1,
+            "cell_size_m": 1.0 / self._inv_cell,
+            "critical_step_s": self._dt_crit,
+            "substep_s": self.substep_s(),
+            "safety": self.safety,
+            "gravity_m_s2": self.gravity.tolist(),
+            "ice_ice": self.ice_ice.row(),
+            "ice_ship": self.ice_ship.row(),
+            "water": None if self.water is None else self.water.row().tolist(),
+            "time_s": self.time_s,
+            "substeps_taken": self.substeps_taken,
+        }

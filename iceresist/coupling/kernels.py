@@ -47,7 +47,6 @@ from iceresist.coupling.geometry import BOX, SPHERE
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
-from iceresist.lbm.stream import cell_device
 
 #: Regula-falsi (Illinois) iterations for the link distance; exact after one for planar faces.
 ROOT_ITERATIONS = 5
@@ -146,9 +145,10 @@ def build_accumulate(target):
     if target.is_cuda:
         from numba import cuda
 
-        @target.device
-        def accumulate(a, i, j, v):
-            cuda.atomic.add(a, (i, j), v)
+        # ``cuda`` must be a global of the function (not a closure cell) so that the simulator can swap it
+        ns = {"cuda": cuda}
+        exec("def accumulate(a, i, j, v):\n    cuda.atomic.add(a, (i, j), v)\n", ns)
+        accumulate = target.device(ns["accumulate"])
     else:
         @target.device
         def accumulate(a, i, j, v):
@@ -167,7 +167,7 @@ def build_visits(target, real):
     CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
     WR = W.astype(real)
     OPPI = OPP.astype(np.int64)
-    dev = cell_device(target)
+    dev = target.device
 
     @dev
     def mark(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner):
@@ -374,13 +374,19 @@ class BodyLauncher:
         else:
             import numba
 
+            # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
+            loop = (f"def body_loop(k, {sig}):\n"
+                    "    for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
+                    "        for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
+                    "            for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
+                    f"                visit(k, gx, gy, gz, {sig})\n")
+            ns = {"visit": visit}
+            exec(compile(loop, "<iceresist body loop cpu>", "exec"), ns)
             src = (f"def launch_bodies(nbodies, {sig}):\n"
                    "    for k in prange(nbodies):\n"
-                   "        for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
-                   "            for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
-                   "                for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
-                   f"                    visit(k, gx, gy, gz, {sig})\n")
-            ns = {"prange": numba.prange, "visit": visit}
+                   f"        body_loop(k, {sig})\n")
+            ns = {"prange": numba.prange,
+                  "body_loop": numba.njit(ns["body_loop"], fastmath=set(CPU_FASTMATH))}
             exec(compile(src, "<iceresist body launcher cpu>", "exec"), ns)
             self._kernel = numba.njit(ns["launch_bodies"], parallel=True, fastmath=set(CPU_FASTMATH))
 
@@ -413,12 +419,15 @@ class ActiveLauncher:
         else:
             import numba
 
+            loop = (f"def block_loop(b, {rest}):\n"
+                    f"    for c in range({CUDA_BLOCK_CELLS}):\n"
+                    f"        visit(b, c, {rest})\n")
+            ns = {"visit": visit}
+            exec(compile(loop, "<iceresist block loop cpu>", "exec"), ns)
             src = (f"def launch_active(nactive, {sig}):\n"
                    "    for i in prange(nactive):\n"
-                   "        b = active[i]\n"
-                   f"        for c in range({CUDA_BLOCK_CELLS}):\n"
-                   f"            visit(b, c, {rest})\n")
-            ns = {"prange": numba.prange, "visit": visit}
+                   f"        block_loop(active[i], {rest})\n")
+            ns = {"prange": numba.prange, "block_loop": numba.njit(ns["block_loop"], fastmath=set(CPU_FASTMATH))}
             exec(compile(src, "<iceresist active launcher cpu>", "exec"), ns)
             self._kernel = numba.njit(ns["launch_active"], parallel=True, fastmath=set(CPU_FASTMATH))
 

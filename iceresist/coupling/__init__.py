@@ -1,1 +1,11 @@
-"""coupling."""
+"""Fluid-structure coupling of the LBM and the DEM (paper section 2.4, eqs. 16-21).
+
+Public API::
+
+    from iceresist.coupling import FluidStructureCoupling, LatticeUnits, Sphere, Box, ConvexPolyhedron
+"""
+
+from iceresist.coupling.coupler import FluidStructureCoupling, LatticeUnits
+from iceresist.coupling.geometry import Box, ConvexPolyhedron, Sphere
+
+__all__ = ["FluidStructureCoupling", "LatticeUnits", "Sphere", "Box", "ConvexPolyhedron"]

@@ -23,6 +23,11 @@ from __future__ import annotations
 
 from iceresist.grid import flags as FL
 
+#: Flag bit of a non-fluid cell covered by a moving body: the fused kernel pulls from it as from a fluid
+#: cell, because a pre-pass of the coupling (:mod:`iceresist.coupling.links`) wrote into its slot q the
+#: interpolated bounce-back population f_q that the fluid cell x = y + c_q needs (paper eq. 16).
+GHOST = 16
+
 
 def build_link_boundary(target, real, device=None):
     """``link_boundary(fopp, row, bc_kind, bc_u, bc_rho, cx, cy, cz, w, ulx, uly, ulz) -> f_q``.

@@ -117,6 +117,17 @@ class LBMSolver:
             return cuda.to_device(a)
         return a
 
+    @property
+    def state(self):
+        """The population buffer the next step pulls from (a device array on CUDA); moving-boundary hooks
+        (:mod:`iceresist.coupling`) edit it in place between steps."""
+        return self._f[0]
+
+    @property
+    def flags(self):
+        """The cell-flag table the fused kernel reads (a device array on CUDA); moving bodies rewrite it."""
+        return self._tables["flags"]
+
     def _host_f(self) -> np.ndarray:
         f = self._f[0]
         return f.copy_to_host() if self.target.is_cuda else f

@@ -8,7 +8,8 @@
 which, for cell ``c`` of block ``b``, pulls the 27 post-collision populations
 f_q(x - c_q) from ``src`` (through ``nbr_key`` where x - c_q lies in another
 block), applies the boundary rules of ``iceresist.lbm.boundary`` where x - c_q
-is not fluid, collides (paper eq. 1, operator ``collide`` of
+is not fluid (a GHOST cell counts as a source: a moving body whose incoming
+slots a link pre-pass filled, :mod:`iceresist.coupling`), collides (paper eq. 1, operator ``collide`` of
 ``iceresist.lbm.collide``) and writes the result to ``dst[b, :, c]``.
 
 Populations are stored in the well-conditioned form f - w (rho0 = 1). Cells whose
@@ -24,7 +25,7 @@ import numpy as np
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import C, OPP, Q, W
-from iceresist.lbm.boundary import build_link_boundary
+from iceresist.lbm.boundary import GHOST, build_link_boundary
 from iceresist.lbm.codegen import F_NAMES, compile_source, term
 
 ARGS = ("src", "dst", "nbr_key", "link_bc", "flags", "bc_kind", "bc_u", "bc_rho", "omega", "Fx", "Fy", "Fz")
@@ -79,7 +80,7 @@ def stream_collide_source(loop_cells: bool = False) -> str:
         s += f"        fopp = src[b, {int(OPP[q])}, c]\n"
         s += "        if nb >= 0:\n"
         s += f"            sc = {cell}\n"
-        s += "            if flags[nb, sc] & FLUID:\n"
+        s += "            if flags[nb, sc] & PULLED:\n"
         s += f"                f{q} = src[nb, {q}, sc]\n"
         s += "            else:\n"
         s += f"                f{q} = fopp\n"
@@ -98,7 +99,7 @@ def stream_collide_source(loop_cells: bool = False) -> str:
 
 
 def _namespace(target, real, collide):
-    ns = {"FLUID": FL.FLUID, "NEAR_OUTLET": FL.NEAR_OUTLET, "izero": np.int64(0), "zero": real(0.0),
+    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "NEAR_OUTLET": FL.NEAR_OUTLET, "izero": np.int64(0), "zero": real(0.0),
           "one": real(1.0), "half": real(0.5), "r0": real(-1.0), "r1": real(0.0), "r2": real(1.0),
           "collide": collide, "link_boundary": build_link_boundary(target, real, cell_device(target))}
     ns.update({f"w{q}": real(W[q]) for q in range(Q)})

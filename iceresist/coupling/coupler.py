@@ -1,0 +1,297 @@
+"""The coupled LBM-DEM step: moving bodies as boundaries of the fluid, fluid forces back to the bodies.
+
+One fluid step of :class:`FluidStructureCoupling` (paper section 2.4):
+
+1. the body state (centre, orientation, velocity, angular velocity) is read from the DEM and put in
+   lattice units;
+2. cells are re-classified: covered cells become GHOST, uncovered cells are refilled, and the mass
+   excess of both is handed to the fluid neighbours (:mod:`iceresist.coupling.kernels`);
+3. the link pass writes the interpolated bounce-back populations (eq. 16) and sums the momentum
+   exchange (eqs. 17-19) into F_s(t), M_s(t);
+4. the LBM takes its fused stream-collide step;
+5. F_fluid = (F_s(t) + F_s(t - dt)) / 2 and M_fluid likewise (eqs. 20-21) are handed to the DEM as
+   external loads (eqs. 13-14), held over its sub-steps while it advances by dt.
+
+A kinematic DEM body (the ship) moves at its prescribed velocity and only acts on the fluid (one-way).
+
+Buoyancy: a fluid without a gravity body force has no hydrostatic pressure, so by default
+(``buoyancy=None`` and a zero LBM force) each body also gets -rho_f V g, the buoyancy of a submerged body.
+With the gravity body force in the LBM the hydrostatic pressure acts through the momentum exchange instead.
+
+Units (:class:`LatticeUnits`): lattice velocity = v dt/dx, lattice force = F dt^2 / (rho_f dx^4), lattice
+torque = M dt^2 / (rho_f dx^5). Positions: the centre of cell (i, j, k) lies at origin + (i + 1/2) dx.
+
+Free surface: the GHOST flag and the link pass act on the population buffer of the flow solver only;
+a phase-field solver on the same forest reads ``owner``/``flags`` of this class to apply its own
+wall rule at the bodies, and the refill of its second distribution follows the same pattern.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from iceresist.coupling.geometry import pack
+from iceresist.coupling.kernels import coupling_launchers
+from iceresist.errors import InputError, StabilityError
+from iceresist.grid import flags as FL
+from iceresist.grid.forest import BLOCK
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class LatticeUnits:
+    """Cell size ``dx_m``, time step ``dt_s``, fluid density ``rho_kg_m3``, and the world position of the
+    corner (cell 0, 0, 0 lower corner) of the lattice ``origin_m``."""
+
+    dx_m: float
+    dt_s: float
+    rho_kg_m3: float
+    origin_m: tuple = (0.0, 0.0, 0.0)
+
+    def __post_init__(self):
+        for name in ("dx_m", "dt_s", "rho_kg_m3"):
+            if not getattr(self, name) > 0:
+                raise InputError(f"LatticeUnits {name} must be positive, got {getattr(self, name)!r}")
+
+    @property
+    def force_N(self) -> float:
+        """One lattice force unit in newtons."""
+        return self.rho_kg_m3 * self.dx_m ** 4 / self.dt_s ** 2
+
+    @property
+    def velocity_m_s(self) -> float:
+        return self.dx_m / self.dt_s
+
+
+def quaternion_matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (n, 3, 3), body -> world, of unit quaternions (n, 4) (w, x, y, z)."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+    ], axis=1)
+
+
+class FluidStructureCoupling:
+    """Couples an :class:`~iceresist.lbm.solver.LBMSolver` and a :class:`~iceresist.dem.DEMSystem`.
+
+    ``geometries``: one shape of :mod:`iceresist.coupling.geometry` per DEM body, in body order.
+    ``units``: :class:`LatticeUnits`. ``buoyancy``: add -rho_f V g to each body (default: when the LBM
+    has no body force). ``debug``: fill newly covered cells with NaN, so a population the coupling failed
+    to provide shows up in :meth:`check_populations`.
+    """
+
+    def __init__(self, solver, dem, geometries, units: LatticeUnits, buoyancy: bool | None = None,
+                 debug: bool = False):
+        self.solver, self.dem, self.units = solver, dem, units
+        self.target, self.real = solver.target, solver.real
+        geometries = list(geometries)
+        if len(geometries) != dem.n_bodies:
+            raise InputError(f"coupling needs one geometry per DEM body: {len(geometries)} geometries for "
+                             f"{dem.n_bodies} bodies")
+        self.geometries = geometries
+        self.n = len(geometries)
+        kinds, pars, first, count, planes, half = pack(geometries)
+        dx = units.dx_m
+        self._kinds, self._first, self._count = kinds, first, count
+        self._par_lat = pars / dx
+        self._half_lat = half / dx
+        planes = planes.copy()
+        planes[:, 3] /= dx
+        self._volume_m3 = np.array([g.volume_m3() for g in geometries])
+        self.buoyancy = bool(np.allclose(solver.force, 0.0)) if buoyancy is None else bool(buoyancy)
+        self.debug = bool(debug)
+
+        fo = solver.forest
+        self.forest = fo
+        nbx, nby, nbz = fo.shape_blocks
+        block_map = np.full((nbx, nby, nbz), -1, dtype=np.int32)
+        block_map[fo.origin[:, 0], fo.origin[:, 1], fo.origin[:, 2]] = np.arange(fo.nblocks, dtype=np.int32)
+        self._block_map_host = block_map
+        self._periodic = np.array([fo.faces[a + "-"].kind == "periodic" for a in "xyz"])
+        grid = np.array([*fo.shape_cells, *self._periodic.astype(int)], dtype=np.int64)
+        self._shape = np.array(fo.shape_cells)
+        flags0 = np.ascontiguousarray(fo.flags.astype(np.uint8))
+        owner = np.full((fo.nblocks, BLOCK ** 3), -1, dtype=np.int32)
+        dev = self._dev
+        self._d = {"grid": dev(grid), "block_map": dev(block_map), "flags0": dev(flags0),
+                   "borigin": dev(np.ascontiguousarray(fo.origin.astype(np.int64))),
+                   "planes": dev(np.ascontiguousarray(planes.astype(self.real))),
+                   "owner": dev(owner), "owner_prev": dev(owner.copy())}
+        if self.target.is_cuda:
+            self._minus_one = dev(owner.copy())
+        self._k = coupling_launchers(self.target, self.real)
+        self._prev_boxes = None
+        self._force_prev = None
+        self.force_lattice = np.zeros((self.n, 3))
+        self.torque_lattice = np.zeros((self.n, 3))
+        self.links = np.zeros(self.n, dtype=np.int64)
+        self.fluid_force_N = np.zeros((self.n, 3))
+        self.fluid_torque_N_m = np.zeros((self.n, 3))
+        self.active_blocks = 0
+        self.event_blocks = 0
+        self.iteration = 0
+        log.info("coupling: %d bodies on %d blocks, buoyancy %s", self.n, fo.nblocks, self.buoyancy)
+
+    # ------------------------------------------------------------------ device helpers
+    def _dev(self, a):
+        if self.target.is_cuda:
+            from numba import cuda
+
+            return cuda.to_device(np.ascontiguousarray(a))
+        return np.ascontiguousarray(a)
+
+    def _host(self, a):
+        return a.copy_to_host() if self.target.is_cuda else a
+
+    # ------------------------------------------------------------------ body state
+    def _body_arrays(self):
+        """``body`` (n, 21) and ``bint`` (n, 9) in lattice units from the DEM state."""
+        u = self.units
+        pos = (self.dem.positions - np.asarray(u.origin_m)) / u.dx_m
+        R = quaternion_matrices(self.dem.quaternions)
+        body = np.empty((self.n, 21))
+        body[:, 0:3] = pos
+        body[:, 3:12] = R.reshape(self.n, 9)
+        body[:, 12:15] = self.dem.velocities * (u.dt_s / u.dx_m)
+        body[:, 15:18] = self.dem.angular_velocities * u.dt_s
+        body[:, 18:21] = self._par_lat
+        ext = np.einsum("nij,nj->ni", np.abs(R), self._half_lat)
+        lo = np.floor(pos - ext - 0.5).astype(np.int64) - 1
+        hi = np.ceil(pos + ext - 0.5).astype(np.int64) + 1
+        n = self._shape
+        per = self._periodic
+        lo = np.where(per, lo, np.maximum(lo, 0))
+        hi = np.where(per, np.minimum(hi, lo + n - 1), np.minimum(hi, n - 1))
+        bint = np.empty((self.n, 9), dtype=np.int32)
+        bint[:, 0], bint[:, 1], bint[:, 2] = self._kinds, self._first, self._count
+        bint[:, 3:6], bint[:, 6:9] = lo, hi
+        return body.astype(self.real), bint
+
+    def _active(self, bint):
+        """Blocks the cell boxes of this and the previous step touch, dilated by one cell."""
+        boxes = bint[:, 3:9].astype(np.int64)
+        if self._prev_boxes is not None:
+            boxes = np.concatenate([boxes, self._prev_boxes])
+        self._prev_boxes = bint[:, 3:9].astype(np.int64)
+        blo = (boxes[:, :3] - 1) >> 3
+        bhi = (boxes[:, 3:] + 1) >> 3
+        span = bhi - blo + 1
+        nb = np.array(self.forest.shape_blocks)
+        out = []
+        small = (span <= 4).all(axis=1)
+        groups = [(blo[small], bhi[small], 4)] + [(blo[i:i + 1], bhi[i:i + 1], int(span[i].max()))
+                                                 for i in np.flatnonzero(~small)]
+        for lo, hi, s in groups:
+            if len(lo) == 0:
+                continue
+            off = np.stack(np.meshgrid(*(np.arange(s),) * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+            cand = lo[:, None, :] + off[None]
+            ok = (cand <= hi[:, None, :]).all(axis=2)
+            cand = cand[ok]
+            for a in range(3):
+                if self._periodic[a]:
+                    cand[:, a] %= nb[a]
+            inside = ((cand >= 0) & (cand < nb)).all(axis=1)
+            cand = cand[inside]
+            out.append(self._block_map_host[cand[:, 0], cand[:, 1], cand[:, 2]])
+        blocks = np.unique(np.concatenate(out)) if out else np.zeros(0, dtype=np.int32)
+        return blocks[blocks >= 0].astype(np.int32)
+
+    def _near_events(self, evt):
+        """Blocks with a covered or uncovered cell in their own or a neighbour block."""
+        hit = np.flatnonzero(evt)
+        if len(hit) == 0:
+            return np.zeros(0, dtype=np.int32)
+        nb = self.forest.nbr[hit].ravel()
+        blocks = np.unique(np.concatenate([hit, nb[nb >= 0]]))
+        return blocks.astype(np.int32)
+
+    # ------------------------------------------------------------------ the step
+    def update_boundaries(self):
+        """Passes 1-4 of a coupling step (module docstring): cells, refill, mass, links and F_s(t), M_s(t)."""
+        d, k, real = self._d, self._k, self.real
+        body_h, bint_h = self._body_arrays()
+        active_h = self._active(bint_h)
+        self.active_blocks = len(active_h)
+        body, bint, active = self._dev(body_h), self._dev(bint_h), self._dev(active_h)
+        d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]
+        if self.target.is_cuda:
+            d["owner"].copy_to_device(self._minus_one)
+        else:
+            d["owner"].fill(-1)
+        f, flags = self.solver.state, self.solver.flags
+        k["mark"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
+        Fx, Fy, Fz = (real(v) for v in self.solver.force)
+        na = len(active_h)
+        evt = self._dev(np.zeros(self.forest.nblocks, dtype=np.int32))
+        k["refill"](na, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+                    d["owner_prev"], f, evt, Fx, Fy, Fz)
+        near = self._near_events(self._host(evt))
+        self.event_blocks = len(near)
+        k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"], d["owner"],
+                          d["owner_prev"], f)
+        if self.debug:
+            k["poison"](na, active, d["flags0"], d["owner"], d["owner_prev"], f)
+        bforce = self._dev(np.zeros((self.n, 3)))
+        btorque = self._dev(np.zeros((self.n, 3)))
+        nlinks = self._dev(np.zeros((self.n, 1), dtype=np.int64))
+        k["links"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
+                   bforce, btorque, nlinks)
+        self.force_lattice = self._host(bforce).copy()
+        self.torque_lattice = self._host(btorque).copy()
+        self.links = self._host(nlinks)[:, 0].copy()
+
+    def step(self, n: int = 1):
+        """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21)."""
+        u = self.units
+        g = np.asarray(self.dem.gravity, dtype=float)
+        for _ in range(int(n)):
+            self.update_boundaries()
+            self.solver.step(1)
+            f_now = np.concatenate([self.force_lattice, self.torque_lattice], axis=1)
+            prev = f_now if self._force_prev is None else self._force_prev
+            avg = 0.5 * (f_now + prev)
+            self._force_prev = f_now
+            self.fluid_force_N = avg[:, :3] * u.force_N
+            self.fluid_torque_N_m = avg[:, 3:] * u.force_N * u.dx_m
+            ext = self.fluid_force_N.copy()
+            if self.buoyancy:
+                ext -= u.rho_kg_m3 * self._volume_m3[:, None] * g[None, :]
+            for b in range(self.n):
+                self.dem.set_external(b, force_N=ext[b], torque_N_m=self.fluid_torque_N_m[b])
+            self.dem.step(u.dt_s)
+            self.iteration += 1
+
+    # ------------------------------------------------------------------ diagnostics
+    def owners(self) -> np.ndarray:
+        """The body covering each cell (nblocks, 512), -1 for none (host copy)."""
+        return self._host(self._d["owner"]).copy()
+
+    def fluid_mask(self) -> np.ndarray:
+        """Cells that are fluid now (nblocks, 512): static fluid and not covered by a body."""
+        return (self.forest.flags & FL.FLUID != 0) & (self.owners() < 0)
+
+    def fluid_mass(self) -> tuple[float, int]:
+        """Sum of rho over the fluid cells now (lattice units) and the number of those cells."""
+        f = self.solver.populations()
+        m = self.fluid_mask()
+        return float(m.sum() + f.sum(axis=1)[m].sum()), int(m.sum())
+
+    def check_populations(self):
+        """Raise StabilityError where a fluid cell holds a non-finite population (a cell left without
+        populations after a body moved, or a blow-up)."""
+        f = self.solver.populations()
+        m = self.fluid_mask()
+        bad = ~np.isfinite(f).all(axis=1) & m
+        if bad.any():
+            b, c = np.argwhere(bad)[0]
+            raise StabilityError(f"{int(bad.sum())} fluid cells hold non-finite populations (first: block {b}, "
+                                 f"cell {c}); lower the body speed (Mach) or check the refill")

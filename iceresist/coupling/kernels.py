@@ -1,0 +1,458 @@
+"""Kernels of the moving-boundary coupling, one source for CPU and CUDA (paper section 2.4, eqs. 16-19).
+
+Everything is in lattice units: cell (i, j, k) has its centre at (i + 1/2, j + 1/2, k + 1/2); a body's
+position, velocity (cells per step) and angular velocity (rad per step) are lattice values.
+
+Arrays the kernels share:
+
+* ``body[n, 21]`` (real): centre of mass (0-2), rotation body -> world, row-major (3-11), velocity (12-14),
+  angular velocity (15-17), shape parameters (18-20: sphere radius or box half extents);
+* ``bint[n, 9]`` (int32): shape kind, first plane, plane count, then the cell box lo (3) and hi (3) the
+  body may touch (global cell indices, inclusive; beyond the domain on periodic axes);
+* ``planes[m, 4]`` (real): face planes n . p + d of convex bodies in the body frame;
+* ``grid[6]`` (int64): nx, ny, nz and 1 for periodic axes; ``block_map[nbx, nby, nbz]``: block index or -1;
+* ``owner[nblocks, 512]`` (int32): the body covering a cell now (-1: none), ``owner_prev`` the same one step
+  earlier; ``flags0`` the static flags of the forest, ``flags`` the table the fused kernel reads.
+
+Passes of one coupling step, each a launch:
+
+1. ``mark`` (per body over its cell box): owner = body where the signed distance at the cell centre < 0;
+2. ``classify_refill`` (per cell of the active blocks): flags = GHOST where covered, else the static flags;
+   a cell a body uncovered gets equilibrium populations at the body's velocity there and the weighted
+   mean density of its fluid neighbours, plus their mean non-equilibrium part (the refill);
+3. ``redistribute`` (per cell of the blocks next to a block with a covered or uncovered cell): a fluid cell next to a newly covered cell takes its
+   share w_q / sum w of that cell's mass excess rho - 1, and next to a refilled cell gives back its share of
+   that cell's excess, so that the sum of rho - 1 over the fluid is unchanged; the share goes into the rest
+   population. Gathering (each cell writes only itself) makes it race-free;
+4. ``links`` (per body over its cell box): for every covered cell y and direction q with a fluid cell
+   x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q by regula falsi on the
+   signed distance, the interpolated bounce-back population of eq. (16) with the wall velocity
+   v + omega x r at the wall point, written into slot q of y (the fused kernel pulls it from there), and the
+   momentum exchange of eq. (17), summed into force and torque (eqs. 18-19) about the centre of mass.
+
+Populations are f - w (rho0 = 1). Eq. (16) keeps its form for f - w (its coefficients sum to one and
+w_q = w_opp). In eq. (17) written for f - w the link gains the constant 2 w_q c_opp, the force of the
+reference pressure rho0 c_s^2, which sums to zero over a closed surface; it is left out, so the force is that
+of the gauge pressure (exact zero for a body at rest in fluid at rest, also where a body touches a wall).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
+from iceresist.coupling.geometry import BOX, SPHERE
+from iceresist.grid import flags as FL
+from iceresist.lattice import C, OPP, Q, W
+from iceresist.lbm.boundary import GHOST
+
+#: Regula-falsi (Illinois) iterations for the link distance; exact after one for planar faces.
+ROOT_ITERATIONS = 5
+#: Smallest link distance used (avoids 1/(2q) blowing up where a cell centre lies on the surface).
+Q_MIN = 1e-3
+
+MARK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner")
+LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "f", "bforce", "btorque", "nlinks")
+REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
+               "block_evt", "Fx", "Fy", "Fz")
+REDIST_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
+POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
+
+
+def build_geometry_functions(target, real):
+    """Small device functions: ``lookup`` of a global cell, ``sdf_at`` a world point, ``wall_velocity``."""
+    half, zero, big = real(0.5), real(0.0), real(1e30)
+    sphere_kind, box_kind = SPHERE, BOX
+    dev = target.device
+
+    @dev
+    def lookup(gx, gy, gz, grid, block_map):
+        """(block, cell) of global cell (gx, gy, gz); block -1 outside the domain or in no block."""
+        nx, ny, nz = grid[0], grid[1], grid[2]
+        if gx < 0 or gx >= nx:
+            if grid[3] == 0:
+                return -1, 0
+            gx = gx % nx
+        if gy < 0 or gy >= ny:
+            if grid[4] == 0:
+                return -1, 0
+            gy = gy % ny
+        if gz < 0 or gz >= nz:
+            if grid[5] == 0:
+                return -1, 0
+            gz = gz % nz
+        b = block_map[gx >> 3, gy >> 3, gz >> 3]
+        return b, (gx & 7) + 8 * ((gy & 7) + 8 * (gz & 7))
+
+    @dev
+    def offset(k, px, py, pz, body, grid):
+        """p - x_s (lattice units), nearest image on periodic axes."""
+        dx = px - body[k, 0]
+        dy = py - body[k, 1]
+        dz = pz - body[k, 2]
+        if grid[3] != 0:
+            L = real(grid[0])
+            dx -= L * real(math.floor(dx / L + half))
+        if grid[4] != 0:
+            L = real(grid[1])
+            dy -= L * real(math.floor(dy / L + half))
+        if grid[5] != 0:
+            L = real(grid[2])
+            dz -= L * real(math.floor(dz / L + half))
+        return dx, dy, dz
+
+    @dev
+    def sdf_at(k, px, py, pz, body, bint, planes, grid):
+        """Signed distance (lattice units) of world point p to body k, negative inside."""
+        dx, dy, dz = offset(k, px, py, pz, body, grid)
+        x = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
+        y = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
+        z = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
+        kind = bint[k, 0]
+        if kind == sphere_kind:
+            return math.sqrt(x * x + y * y + z * z) - body[k, 18]
+        if kind == box_kind:
+            qx = abs(x) - body[k, 18]
+            qy = abs(y) - body[k, 19]
+            qz = abs(z) - body[k, 20]
+            mx = max(qx, zero)
+            my = max(qy, zero)
+            mz = max(qz, zero)
+            return math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
+        d = -big
+        first = bint[k, 1]
+        for i in range(first, first + bint[k, 2]):
+            v = planes[i, 0] * x + planes[i, 1] * y + planes[i, 2] * z + planes[i, 3]
+            if v > d:
+                d = v
+        return d
+
+    @dev
+    def wall_velocity(k, px, py, pz, body, grid):
+        """Velocity v + omega x r of body k at world point p, and r = p - x_s."""
+        rx, ry, rz = offset(k, px, py, pz, body, grid)
+        ox, oy, oz = body[k, 15], body[k, 16], body[k, 17]
+        return (body[k, 12] + oy * rz - oz * ry, body[k, 13] + oz * rx - ox * rz,
+                body[k, 14] + ox * ry - oy * rx, rx, ry, rz)
+
+    return lookup, sdf_at, wall_velocity
+
+
+def build_accumulate(target):
+    """``accumulate(a, i, j, v)``: a[i, j] += v; atomic on CUDA (threads of one body share the row)."""
+    if target.is_cuda:
+        from numba import cuda
+
+        # ``cuda`` must be a global of the function (not a closure cell) so that the simulator can swap it
+        ns = {"cuda": cuda}
+        exec("def accumulate(a, i, j, v):\n    cuda.atomic.add(a, (i, j), v)\n", ns)
+        accumulate = target.device(ns["accumulate"])
+    else:
+        @target.device
+        def accumulate(a, i, j, v):
+            a[i, j] += v
+    return accumulate
+
+
+def build_visits(target, real):
+    """The per-cell functions of the passes (see the module docstring)."""
+    lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
+    accumulate = build_accumulate(target)
+    zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
+    c45, c15, qmin, nan = real(4.5), real(1.5), real(Q_MIN), real(np.nan)
+    fluid, ghost, niter, nq = FL.FLUID, GHOST, ROOT_ITERATIONS, Q
+    CXI, CYI, CZI = (np.ascontiguousarray(C[:, a]).astype(np.int64) for a in range(3))
+    CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
+    WR = W.astype(real)
+    OPPI = OPP.astype(np.int64)
+    dev = target.device
+
+    @dev
+    def mark(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner):
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        if b < 0:
+            return
+        if (flags0[b, c] & fluid) == 0:
+            return
+        if sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid) < zero:
+            owner[b, c] = k
+
+    @dev
+    def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks):
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        if b < 0:
+            return
+        if owner[b, c] != k:
+            return
+        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
+        s_in = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+        for q in range(1, nq):
+            xb, xc = lookup(gx + CXI[q], gy + CYI[q], gz + CZI[q], grid, block_map)
+            if xb < 0:
+                continue
+            if (flags0[xb, xc] & fluid) == 0 or owner[xb, xc] >= 0:
+                continue
+            cx, cy, cz = CXR[q], CYR[q], CZR[q]
+            px, py, pz = yx + cx, yy + cy, yz + cz
+            # link distance: root of the SDF on x - t c_q, t in [0, 1] (Illinois regula falsi)
+            t0, s0 = zero, sdf_at(k, px, py, pz, body, bint, planes, grid)
+            t1, s1 = one, s_in
+            if s0 <= zero:
+                t = qmin
+            else:
+                for _ in range(niter):
+                    t = (t0 * s1 - t1 * s0) / (s1 - s0)
+                    st = sdf_at(k, px - t * cx, py - t * cy, pz - t * cz, body, bint, planes, grid)
+                    if st > zero:
+                        t0, s0 = t, st
+                        s1 = s1 * half
+                    else:
+                        t1, s1 = t, st
+                        s0 = s0 * half
+                t = (t0 * s1 - t1 * s0) / (s1 - s0)
+            qd = min(max(t, qmin), one)
+            ux, uy, uz, rx, ry, rz = wall_velocity(k, px - qd * cx, py - qd * cy, pz - qd * cz, body, grid)
+            o = OPPI[q]
+            gopp = f[xb, o, xc]
+            mom = six * WR[q] * (cx * ux + cy * uy + cz * uz)
+            if qd <= half:
+                x2b, x2c = lookup(gx + 2 * CXI[q], gy + 2 * CYI[q], gz + 2 * CZI[q], grid, block_map)
+                far = False
+                if x2b >= 0:
+                    far = (flags0[x2b, x2c] & fluid) != 0 and owner[x2b, x2c] < 0
+                if far:
+                    fnew = two * qd * gopp + (one - two * qd) * f[x2b, o, x2c] + mom
+                else:
+                    fnew = gopp + mom
+            else:
+                inv = one / (two * qd)
+                fnew = inv * (gopp + mom) + (one - inv) * f[xb, q, xc]
+            f[b, q, c] = fnew
+            # eq. (17): (c_opp - u_w) f*_opp(x) - (c_q - u_w) f_q(x, t+1), reference pressure left out
+            s = gopp + fnew
+            d = gopp - fnew
+            Fx = -cx * s - ux * d
+            Fy = -cy * s - uy * d
+            Fz = -cz * s - uz * d
+            accumulate(bforce, k, 0, Fx)
+            accumulate(bforce, k, 1, Fy)
+            accumulate(bforce, k, 2, Fz)
+            accumulate(btorque, k, 0, ry * Fz - rz * Fy)
+            accumulate(btorque, k, 1, rz * Fx - rx * Fz)
+            accumulate(btorque, k, 2, rx * Fy - ry * Fx)
+            accumulate(nlinks, k, 0, 1)
+
+    @dev
+    def stable(b, c, flags0, owner, owner_prev):
+        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
+
+    @dev
+    def classify_refill(b, c, borigin, body, grid, block_map, flags0, flags, owner, owner_prev, f, block_evt,
+                        Fx, Fy, Fz):
+        k = owner[b, c]
+        if k >= 0:
+            flags[b, c] = ghost
+            if owner_prev[b, c] < 0:
+                block_evt[b] = 1
+            return
+        fl = flags0[b, c]
+        flags[b, c] = fl
+        kp = owner_prev[b, c]
+        if kp < 0 or (fl & fluid) == 0:
+            return
+        block_evt[b] = 1
+        gx = borigin[b, 0] * 8 + (c & 7)
+        gy = borigin[b, 1] * 8 + ((c >> 3) & 7)
+        gz = borigin[b, 2] * 8 + (c >> 6)
+        ux, uy, uz, rx, ry, rz = wall_velocity(kp, real(gx) + half, real(gy) + half, real(gz) + half, body, grid)
+        for p in range(nq):
+            f[b, p, c] = zero
+        wsum = zero
+        rsum = zero
+        for q in range(1, nq):
+            nb, nc = lookup(gx + CXI[q], gy + CYI[q], gz + CZI[q], grid, block_map)
+            if nb < 0:
+                continue
+            if not stable(nb, nc, flags0, owner, owner_prev):
+                continue
+            rho = one
+            jx = zero
+            jy = zero
+            jz = zero
+            for p in range(nq):
+                g = f[nb, p, nc]
+                rho += g
+                jx += CXR[p] * g
+                jy += CYR[p] * g
+                jz += CZR[p] * g
+            vx, vy, vz = jx / rho, jy / rho, jz / rho
+            uu = vx * vx + vy * vy + vz * vz
+            w = WR[q]
+            for p in range(nq):
+                cu = CXR[p] * vx + CYR[p] * vy + CZR[p] * vz
+                geq = WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
+                f[b, p, c] += w * (f[nb, p, nc] - geq)
+            wsum += w
+            rsum += w * rho
+        rho = one
+        inv = zero
+        if wsum > zero:
+            rho = rsum / wsum
+            inv = one / wsum
+        vx = ux + half * Fx / rho        # stored populations carry u + F / (2 rho)
+        vy = uy + half * Fy / rho
+        vz = uz + half * Fz / rho
+        uu = vx * vx + vy * vy + vz * vz
+        for p in range(nq):
+            cu = CXR[p] * vx + CYR[p] * vy + CZR[p] * vz
+            f[b, p, c] = f[b, p, c] * inv + WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
+
+    @dev
+    def redistribute(b, c, borigin, grid, block_map, flags0, owner, owner_prev, f):
+        if not stable(b, c, flags0, owner, owner_prev):
+            return
+        gx = borigin[b, 0] * 8 + (c & 7)
+        gy = borigin[b, 1] * 8 + ((c >> 3) & 7)
+        gz = borigin[b, 2] * 8 + (c >> 6)
+        acc = zero
+        for q in range(1, nq):
+            hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
+            yb, yc = lookup(hx, hy, hz, grid, block_map)
+            if yb < 0:
+                continue
+            if (flags0[yb, yc] & fluid) == 0:
+                continue
+            now = owner[yb, yc] >= 0
+            if now == (owner_prev[yb, yc] >= 0):
+                continue
+            excess = zero
+            for p in range(nq):
+                excess += f[yb, p, yc]
+            if not now:
+                excess = -excess
+            wy = zero
+            for p in range(1, nq):
+                zb, zc = lookup(hx + CXI[p], hy + CYI[p], hz + CZI[p], grid, block_map)
+                if zb >= 0:
+                    if stable(zb, zc, flags0, owner, owner_prev):
+                        wy += WR[p]
+            acc += excess * WR[q] / wy
+        f[b, 0, c] += acc
+
+    @dev
+    def poison(b, c, flags0, owner, owner_prev, f):
+        if owner[b, c] >= 0 and owner_prev[b, c] < 0 and (flags0[b, c] & fluid) != 0:
+            for p in range(nq):
+                f[b, p, c] = nan
+
+    return mark, links, classify_refill, redistribute, poison
+
+
+class BodyLauncher:
+    """``launcher(nbodies, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over every cell of the cell
+    box ``bint[k, 3:9]`` of every body k: CPU prange over bodies; CUDA one thread block per body, threads
+    striding over its cells."""
+
+    def __init__(self, target, visit, argnames):
+        self.target = target
+        sig = ", ".join(argnames)
+        if target.is_cuda:
+            from numba import cuda
+
+            src = (f"def launch_bodies({sig}):\n"
+                   "    k = cuda.blockIdx.x\n"
+                   "    lx = bint[k, 3]\n    ly = bint[k, 4]\n    lz = bint[k, 5]\n"
+                   "    nx = bint[k, 6] - lx + 1\n    ny = bint[k, 7] - ly + 1\n    nz = bint[k, 8] - lz + 1\n"
+                   "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
+                   "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
+                   f"        visit(k, gx, gy, gz, {sig})\n")
+            ns = {"cuda": cuda, "visit": visit}
+            exec(compile(src, "<iceresist body launcher cuda>", "exec"), ns)
+            self._kernel = cuda.jit(ns["launch_bodies"])
+        else:
+            import numba
+
+            # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
+            loop = (f"def body_loop(k, {sig}):\n"
+                    "    for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
+                    "        for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
+                    "            for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
+                    f"                visit(k, gx, gy, gz, {sig})\n")
+            ns = {"visit": visit}
+            exec(compile(loop, "<iceresist body loop cpu>", "exec"), ns)
+            src = (f"def launch_bodies(nbodies, {sig}):\n"
+                   "    for k in prange(nbodies):\n"
+                   f"        body_loop(k, {sig})\n")
+            ns = {"prange": numba.prange,
+                  "body_loop": numba.njit(ns["body_loop"], fastmath=set(CPU_FASTMATH))}
+            exec(compile(src, "<iceresist body launcher cpu>", "exec"), ns)
+            self._kernel = numba.njit(ns["launch_bodies"], parallel=True, fastmath=set(CPU_FASTMATH))
+
+    def __call__(self, nbodies, *args):
+        if nbodies == 0:
+            return
+        if self.target.is_cuda:
+            self._kernel[nbodies, 128](*args)
+        else:
+            self._kernel(nbodies, *args)
+
+
+class ActiveLauncher:
+    """``launcher(nactive, active, *rest)`` runs ``visit(b, c, *rest)`` for the 512 cells of each block
+    ``active[i]``: CPU prange over the list; CUDA one thread per cell."""
+
+    def __init__(self, target, visit, argnames):
+        self.target = target
+        rest = ", ".join(argnames[1:])
+        sig = ", ".join(argnames)
+        if target.is_cuda:
+            from numba import cuda
+
+            src = (f"def launch_active({sig}):\n"
+                   "    b = active[cuda.blockIdx.x]\n"
+                   f"    visit(b, cuda.threadIdx.x, {rest})\n")
+            ns = {"cuda": cuda, "visit": visit}
+            exec(compile(src, "<iceresist active launcher cuda>", "exec"), ns)
+            self._kernel = cuda.jit(ns["launch_active"])
+        else:
+            import numba
+
+            loop = (f"def block_loop(b, {rest}):\n"
+                    f"    for c in range({CUDA_BLOCK_CELLS}):\n"
+                    f"        visit(b, c, {rest})\n")
+            ns = {"visit": visit}
+            exec(compile(loop, "<iceresist block loop cpu>", "exec"), ns)
+            src = (f"def launch_active(nactive, {sig}):\n"
+                   "    for i in prange(nactive):\n"
+                   f"        block_loop(active[i], {rest})\n")
+            ns = {"prange": numba.prange, "block_loop": numba.njit(ns["block_loop"], fastmath=set(CPU_FASTMATH))}
+            exec(compile(src, "<iceresist active launcher cpu>", "exec"), ns)
+            self._kernel = numba.njit(ns["launch_active"], parallel=True, fastmath=set(CPU_FASTMATH))
+
+    def __call__(self, nactive, *args):
+        if nactive == 0:
+            return
+        if self.target.is_cuda:
+            self._kernel[nactive, CUDA_BLOCK_CELLS](*args)
+        else:
+            self._kernel(nactive, *args)
+
+
+_CACHE: dict = {}
+
+
+def coupling_launchers(target, real):
+    """Compiled launchers ``mark, links, refill, redistribute, poison`` (cached per target and precision)."""
+    key = (target.name, target.simulator, np.dtype(real).name)
+    if key not in _CACHE:
+        mark, links, refill, redist, poison = build_visits(target, real)
+        _CACHE[key] = {
+            "mark": BodyLauncher(target, mark, MARK_ARGS),
+            "links": BodyLauncher(target, links, LINK_ARGS),
+            "refill": ActiveLauncher(target, refill, REFILL_ARGS),
+            "redistribute": ActiveLauncher(target, redist, REDIST_ARGS),
+            "poison": ActiveLauncher(target, poison, POISON_ARGS),
+        }
+    return _CACHE[key]

@@ -15,6 +15,7 @@ FLUID = 1
 SOLID = 2
 NEAR_WALL = 4
 NEAR_OUTLET = 8
+GHOST = 16  # non-fluid cell covered by a moving body; its incoming slots are filled by the coupling
 
 #: Boundary-condition codes of the link table (``BlockForest.bc_kind``).
 BC_WALL = 0       # resting half-way bounce-back (also solid cells and unallocated blocks)

@@ -26,7 +26,7 @@ from iceresist.grid import flags as FL
 #: Flag bit of a non-fluid cell covered by a moving body: the fused kernel pulls from it as from a fluid
 #: cell, because a pre-pass of the coupling (:mod:`iceresist.coupling.links`) wrote into its slot q the
 #: interpolated bounce-back population f_q that the fluid cell x = y + c_q needs (paper eq. 16).
-GHOST = 16
+GHOST = FL.GHOST
 
 
 def build_link_boundary(target, real, device=None):

@@ -132,6 +132,7 @@ class Tier1Model:
         self.substep_s = self.dem.substep_s()
         self.substeps_per_step = max(1, int(math.ceil(con.sample_interval_s / self.substep_s - 1e-9)))
         self.dt_s = self.substeps_per_step * self.substep_s
+        self.substep_s = self.dt_s / self.substeps_per_step  # the sub-step DEMSystem.step takes, to the last bit
         self.units = Tier1Units(dx_m=2 * self.cube.sphere_radius_m, dt_s=self.dt_s)
         self.cells = 0
         self.shape_cells = None
@@ -153,16 +154,12 @@ class Tier1Model:
         return self.start_x_m + self.speed_m_s * self.time_s
 
     def step(self, n: int = 1):
-        """n record intervals; each leaves the mean ice force on the hull over its sub-steps."""
-        h = self.substep_s
+        """n record intervals; each leaves the mean ice force on the hull over its sub-steps (kept by the DEM)."""
         for _ in range(int(n)):
-            acc = np.zeros(3)
-            for _ in range(self.substeps_per_step):
-                self.dem.step(h, substeps=1)
-                acc += self.dem.ice_force_on(self.hull_body)
-            self._force_mean = acc / self.substeps_per_step
-            self._force_last = self.dem.ice_force_on(self.hull_body)
+            self.dem.step(self.dt_s, substeps=self.substeps_per_step)
             self.iteration += 1
+        self._force_mean = self.dem.mean_contact_force_on(self.hull_body)
+        self._force_last = self.dem.ice_force_on(self.hull_body)
 
     def fields(self) -> dict:
         return {}

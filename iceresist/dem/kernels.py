@@ -38,7 +38,7 @@ CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mass", "kin
 # (CPython passes calls with more than 30 arguments as *args, which numba cannot inline: keep lists short)
 GATHER_ARGS = ["h", "do_kick", "bfirst", "bcount", "sforce", "storque", "mass", "kin", "ext", "env", "pos",
                "quat", "vel", "omega", "angmom", "volume", "blen", "bhalf", "vfirst", "vcount", "voff", "vvol",
-               "bcontact", "force", "torque", "inv_meff"]
+               "bcontact", "bcsum", "force", "torque", "inv_meff"]
 
 
 def build_items(target, real):
@@ -274,9 +274,9 @@ def build_items(target, real):
 
     @target.device
     def gather(b, h, do_kick, bfirst, bcount, sforce, storque, mass, kin, ext, env, pos, quat, vel, omega, angmom,
-               volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, force, torque, inv_meff):
+               volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff):
         """ext[b] = (F_fluid, M_fluid); env = (water level, rho_w, C_d, C_a, water on, g_x, g_y, g_z);
-        bcontact[b] = (contact force, contact torque)."""
+        bcontact[b] = (contact force, contact torque); a kicking call (a sub-step) adds bcontact[b] to bcsum[b]."""
         fx = zero
         fy = zero
         fz = zero
@@ -296,6 +296,13 @@ def build_items(target, real):
         bcontact[b, 3] = tx
         bcontact[b, 4] = ty
         bcontact[b, 5] = tz
+        if do_kick != 0:
+            bcsum[b, 0] += fx
+            bcsum[b, 1] += fy
+            bcsum[b, 2] += fz
+            bcsum[b, 3] += tx
+            bcsum[b, 4] += ty
+            bcsum[b, 5] += tz
         if kin[b] == 0:
             m = mass[b]
             fx += m * env[5] + ext[b, 0]
@@ -334,14 +341,24 @@ def build_items(target, real):
     return drift, place, contact, gather
 
 
-#: below this many items the CPU runs the serial build of a launcher: a parallel launch costs more than it saves
-SERIAL_BELOW = 2048
+#: CPU launches with fewer items than this run the serial twin (plain ``range``), per launcher. A parallel
+#: launch waits for the worker threads: on a 2-core x86 VM shared with other work that wait was about 12 ms per
+#: launch, while placing 10k spheres takes 0.2 ms and their contacts about 7 ms serially, so the cheap per-body
+#: and per-sphere passes stay serial at any realistic size and the contact pass goes parallel only where its
+#: serial time (about 0.7 us per sphere) clearly exceeds two such waits.
+PARALLEL_FROM = {"drift": 1 << 20, "place": 1 << 20, "gather": 1 << 20, "contact": 1 << 15}
 
 
-def make_launcher(target, item, argnames, name):
+def use_parallel(kind: str, n: int) -> bool:
+    """Whether a CPU launch of ``n`` items of ``kind`` takes the prange twin (never with one numba thread)."""
+    return n >= PARALLEL_FROM[kind] and numba.get_num_threads() > 1
+
+
+def make_launcher(target, item, argnames, name, kind):
     """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA.
 
-    On the CPU a serial twin (plain ``range``) serves small n; each twin compiles on its first call."""
+    On the CPU a serial twin (plain ``range``) serves launches below ``PARALLEL_FROM[kind]`` items; each twin
+    compiles on its first call."""
     args = ", ".join(argnames)
     if target.is_cuda:
         from numba import cuda
@@ -362,7 +379,7 @@ def make_launcher(target, item, argnames, name):
         ser = target.kernel(ns[name], parallel=False)
 
         def launch(n, *a):
-            if n >= SERIAL_BELOW:
+            if use_parallel(kind, n):
                 par(n, *a)
             elif n:
                 ser(n, *a)
@@ -374,9 +391,9 @@ def build_launchers(target, real):
     """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid)."""
     drift, place, contact, gather = build_items(target, real)
     return {
-        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift"),
-        "place": make_launcher(target, place, PLACE_ARGS, "dem_place"),
-        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact"),
-        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather"),
+        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift", "drift"),
+        "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place"),
+        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact", "contact"),
+        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather", "gather"),
         "sort": build_grid_sort(target),
     }

@@ -23,6 +23,7 @@ import math
 
 import numba
 
+from iceresist.dem import kcache
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
@@ -354,11 +355,12 @@ def use_parallel(kind: str, n: int) -> bool:
     return n >= PARALLEL_FROM[kind] and numba.get_num_threads() > 1
 
 
-def make_launcher(target, item, argnames, name, kind):
+def make_launcher(target, item, argnames, name, kind, key=None):
     """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA.
 
     On the CPU a serial twin (plain ``range``) serves launches below ``PARALLEL_FROM[kind]`` items; each twin
-    compiles on its first call."""
+    compiles on its first call, from the on-disk cache of :mod:`iceresist.dem.kcache` when ``key`` (its
+    fingerprint) is given and the cache is on."""
     args = ", ".join(argnames)
     if target.is_cuda:
         from numba import cuda
@@ -372,17 +374,21 @@ def make_launcher(target, item, argnames, name, kind):
             if n:
                 kern[(n + THREADS - 1) // THREADS, THREADS](n, *a)
     else:
-        src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
-        ns = {"prange": numba.prange, "item": item}
-        exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-        par = target.kernel(ns[name])
-        ser = target.kernel(ns[name], parallel=False)
+        built = kcache.cpu_launchers(name, argnames, item, key) if key is not None else None
+        if built is None:
+            src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
+            ns = {"prange": numba.prange, "item": item}
+            exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
+            built = target.kernel(ns[name]), target.kernel(ns[name], parallel=False)
+        par, ser = built
 
         def launch(n, *a):
             if use_parallel(kind, n):
                 par(n, *a)
             elif n:
                 ser(n, *a)
+
+        launch.parallel, launch.serial = par, ser
     launch.__name__ = name
     return launch
 
@@ -390,10 +396,11 @@ def make_launcher(target, item, argnames, name, kind):
 def build_launchers(target, real):
     """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid)."""
     drift, place, contact, gather = build_items(target, real)
+    key = None if target.is_cuda else kcache.fingerprint(real)
     return {
-        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift", "drift"),
-        "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place"),
-        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact", "contact"),
-        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather", "gather"),
+        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift", "drift", key),
+        "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place", key),
+        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact", "contact", key),
+        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather", "gather", key),
         "sort": build_grid_sort(target),
     }

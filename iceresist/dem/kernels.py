@@ -342,25 +342,27 @@ def build_items(target, real):
     return drift, place, contact, gather
 
 
-#: CPU launches with fewer items than this run the serial twin (plain ``range``), per launcher. A parallel
-#: launch waits for the worker threads: on a 2-core x86 VM shared with other work that wait was about 12 ms per
-#: launch, while placing 10k spheres takes 0.2 ms and their contacts about 7 ms serially, so the cheap per-body
-#: and per-sphere passes stay serial at any realistic size and the contact pass goes parallel only where its
-#: serial time (about 0.7 us per sphere) clearly exceeds two such waits.
+#: CPU launches with fewer items than this run on one thread, per launcher. A launch on all threads waits
+#: for every worker: on a 2-core x86 VM shared with other work that wait was about 12-15 ms per launch, while
+#: placing 10k spheres takes 0.2 ms and their contacts about 6 ms on one thread, so the cheap per-body and
+#: per-sphere passes stay on one thread at any realistic size, and the contact pass uses all threads only where
+#: its one-thread time (about 0.6 us per sphere) clearly exceeds two such waits.
 PARALLEL_FROM = {"drift": 1 << 20, "place": 1 << 20, "gather": 1 << 20, "contact": 1 << 15}
 
 
 def use_parallel(kind: str, n: int) -> bool:
-    """Whether a CPU launch of ``n`` items of ``kind`` takes the prange twin (never with one numba thread)."""
-    return n >= PARALLEL_FROM[kind] and numba.get_num_threads() > 1
+    """Whether a CPU launch of ``n`` items of ``kind`` runs on all numba threads (else on one)."""
+    return n >= PARALLEL_FROM[kind]
 
 
 def make_launcher(target, item, argnames, name, kind, key=None):
     """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA.
 
-    On the CPU a serial twin (plain ``range``) serves launches below ``PARALLEL_FROM[kind]`` items; each twin
-    compiles on its first call, from the on-disk cache of :mod:`iceresist.dem.kcache` when ``key`` (its
-    fingerprint) is given and the cache is on."""
+    On the CPU one prange kernel serves every launch; below ``PARALLEL_FROM[kind]`` items it runs with one
+    thread (``numba.set_num_threads(1)`` for the call: no wait for the workers, and the prange build ran the
+    contact pass about 1.5x faster on one thread than a plain ``range`` loop did). It compiles on its first call,
+    from the on-disk cache of :mod:`iceresist.dem.kcache` when ``key`` (its fingerprint) is given and the cache
+    is on."""
     args = ", ".join(argnames)
     if target.is_cuda:
         from numba import cuda
@@ -374,21 +376,27 @@ def make_launcher(target, item, argnames, name, kind, key=None):
             if n:
                 kern[(n + THREADS - 1) // THREADS, THREADS](n, *a)
     else:
-        built = kcache.cpu_launchers(name, argnames, item, key) if key is not None else None
-        if built is None:
+        kern = kcache.cpu_launcher(name, argnames, item, key) if key is not None else None
+        if kern is None:
             src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
             ns = {"prange": numba.prange, "item": item}
             exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-            built = target.kernel(ns[name]), target.kernel(ns[name], parallel=False)
-        par, ser = built
+            kern = target.kernel(ns[name])
 
         def launch(n, *a):
-            if use_parallel(kind, n):
-                par(n, *a)
-            elif n:
-                ser(n, *a)
+            if not n:
+                return
+            threads = numba.get_num_threads()
+            if threads == 1 or use_parallel(kind, n):
+                kern(n, *a)
+                return
+            numba.set_num_threads(1)
+            try:
+                kern(n, *a)
+            finally:
+                numba.set_num_threads(threads)
 
-        launch.parallel, launch.serial = par, ser
+        launch.kernel = kern
     launch.__name__ = name
     return launch
 

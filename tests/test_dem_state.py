@@ -94,3 +94,25 @@ def test_mean_contact_force_is_the_mean_over_substeps():
     # one sub-step: the mean is the force after it
     ref.step(h, substeps=1)
     np.testing.assert_array_equal(ref.mean_contact_force_on(0), ref.contact_force_on(0))
+
+
+def test_thread_count_does_not_change_the_result(monkeypatch):
+    import numba
+
+    import iceresist.dem.kernels as kernels
+
+    threads = numba.config.NUMBA_NUM_THREADS
+    if threads < 2:
+        pytest.skip("one numba thread only")
+    monkeypatch.setattr(kernels, "PARALLEL_FROM", dict.fromkeys(kernels.PARALLEL_FROM, 0))
+    out = []
+    for n in (1, threads):
+        numba.set_num_threads(n)
+        s = _heap()
+        for _ in range(30):
+            s.step(0.002)
+        out.append(_final(s))
+    numba.set_num_threads(threads)
+    assert out[0]["forces"].any()
+    for name in out[0]:
+        np.testing.assert_array_equal(out[0][name], out[1][name], err_msg=name)

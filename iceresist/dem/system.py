@@ -7,7 +7,10 @@ Sub-step rule (DESIGN.md section 7): the critical step of a linear contact is dt
 largest stiffness k = max(k_n, k_t) and the smallest pair mass m = m_s,min / 2, where m_s = 1 / (1/m + r^2 / I_min)
 is the effective mass a body shows at its sphere at lever arm r (translation plus the softest rotation). A step
 ``dt`` is cut into ceil(dt / (safety dt_crit)) sub-steps; a forced sub-step above dt_crit is refused with
-:class:`~iceresist.errors.StabilityError`.
+:class:`~iceresist.errors.StabilityError`. The gather kernel also sums each body's contact force and torque over
+the sub-steps of a step (:meth:`DEMSystem.mean_contact_force_on`), so a caller that records a mean over a step
+needs no loop of its own. :meth:`DEMSystem.state` and :meth:`DEMSystem.load_state` carry the contact history,
+so a restart continues bit for bit.
 """
 
 from __future__ import annotations

@@ -115,7 +115,7 @@ def cmd_run(args) -> int:
                                      precision=desc["precision"], cells=model.cells),
                           scene_name=scene.scene.name, scene_source=scene.source_name,
                           description=scene.scene.description, model=desc, units=u.describe(),
-                          shape_cells=list(model.shape_cells))
+                          shape_cells=None if model.shape_cells is None else list(model.shape_cells))
         sim = build_simulation(scene, model, rf, chk_path, progress=not args.no_progress)
         log.info("running %s: %d cells, dt = %.4g s, tau = %.6g, %s on %s -> %s", scene.scene.name, model.cells,
                  u.dt_s, u.tau, model.precision, model.target.name, h5_path)

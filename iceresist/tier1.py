@@ -132,6 +132,7 @@ class Tier1Model:
         self.substep_s = self.dem.substep_s()
         self.substeps_per_step = max(1, int(math.ceil(con.sample_interval_s / self.substep_s - 1e-9)))
         self.dt_s = self.substeps_per_step * self.substep_s
+        self.substep_s = self.dt_s / self.substeps_per_step  # the sub-step DEMSystem.step takes, to the last bit
         self.units = Tier1Units(dx_m=2 * self.cube.sphere_radius_m, dt_s=self.dt_s)
         self.cells = 0
         self.shape_cells = None
@@ -148,21 +149,22 @@ class Tier1Model:
         return self.iteration * self.dt_s
 
     @property
+    def target(self):
+        """The DEM's compile target (what the run job logs)."""
+        return self.dem.target
+
+    @property
     def x_bow_m(self) -> float:
         """Stem position at the waterline (m); the hull moves rigidly at the prescribed speed."""
         return self.start_x_m + self.speed_m_s * self.time_s
 
     def step(self, n: int = 1):
-        """n record intervals; each leaves the mean ice force on the hull over its sub-steps."""
-        h = self.substep_s
+        """n record intervals; each leaves the mean ice force on the hull over its sub-steps (kept by the DEM)."""
         for _ in range(int(n)):
-            acc = np.zeros(3)
-            for _ in range(self.substeps_per_step):
-                self.dem.step(h, substeps=1)
-                acc += self.dem.ice_force_on(self.hull_body)
-            self._force_mean = acc / self.substeps_per_step
-            self._force_last = self.dem.ice_force_on(self.hull_body)
+            self.dem.step(self.dt_s, substeps=self.substeps_per_step)
             self.iteration += 1
+        self._force_mean = self.dem.mean_contact_force_on(self.hull_body)
+        self._force_last = self.dem.ice_force_on(self.hull_body)
 
     def fields(self) -> dict:
         return {}
@@ -187,12 +189,20 @@ class Tier1Model:
                 "velocities_m_s": self.dem.velocities[ice]}
 
     def state(self) -> dict:
-        """Body state for the record (contact histories are not part of it: tier-1 runs restart from t = 0)."""
-        return {"iteration": np.int64(self.iteration), **self.ice_state()}
+        """Everything a checkpoint needs to continue bit for bit: the step count, the last recorded forces and
+        the DEM state with its contact history (``dem``); the ice bodies alone under ``positions_m`` etc."""
+        return {"iteration": np.int64(self.iteration), "force_mean_N": self._force_mean.copy(),
+                "force_last_N": self._force_last.copy(), "dem": self.dem.state(), **self.ice_state()}
 
     def load_state(self, state: dict):
-        raise InputError("tier-1 runs cannot be continued from a checkpoint (the DEM contact history is not "
-                         "saved): run the scene again without --pickup")
+        """Continue from :meth:`state` of a model built from the same scene."""
+        if "dem" not in state:
+            raise InputError("the checkpoint holds no DEM state (it was written before tier-1 checkpoints kept "
+                             "the contact history): run the scene again without --pickup")
+        self.dem.load_state(state["dem"])
+        self.iteration = int(state["iteration"])
+        self._force_mean = np.asarray(state["force_mean_N"], dtype=float).copy()
+        self._force_last = np.asarray(state["force_last_N"], dtype=float).copy()
 
     def describe(self) -> dict:
         g = self.geometry

@@ -50,3 +50,6 @@ def test_recorder_writes_ice_force_time_series(tmp_path):
     assert np.allclose(t, 1e-3 * np.arange(1, 11))
     assert f[:, 0].min() < 0  # the ice pushes back on the advancing hull
     assert np.allclose(f[-1], s.ice_force_on(ship))
+    _, fm = read_ice_force(tmp_path / "run.h5", mean=True)
+    assert np.allclose(fm[-1], s.mean_contact_force_on(ship)) and s.last_substeps > 1
+    assert fm[:, 0].min() < 0 and not np.allclose(fm, f)

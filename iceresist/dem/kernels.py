@@ -23,6 +23,7 @@ import math
 
 import numba
 
+from iceresist.dem import kcache
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
@@ -38,7 +39,7 @@ CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mass", "kin
 # (CPython passes calls with more than 30 arguments as *args, which numba cannot inline: keep lists short)
 GATHER_ARGS = ["h", "do_kick", "bfirst", "bcount", "sforce", "storque", "mass", "kin", "ext", "env", "pos",
                "quat", "vel", "omega", "angmom", "volume", "blen", "bhalf", "vfirst", "vcount", "voff", "vvol",
-               "bcontact", "force", "torque", "inv_meff"]
+               "bcontact", "bcsum", "force", "torque", "inv_meff"]
 
 
 def build_items(target, real):
@@ -274,9 +275,9 @@ def build_items(target, real):
 
     @target.device
     def gather(b, h, do_kick, bfirst, bcount, sforce, storque, mass, kin, ext, env, pos, quat, vel, omega, angmom,
-               volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, force, torque, inv_meff):
+               volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff):
         """ext[b] = (F_fluid, M_fluid); env = (water level, rho_w, C_d, C_a, water on, g_x, g_y, g_z);
-        bcontact[b] = (contact force, contact torque)."""
+        bcontact[b] = (contact force, contact torque); a kicking call (a sub-step) adds bcontact[b] to bcsum[b]."""
         fx = zero
         fy = zero
         fz = zero
@@ -296,6 +297,13 @@ def build_items(target, real):
         bcontact[b, 3] = tx
         bcontact[b, 4] = ty
         bcontact[b, 5] = tz
+        if do_kick != 0:
+            bcsum[b, 0] += fx
+            bcsum[b, 1] += fy
+            bcsum[b, 2] += fz
+            bcsum[b, 3] += tx
+            bcsum[b, 4] += ty
+            bcsum[b, 5] += tz
         if kin[b] == 0:
             m = mass[b]
             fx += m * env[5] + ext[b, 0]
@@ -334,14 +342,27 @@ def build_items(target, real):
     return drift, place, contact, gather
 
 
-#: below this many items the CPU runs the serial build of a launcher: a parallel launch costs more than it saves
-SERIAL_BELOW = 2048
+#: CPU launches with fewer items than this run on one thread, per launcher. A launch on all threads waits
+#: for every worker: on a 2-core x86 VM shared with other work that wait was about 12-15 ms per launch, while
+#: placing 10k spheres takes 0.2 ms and their contacts about 6 ms on one thread, so the cheap per-body and
+#: per-sphere passes stay on one thread at any realistic size, and the contact pass uses all threads only where
+#: its one-thread time (about 0.6 us per sphere) clearly exceeds two such waits.
+PARALLEL_FROM = {"drift": 1 << 20, "place": 1 << 20, "gather": 1 << 20, "contact": 1 << 15}
 
 
-def make_launcher(target, item, argnames, name):
+def use_parallel(kind: str, n: int) -> bool:
+    """Whether a CPU launch of ``n`` items of ``kind`` runs on all numba threads (else on one)."""
+    return n >= PARALLEL_FROM[kind]
+
+
+def make_launcher(target, item, argnames, name, kind, key=None):
     """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA.
 
-    On the CPU a serial twin (plain ``range``) serves small n; each twin compiles on its first call."""
+    On the CPU one prange kernel serves every launch; below ``PARALLEL_FROM[kind]`` items it runs with one
+    thread (``numba.set_num_threads(1)`` for the call: no wait for the workers, and the prange build ran the
+    contact pass about 1.5x faster on one thread than a plain ``range`` loop did). It compiles on its first call,
+    from the on-disk cache of :mod:`iceresist.dem.kcache` when ``key`` (its fingerprint) is given and the cache
+    is on."""
     args = ", ".join(argnames)
     if target.is_cuda:
         from numba import cuda
@@ -355,17 +376,27 @@ def make_launcher(target, item, argnames, name):
             if n:
                 kern[(n + THREADS - 1) // THREADS, THREADS](n, *a)
     else:
-        src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
-        ns = {"prange": numba.prange, "item": item}
-        exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-        par = target.kernel(ns[name])
-        ser = target.kernel(ns[name], parallel=False)
+        kern = kcache.cpu_launcher(name, argnames, item, key) if key is not None else None
+        if kern is None:
+            src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
+            ns = {"prange": numba.prange, "item": item}
+            exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
+            kern = target.kernel(ns[name])
 
         def launch(n, *a):
-            if n >= SERIAL_BELOW:
-                par(n, *a)
-            elif n:
-                ser(n, *a)
+            if not n:
+                return
+            threads = numba.get_num_threads()
+            if threads == 1 or use_parallel(kind, n):
+                kern(n, *a)
+                return
+            numba.set_num_threads(1)
+            try:
+                kern(n, *a)
+            finally:
+                numba.set_num_threads(threads)
+
+        launch.kernel = kern
     launch.__name__ = name
     return launch
 
@@ -373,10 +404,11 @@ def make_launcher(target, item, argnames, name):
 def build_launchers(target, real):
     """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid)."""
     drift, place, contact, gather = build_items(target, real)
+    key = None if target.is_cuda else kcache.fingerprint(real)
     return {
-        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift"),
-        "place": make_launcher(target, place, PLACE_ARGS, "dem_place"),
-        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact"),
-        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather"),
+        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift", "drift", key),
+        "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place", key),
+        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact", "contact", key),
+        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather", "gather", key),
         "sort": build_grid_sort(target),
     }

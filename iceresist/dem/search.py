@@ -18,6 +18,7 @@ import numpy as np
 from numba import cuda  # cuda.grid / cuda.atomic inside kernels (module global for the simulator)
 
 from iceresist.backends.jit import Target
+from iceresist.dem import kcache
 
 P1, P2, P3 = 73856093, 19349663, 83492791
 SCAN_CHUNK = 256
@@ -37,25 +38,26 @@ def build_cell_hash(target: Target):
     return cell_hash
 
 
+def sort_cpu(n, key, start, count, cursor, order):
+    """Serial counting sort of sphere indices by bucket (the CPU body of :func:`build_grid_sort`)."""
+    count[:] = 0
+    for i in range(n):
+        count[key[i]] += 1
+    run = 0
+    for b in range(count.shape[0]):
+        start[b] = run
+        cursor[b] = run
+        run += count[b]
+    for i in range(n):
+        k = key[i]
+        order[cursor[k]] = i
+        cursor[k] += 1
+
+
 def build_grid_sort(target: Target):
     """``sort(n, key, start, count, cursor, order)``: bucket counts, starts and sphere indices sorted by bucket."""
     if not target.is_cuda:
-        @target.kernel(parallel=False)
-        def sort_cpu(n, key, start, count, cursor, order):
-            count[:] = 0
-            for i in range(n):
-                count[key[i]] += 1
-            run = 0
-            for b in range(count.shape[0]):
-                start[b] = run
-                cursor[b] = run
-                run += count[b]
-            for i in range(n):
-                k = key[i]
-                order[cursor[k]] = i
-                cursor[k] += 1
-
-        return sort_cpu
+        return kcache.cpu_function(sort_cpu)
 
     @target.kernel
     def zero2(nb, a, b):

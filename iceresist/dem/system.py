@@ -7,7 +7,10 @@ Sub-step rule (DESIGN.md section 7): the critical step of a linear contact is dt
 largest stiffness k = max(k_n, k_t) and the smallest pair mass m = m_s,min / 2, where m_s = 1 / (1/m + r^2 / I_min)
 is the effective mass a body shows at its sphere at lever arm r (translation plus the softest rotation). A step
 ``dt`` is cut into ceil(dt / (safety dt_crit)) sub-steps; a forced sub-step above dt_crit is refused with
-:class:`~iceresist.errors.StabilityError`.
+:class:`~iceresist.errors.StabilityError`. The gather kernel also sums each body's contact force and torque over
+the sub-steps of a step (:meth:`DEMSystem.mean_contact_force_on`), so a caller that records a mean over a step
+needs no loop of its own. :meth:`DEMSystem.state` and :meth:`DEMSystem.load_state` carry the contact history,
+so a restart continues bit for bit.
 """
 
 from __future__ import annotations
@@ -184,6 +187,7 @@ class DEMSystem:
         h["force"] = np.zeros((nb, 3), dtype=real)
         h["torque"] = np.zeros((nb, 3), dtype=real)
         h["bcontact"] = np.zeros((nb, 6), dtype=real)
+        h["bcsum"] = np.zeros((nb, 6), dtype=real)
         h["bfirst"] = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         h["bcount"] = counts
         h["vfirst"] = np.concatenate([[0], np.cumsum(vcounts)[:-1]]).astype(np.int64)
@@ -299,8 +303,8 @@ class DEMSystem:
         self._cur = nxt
         k["gather"](nb, r(h), np.int64(kick), d["bfirst"], d["bcount"], d["sforce"], d["storque"], d["mass"],
                     d["kin"], d["ext"], d["env"], d["pos"], d["quat"], d["vel"], d["omega"], d["angmom"], d["volume"],
-                    d["blen"], d["bhalf"], d["vfirst"], d["vcount"], d["voff"], d["vvol"], d["bcontact"], d["force"],
-                    d["torque"], d["inv_meff"])
+                    d["blen"], d["bhalf"], d["vfirst"], d["vcount"], d["voff"], d["vvol"], d["bcontact"], d["bcsum"],
+                    d["force"], d["torque"], d["inv_meff"])
 
     def _substep(self, h: float):
         d, r = self._d, self.real
@@ -339,12 +343,72 @@ class DEMSystem:
         if self._dirty:
             self.prime()
         h = dt_s / n
+        self._zero("bcsum")
         for _ in range(n):
             self._substep(h)
         self.time_s += dt_s
         self.substeps_taken += n
         self.last_substeps = n
         return n
+
+    def _zero(self, name):
+        if self.target.is_cuda:
+            self._h[name][...] = 0
+            self._d[name].copy_to_device(self._h[name])
+        else:
+            self._h[name][...] = 0
+
+    # ------------------------------------------------------------------ checkpoint
+    #: Arrays that change while stepping (or through set_external / set_water); everything else follows from
+    #: the bodies, walls and parameters the system was built with.
+    STATE_ARRAYS = ("pos", "vel", "vpred", "quat", "angmom", "omega", "inv_meff", "pvel", "pomega", "ext", "env",
+                    "force", "torque", "bcontact", "bcsum", "xs", "sforce", "storque", "senergy", "snew", "sover")
+
+    def state(self) -> dict[str, np.ndarray]:
+        """Everything :meth:`load_state` needs to continue bit for bit: body states, the last forces, the
+        tangential springs of the contacts (partner, spring vector, count per sphere), counters and the time.
+
+        A checkpoint fits a system built with the same bodies, walls and parameters in the same order."""
+        if not self._built:
+            self._build()
+        out = {k: np.array(self._get(k), copy=True) for k in self.STATE_ARRAYS}
+        hp, hxi, hn = (np.array(self._get(f"{k}_{self._cur}"), copy=True) for k in ("hp", "hxi", "hn"))
+        out.update(history_partner=hp, history_spring_m=hxi, history_count=hn)
+        out["time_s"] = np.float64(self.time_s)
+        out["substeps_taken"] = np.int64(self.substeps_taken)
+        out["last_substeps"] = np.int64(self.last_substeps)
+        out["primed"] = np.int8(0 if self._dirty else 1)
+        return out
+
+    def load_state(self, state: dict):
+        """Restore a :meth:`state` taken from a system built the same way (same bodies, walls, precision)."""
+        if not self._built:
+            self._build()
+        names = self.STATE_ARRAYS + ("history_partner", "history_spring_m", "history_count")
+        missing = [k for k in names if k not in state]
+        if missing:
+            raise InputError(f"DEM state lacks {', '.join(missing)}: it was not written by DEMSystem.state()")
+        for k in self.STATE_ARRAYS:
+            self._load(k, k, state[k])
+        for k, name in (("hp", "history_partner"), ("hxi", "history_spring_m"), ("hn", "history_count")):
+            self._load(f"{k}_a", name, state[name])
+        self._cur = "a"
+        self.time_s = float(state["time_s"])
+        self.substeps_taken = int(state["substeps_taken"])
+        self.last_substeps = int(state["last_substeps"])
+        self._dirty = not bool(state["primed"])
+
+    def _load(self, key, name, value):
+        value = np.asarray(value)
+        want = self._h[key]
+        if value.shape != want.shape:
+            raise InputError(f"DEM state {name}: shape {value.shape} does not fit this system's {want.shape} "
+                             f"({self.n_bodies} bodies, {self.n_spheres} spheres, {self.history_slots} history "
+                             f"slots): build the system as the checkpointed one was built")
+        if value.dtype != want.dtype:
+            raise InputError(f"DEM state {name}: dtype {value.dtype} is not this system's {want.dtype} "
+                             f"(precision {self.precision})")
+        self._put(key, value)
 
     # ------------------------------------------------------------------ state and diagnostics
     @property
@@ -410,6 +474,19 @@ class DEMSystem:
 
     def contact_torque_on(self, body: int) -> np.ndarray:
         return self._get("bcontact")[body, 3:].astype(float)
+
+    def mean_contact_force_on(self, body: int) -> np.ndarray:
+        """Contact force on a body (N) averaged over the sub-steps of the last :meth:`step` call, each sub-step's
+        force taken at its end (the value :meth:`contact_force_on` shows after that sub-step)."""
+        if self.last_substeps == 0:
+            return self.contact_force_on(body)
+        return self._get("bcsum")[body, :3].astype(float) / self.last_substeps
+
+    def mean_contact_torque_on(self, body: int) -> np.ndarray:
+        """Contact torque about the body's centre (N m) averaged like :meth:`mean_contact_force_on`."""
+        if self.last_substeps == 0:
+            return self.contact_torque_on(body)
+        return self._get("bcsum")[body, 3:].astype(float) / self.last_substeps
 
     def ice_force_on(self, body: int) -> np.ndarray:
         """Ice force on a (ship) body: the contact forces on its spheres, x y z in N (paper section 4.2)."""

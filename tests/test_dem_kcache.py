@@ -1,0 +1,68 @@
+"""The on-disk cache of the CPU DEM launchers: keyed file names, and a second process loads instead of compiling."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from iceresist.backends import jit
+from iceresist.dem import kcache
+
+
+@jit.cpu.device
+def _double(i, a):
+    a[i] = 2.0 * i
+
+
+def test_launchers_are_written_under_their_key_and_cached(tmp_path, monkeypatch):
+    monkeypatch.setenv("ICERESIST_CACHE", str(tmp_path))
+    kern = kcache.cpu_launcher("t_double", ["a"], _double, key="k1")
+    a = np.zeros(5)
+    kern(5, a)
+    assert a.tolist() == [0, 2, 4, 6, 8]
+    files = sorted(p.name for p in (tmp_path / "kernels").glob("t_double_*.py"))
+    assert len(files) == 1
+    assert list((tmp_path / "kernels" / "__pycache__").glob("*t_double_*.nbi"))  # numba saved the compile
+    kcache.cpu_launcher("t_double", ["a"], _double, key="k2")  # another fingerprint: another file
+    assert len(list((tmp_path / "kernels").glob("t_double_*.py"))) == 2
+    monkeypatch.setenv("ICERESIST_CACHE", "off")
+    assert kcache.cpu_launcher("t_double", ["a"], _double, key="k1") is None
+
+
+def test_fingerprint_follows_precision():
+    assert kcache.fingerprint(np.float64) != kcache.fingerprint(np.float32)
+    assert kcache.fingerprint(np.float64) == kcache.fingerprint(np.float64)
+
+
+SCRIPT = textwrap.dedent("""
+    import json
+    from iceresist.dem import DEMSystem, sphere
+    s = DEMSystem(gravity_m_s2=(0, 0, 0))
+    s.add_body(sphere(0.01, 1000.0), (0, 0, 0), (0.5, 0, 0))
+    s.add_body(sphere(0.01, 1000.0), (0.0205, 0, 0), (-0.5, 0, 0))
+    s.add_wall((-0.05, 0, 0), (1, 0, 0))
+    s.step(0.001)
+    stats = {n: [len(f.kernel.stats.cache_hits), len(f.kernel.stats.cache_misses)]
+             for n, f in s._k.items() if n != "sort"}
+    print(json.dumps({"stats": stats, "x": s.positions[:, 0].tolist()}))
+""")
+
+
+def test_second_process_loads_the_dem_kernels_from_the_cache(capsys):
+    import json
+
+    if kcache.cache_dir() is None:
+        pytest.skip("the kernel cache is switched off (ICERESIST_CACHE=off)")
+    exec(SCRIPT, {})  # this process: compiles (or loads) the launchers and saves them to the cache
+    here = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), env.get("PYTHONPATH", "")])
+    run = subprocess.run([sys.executable, "-c", SCRIPT], env=env, check=True, capture_output=True, text=True)
+    there = json.loads(run.stdout.strip().splitlines()[-1])
+    assert set(there["stats"]) == {"drift", "place", "contact", "gather"}
+    for name, (hits, misses) in there["stats"].items():
+        assert hits == 1 and misses == 0, name  # loaded, not compiled
+    assert there["x"] == here["x"]

@@ -59,7 +59,7 @@ class Target:
             from numba import cuda as _cuda
 
             return _cuda.jit(fn, **kw)
-        return numba.njit(fn, parallel=kw.pop("parallel", True), fastmath=set(CPU_FASTMATH), cache=False, **kw)
+        return numba.njit(fn, parallel=kw.pop("parallel", True), fastmath=set(CPU_FASTMATH), cache=kw.pop("cache", False), **kw)
 
 
 def _cpu_device(fn):

@@ -97,7 +97,7 @@ def test_translating_flow_under_flat_surface_stays_flat():
 
 
 def test_cuda_matches_cpu_on_a_tilted_surface():
-    """Two steps of a tilted, moving surface (eq. 11 with u != 0, gas -> liquid refills): the CUDA kernels
+    """Two steps of a tilted surface moving up (eq. 11 with u != 0, reflag, extension): the CUDA kernels
     (simulator) reproduce the CPU populations and phi to 1e-12 in float64."""
     fo = _tank()
     x = np.arange(8) + 0.5

@@ -16,6 +16,8 @@ SOLID = 2
 NEAR_WALL = 4
 NEAR_OUTLET = 8
 GHOST = 16  # non-fluid cell covered by a moving body; its incoming slots are filled by the coupling
+GAS = 32  # free surface: a gas cell (phi < 1/2), not computed; liquid cells pulling from it apply eq. (11)
+NEAR_SURFACE = 64  # free surface: a liquid cell with at least one gas neighbour (general path)
 
 #: Boundary-condition codes of the link table (``BlockForest.bc_kind``).
 BC_WALL = 0       # resting half-way bounce-back (also solid cells and unallocated blocks)

@@ -56,13 +56,14 @@ def operator_available(operator: str) -> bool:
 
 
 @lru_cache(maxsize=None)
-def fused_launcher(target, precision: str, operator: str) -> CellLauncher:
-    """Compile (once per target, precision, operator) the fused stream-collide launcher."""
+def fused_launcher(target, precision: str, operator: str, free_surface: bool = False) -> CellLauncher:
+    """Compile (once per target, precision, operator) the fused stream-collide launcher;
+    ``free_surface``: the variant with eq. (11) at gas cells and the force rho g (:mod:`iceresist.lbm.stream`)."""
     real = jit.real_type(precision)
     collide = collide_builder(operator)(target, real)
     if target.is_cuda:
-        return CellLauncher(target, build_stream_collide(target, real, collide), ARGS)
-    return CellLauncher(target, build_stream_collide_block(target, real, collide), ARGS, per_block=True)
+        return CellLauncher(target, build_stream_collide(target, real, collide, free_surface), ARGS)
+    return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface), ARGS, per_block=True)
 
 
 def _equilibrium_minus_w(rho, ux, uy, uz):
@@ -78,10 +79,12 @@ class LBMSolver:
     ``tau``: relaxation time (lattice units, > 1/2); ``force``: uniform body-force density
     (lattice units); ``operator``: "cumulant" or "bgk"; ``precision``: storage and
     arithmetic, "float32" or "float64"; ``target``: ``jit.cpu`` or ``jit.cuda()``.
+    ``free_surface``: compile the free-surface variant (:mod:`iceresist.freesurface.fluid`), in
+    which ``force`` is an acceleration g (force density rho g) and GAS cells are skipped.
     """
 
     def __init__(self, forest, *, tau: float, force=(0.0, 0.0, 0.0), operator: str = "cumulant",
-                 precision: str = "float32", target=jit.cpu):
+                 precision: str = "float32", target=jit.cpu, free_surface: bool = False):
         if not tau > 0.5:
             raise StabilityError(f"tau = {tau} must exceed 1/2 (lattice viscosity (tau - 1/2)/3 > 0); "
                                  "raise the viscosity or coarsen the time step")
@@ -98,7 +101,7 @@ class LBMSolver:
         self.cells = forest.cells
         #: Bytes of population storage per cell (two buffers), also the memory traffic of one update.
         self.bytes_per_cell = 2 * Q * np.dtype(self.real).itemsize
-        self._launch = fused_launcher(target, precision, operator)
+        self._launch = fused_launcher(target, precision, operator, free_surface)
         real = self.real
         tables = dict(nbr_key=forest.nbr_key.astype(np.int32), link_bc=forest.link_bc.astype(np.int32),
                       flags=forest.flags.astype(np.uint8), bc_kind=forest.bc_kind.astype(np.int32),

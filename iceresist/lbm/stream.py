@@ -45,11 +45,18 @@ def _source_lines(q: int):
     return " + ".join(parts_key), " + ".join(parts_cell)
 
 
-def stream_collide_source(loop_cells: bool = False) -> str:
+def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) -> str:
     """Python source of the fused per-cell update ``stream_collide_cell(b, c, ...)``.
 
     With ``loop_cells`` the same body is wrapped in a loop over the 512 cells of block
     ``b`` (``stream_collide_block(b, ...)``): the CPU form, one call per block.
+
+    With ``free_surface`` (paper section 2.2): a population whose source is a GAS cell
+    is given by eq. (11), and (Fx, Fy, Fz) is an acceleration g: the body force of the
+    cell is rho g (gravity). Eq. (11) with rho0 = 1 in the form f - w reads
+    f_q = -f*_opp + 2 w_q [9/2 (c_q . u)^2 - 3/2 u^2] (the odd terms of f^eq cancel),
+    the anti-bounce-back at rho0 = 1; u is the cell's own velocity from its
+    post-collision populations of the previous step, as at an outlet.
     """
     s = "def stream_collide_cell(b, c, " + ", ".join(ARGS) + "):\n"
     s += "    flag = flags[b, c]\n"
@@ -64,14 +71,19 @@ def stream_collide_source(loop_cells: bool = False) -> str:
     # general path: solids, walls, inlets, outlets
     s += "    else:\n"
     s += "        ulx = zero\n        uly = zero\n        ulz = zero\n"
-    s += "        if flag & NEAR_OUTLET:\n"
+    s += "        if flag & NEED_U:\n"
     g = [f"g{q}" for q in range(Q)]
     for q in range(Q):
         s += f"            g{q} = src[b, {q}, c]\n"
     s += f"            rho_l = one + {' + '.join(g)}\n"
     for a, comp in enumerate("xyz"):
         expr = "".join(term(C[q, a], g[q]) for q in range(Q))
-        s += f"            ul{comp} = (zero{expr} - half * F{comp}) / rho_l\n"
+        if free_surface:
+            s += f"            ul{comp} = (zero{expr}) / rho_l - half * F{comp}\n"
+        else:
+            s += f"            ul{comp} = (zero{expr} - half * F{comp}) / rho_l\n"
+    if free_surface:
+        s += "        uu_l = ulx * ulx + uly * uly + ulz * ulz\n"
     for q in range(1, Q):
         key, cell = _source_lines(q)
         cx, cy, cz = (int(v) for v in C[q])
@@ -82,12 +94,21 @@ def stream_collide_source(loop_cells: bool = False) -> str:
         s += f"            sc = {cell}\n"
         s += "            if flags[nb, sc] & PULLED:\n"
         s += f"                f{q} = src[nb, {q}, sc]\n"
+        if free_surface:
+            cu = "".join(term(C[q, a], f"ul{'xyz'[a]}") for a in range(3))
+            s += "            elif flags[nb, sc] & GAS:\n"
+            s += f"                cu = zero{cu}\n"
+            s += f"                f{q} = -fopp + two_w{q} * (c45 * cu * cu - c15 * uu_l)\n"
         s += "            else:\n"
         s += f"                f{q} = fopp\n"
         s += "        else:\n"
         s += (f"            f{q} = link_boundary(fopp, link_bc[b, k], bc_kind, bc_u, bc_rho, "
               f"r{cx + 1}, r{cy + 1}, r{cz + 1}, w{q}, ulx, uly, ulz)\n")
-    s += f"    out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
+    if free_surface:
+        s += f"    rho_c = one + {' + '.join(F_NAMES)}\n"
+        s += f"    out = collide(({', '.join(F_NAMES)}), omega, rho_c * Fx, rho_c * Fy, rho_c * Fz)\n"
+    else:
+        s += f"    out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
     for q in range(Q):
         s += f"    dst[b, {q}, c] = out[{q}]\n"
     if loop_cells:
@@ -99,23 +120,27 @@ def stream_collide_source(loop_cells: bool = False) -> str:
 
 
 def _namespace(target, real, collide):
-    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "NEAR_OUTLET": FL.NEAR_OUTLET, "izero": np.int64(0), "zero": real(0.0),
+    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "NEAR_OUTLET": FL.NEAR_OUTLET, "GAS": FL.GAS,
+          "NEED_U": FL.NEAR_OUTLET | FL.NEAR_SURFACE, "c45": real(4.5), "c15": real(1.5),
+          "izero": np.int64(0), "zero": real(0.0),
           "one": real(1.0), "half": real(0.5), "r0": real(-1.0), "r1": real(0.0), "r2": real(1.0),
           "collide": collide, "link_boundary": build_link_boundary(target, real, cell_device(target))}
     ns.update({f"w{q}": real(W[q]) for q in range(Q)})
+    ns.update({f"two_w{q}": real(2.0 * W[q]) for q in range(Q)})
     return ns
 
 
-def build_stream_collide(target, real, collide):
-    """The fused pull stream-collide update of one cell, ``stream_collide_cell(b, c, *ARGS)``."""
-    return compile_source(stream_collide_source(), "stream_collide_cell", _namespace(target, real, collide),
+def build_stream_collide(target, real, collide, free_surface: bool = False):
+    """The fused pull stream-collide update of one cell, ``stream_collide_cell(b, c, *ARGS)``;
+    ``free_surface``: eq. (11) at GAS sources and the force rho g (see :func:`stream_collide_source`)."""
+    return compile_source(stream_collide_source(free_surface=free_surface), "stream_collide_cell", _namespace(target, real, collide),
                           cell_device(target))
 
 
-def build_stream_collide_block(target, real, collide):
+def build_stream_collide_block(target, real, collide, free_surface: bool = False):
     """The same update looped over the 512 cells of a block, ``stream_collide_block(b, *ARGS)`` (CPU form:
     one call per block instead of one per cell, about 1.5x faster streaming)."""
-    return compile_source(stream_collide_source(loop_cells=True), "stream_collide_block",
+    return compile_source(stream_collide_source(loop_cells=True, free_surface=free_surface), "stream_collide_block",
                           _namespace(target, real, collide), cell_device(target))
 
 

@@ -1,0 +1,243 @@
+"""The free-surface fluid: cumulant LBM in the liquid, phase field for the surface (paper section 2.2).
+
+One time step (:meth:`FreeSurfaceFluid.step`):
+
+1. fused stream-collide of the liquid (phi >= 1/2) with the body force rho g;
+   populations pulled from a GAS cell follow eq. (11) (:mod:`iceresist.lbm.stream`,
+   ``free_surface=True``); gas cells are skipped like solids;
+2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), extended into the
+   gas layer by layer (:mod:`iceresist.freesurface.extension`);
+3. one step of the conservative Allen-Cahn LBM advected by that velocity (eqs. 4-10,
+   :class:`~iceresist.freesurface.phasefield.PhaseField`);
+4. reflag from the new phi: GAS where phi < 1/2 (the FLUID bit cleared), NEAR_SURFACE
+   on liquid cells with a gas neighbour, the wall flags of the forest kept. A cell
+   turning from gas to liquid has no populations: it gets the equilibrium at the
+   reference density rho0 = 1 and the extended velocity (eq. 12 with rho0), the
+   same state eq. (11) assumes for the gas side of the surface.
+
+All-liquid cells keep the short path of the fused kernel.
+"""
+
+from __future__ import annotations
+
+import logging
+from functools import lru_cache
+
+import numpy as np
+
+from iceresist import lattice as L
+from iceresist.backends import jit
+from iceresist.backends.launch import CellLauncher
+from iceresist.errors import InputError
+from iceresist.freesurface.extension import extension_launcher, extend_velocity
+from iceresist.freesurface.layout import build_neighbour
+from iceresist.freesurface.phasefield import PhaseField
+from iceresist.grid import flags as FL
+from iceresist.grid.forest import CELLS
+from iceresist.lbm.solver import LBMSolver
+
+log = logging.getLogger(__name__)
+
+
+def build_surface_cells(target, real):
+    """Compile ``(velocity_cell, reflag_cell)``.
+
+    * ``velocity_cell(b, c, f, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
+      populations f - w with the half-force shift of the force rho g removed; 0 elsewhere;
+    * ``reflag_cell(b, c, phi, base, flags, f, u, nbr)``: the flags of step 4 (module docstring);
+      a cell turning liquid gets f - w = f^eq(1, u) - w.
+    """
+    neighbour, _ = build_neighbour(target)
+    cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
+    w = L.W.astype(real)
+    zero, one, half, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 3.0, 4.5, 1.5))
+    fluid, gas, near_surface = np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE)
+    int64 = np.int64
+    dev = target.device
+
+    @dev
+    def velocity_cell(b, c, f, flags, u, gx, gy, gz):
+        b = int64(b)
+        if flags[b, c] & fluid:
+            rho = one
+            jx = zero
+            jy = zero
+            jz = zero
+            for q in range(27):
+                fq = f[b, q, c]
+                rho += fq
+                jx += cx[q] * fq
+                jy += cy[q] * fq
+                jz += cz[q] * fq
+            u[b, 0, c] = jx / rho - half * gx
+            u[b, 1, c] = jy / rho - half * gy
+            u[b, 2, c] = jz / rho - half * gz
+        else:
+            u[b, 0, c] = zero
+            u[b, 1, c] = zero
+            u[b, 2, c] = zero
+
+    @dev
+    def reflag_cell(b, c, phi, base, flags, f, u, nbr):
+        b = int64(b)
+        bf = base[b, c]
+        if (bf & fluid) == 0:
+            flags[b, c] = bf
+            return
+        if phi[b, c] < half:
+            flags[b, c] = gas
+            return
+        if flags[b, c] & gas:
+            # gas -> liquid: equilibrium at rho0 = 1 and the extended velocity (eq. 12)
+            ux = u[b, 0, c]
+            uy = u[b, 1, c]
+            uz = u[b, 2, c]
+            uu = ux * ux + uy * uy + uz * uz
+            for q in range(27):
+                cu = cx[q] * ux + cy[q] * uy + cz[q] * uz
+                f[b, q, c] = w[q] * (c3 * cu + c45 * cu * cu - c15 * uu)
+        z = c // 64
+        y = (c // 8) % 8
+        x = c % 8
+        near = False
+        for q in range(1, 27):
+            bn, cn = neighbour(nbr, b, x, y, z, cx[q], cy[q], cz[q])
+            if bn >= 0:
+                if (base[bn, cn] & fluid) and phi[bn, cn] < half:
+                    near = True
+        if near:
+            flags[b, c] = bf | near_surface
+        else:
+            flags[b, c] = bf
+
+    return velocity_cell, reflag_cell
+
+
+@lru_cache(maxsize=None)
+def surface_launchers(target, precision: str):
+    vel, reflag = build_surface_cells(target, jit.real_type(precision))
+    return (CellLauncher(target, vel, ("f", "flags", "u", "gx", "gy", "gz")),
+            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "u", "nbr")))
+
+
+class FreeSurfaceFluid:
+    """Liquid with a free surface under gravity on a :class:`~iceresist.grid.BlockForest` (paper section 2.2).
+
+    ``tau``: relaxation time of the liquid (lattice units); ``gravity_lattice``: g (lattice units,
+    acting along -z); ``depth_cells``: still-water level z_s (cells from the bottom of the domain;
+    the cell k spans k..k+1); ``mobility``, ``width``, ``h_lattice``: the phase field (eqs. 9-10);
+    ``operator``, ``precision``, ``target`` as in :class:`~iceresist.lbm.solver.LBMSolver`.
+    """
+
+    def __init__(self, forest, *, tau: float, gravity_lattice: float, depth_cells: float, mobility: float = 0.05,
+                 width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
+                 precision: str = "float32", target=jit.cpu):
+        if not gravity_lattice >= 0:
+            raise InputError(f"free_surface.gravity_lattice must be >= 0 (lattice units), not {gravity_lattice}")
+        if not 0 < depth_cells < forest.shape_cells[2]:
+            raise InputError(f"free_surface.depth_cells must lie inside the domain (0, {forest.shape_cells[2]}), "
+                             f"not {depth_cells}")
+        self.forest = forest
+        self.g = float(gravity_lattice)
+        self.depth = float(depth_cells)
+        self.target = target
+        self.real = jit.real_type(precision)
+        self.fluid = LBMSolver(forest, tau=tau, force=(0.0, 0.0, -self.g), operator=operator, precision=precision,
+                               target=target, free_surface=True)
+        self.phase = PhaseField(forest, mobility=mobility, width=width, h_lattice=h_lattice, precision=precision,
+                                target=target)
+        self._vel, self._reflag = surface_launchers(target, precision)
+        self._ext = extension_launcher(target, precision)
+        self.nblocks = forest.nblocks
+        self._base = self._to_target(np.ascontiguousarray(forest.flags.astype(np.uint8)))
+        self._u = self._to_target(np.zeros((self.nblocks, 3, CELLS), self.real))
+        self._dist = self._to_target(np.zeros((self.nblocks, CELLS), np.int8))
+        self.iteration = 0
+
+    def _to_target(self, a):
+        if self.target.is_cuda:
+            from numba import cuda
+
+            return cuda.to_device(a)
+        return a
+
+    def _host(self, a) -> np.ndarray:
+        return a.copy_to_host() if self.target.is_cuda else np.array(a)
+
+    # ------------------------------------------------------------------ state
+    def initialize(self, surface=None, u=(0.0, 0.0, 0.0)):
+        """Still water in hydrostatic balance under the surface z_s(x, y) (``surface``: dense (nx, ny) heights in
+        cells, default the flat ``depth_cells``), moving with the uniform velocity ``u`` (lattice units).
+
+        phi = 1/2 + 1/2 tanh(2 (z_s - z) / W) (the profile of eq. 4), z the cell centre;
+        rho = exp(3 g (z_s - z)), the solution of c_s^2 d(rho)/dz = -rho g (equal to
+        1 + 3 g (z_s - z) to first order), rho = 1 at the surface, the gas density rho0 of eq. (11).
+        """
+        nx, ny, nz = self.forest.shape_cells
+        zs = np.full((nx, ny), self.depth) if surface is None else np.asarray(surface, dtype=float)
+        if zs.shape != (nx, ny):
+            raise InputError(f"surface must be an array of shape ({nx}, {ny}) (heights in cells), got {zs.shape}")
+        z = np.arange(nz) + 0.5
+        s = zs[:, :, None] - z[None, None, :]
+        phi = 0.5 + 0.5 * np.tanh(2.0 * s / self.phase.width)
+        rho = np.exp(3.0 * self.g * np.maximum(s, 0.0))
+        self.fluid.initialize(rho=rho, u=tuple(float(v) for v in u))
+        phi_b = self.forest.from_dense(phi)
+        # flags from phi (the forest's flags carry no GAS bit yet: no cell counts as newly liquid)
+        self._reflag(self.nblocks, self._to_target(np.ascontiguousarray(phi_b, dtype=self.real)), self._base,
+                     self.fluid.flags, self.fluid.state, self._u, self.phase.nbr)
+        self._velocity()
+        self.phase.initialize(phi_b, self._u)
+        self.iteration = 0
+
+    def _velocity(self):
+        g = self.real(self.g)
+        zero = self.real(0.0)
+        self._vel(self.nblocks, self.fluid.state, self.fluid.flags, self._u, zero, zero, -g)
+        extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr)
+
+    def step(self, n: int = 1):
+        """Advance ``n`` time steps (module docstring, steps 1-4)."""
+        for _ in range(int(n)):
+            self.fluid.step(1)
+            self._velocity()
+            self.phase.step(self._u)
+            self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state, self._u,
+                         self.phase.nbr)
+            self.iteration += 1
+
+    # ------------------------------------------------------------------ diagnostics
+    def phi(self) -> np.ndarray:
+        """Dense phi (nx, ny, nz), float64."""
+        return self.forest.to_dense(self.phase.phi_host().astype(np.float64))
+
+    def volume(self) -> float:
+        """Water volume sum phi (cells^3, the quantity eqs. 4-10 conserve), float64."""
+        return self.phase.volume()
+
+    def macroscopic(self):
+        """Density (nx, ny, nz) and velocity (3, nx, ny, nz) of the liquid, lattice units, float64, NaN in gas
+        and solid."""
+        f = self.fluid.populations()
+        rho = 1.0 + f.sum(axis=1)
+        j = np.einsum("qa,bqc->abc", L.C.astype(np.float64), f)
+        u = j / rho
+        u[2] += 0.5 * self.g
+        liquid = (self._host(self.fluid.flags) & FL.FLUID) != 0
+        rho[~liquid] = np.nan
+        u[:, ~liquid] = np.nan
+        return self.forest.to_dense(rho), self.forest.to_dense(u)
+
+    def surface_height(self) -> np.ndarray:
+        """Height z where phi crosses 1/2 in each column (nx, ny), cells, by linear interpolation (the
+        top-most crossing)."""
+        phi = self.phi()
+        nz = phi.shape[2]
+        z = np.arange(nz) + 0.5
+        below = phi[:, :, :-1] >= 0.5
+        above = phi[:, :, 1:] < 0.5
+        cross = below & above
+        k = nz - 2 - np.argmax(cross[:, :, ::-1], axis=2)
+        p0 = np.take_along_axis(phi, k[..., None], axis=2)[..., 0]
+        p1 = np.take_along_axis(phi, (k + 1)[..., None], axis=2)[..., 0]
+        return z[k] + (p0 - 0.5) / (p0 - p1)

@@ -111,11 +111,88 @@ def build_stream_collide(target, real, collide):
                           cell_device(target))
 
 
-def build_stream_collide_block(target, real, collide):
-    """The same update looped over the 512 cells of a block, ``stream_collide_block(b, *ARGS)`` (CPU form:
-    one call per block instead of one per cell, about 1.5x faster streaming)."""
-    return compile_source(stream_collide_source(loop_cells=True), "stream_collide_block",
-                          _namespace(target, real, collide), cell_device(target))
+def build_stream_collide_block(target, real, collide, vector: bool = True):
+    """The same update over the 512 cells of a block, ``stream_collide_block(b, *ARGS)`` (CPU form).
+
+    With ``vector`` (default) the block is updated in three sweeps so that the collision vectorises
+    across cells (:func:`stream_collide_block_source`); without it, the per-cell update looped over
+    the cells (``stream_collide_source(loop_cells=True)``), kept as the reference form."""
+    if not vector:
+        return compile_source(stream_collide_source(loop_cells=True), "stream_collide_block",
+                              _namespace(target, real, collide), cell_device(target))
+    ns = _namespace(target, real, collide)
+    ns.update({"np": np, "rdtype": real})
+    return compile_source(stream_collide_block_source(), "stream_collide_block", ns, cell_device(target))
+
+
+def _pull_body() -> str:
+    """The pull part of the per-cell update (everything before the collision), taken from
+    :func:`stream_collide_source` so both forms share one set of boundary rules."""
+    body = stream_collide_source().split("\n", 1)[1]
+    return body.split("    out = collide(", 1)[0]
+
+
+def _line_gather(q: int) -> str:
+    """Source pulling population ``q`` of a block whose cells are all FLUID into ``tmp``: per line of
+    8 cells along x, 8 (cx = 0) or 7 + 1 (cx = +-1, one value from the x-neighbour block) copies."""
+    cx, cy, cz = (int(v) for v in C[q])
+    base = q * CELLS
+    s = "    for lz in range(8):\n"
+    s += f"        sz = lz {'-' if cz > 0 else '+'} 1\n" if cz else "        sz = lz\n"
+    s += "        for ly in range(8):\n"
+    s += f"            sy = ly {'-' if cy > 0 else '+'} 1\n" if cy else "            sy = ly\n"
+    s += "            k = 13 + 3 * (sy >> 3) + 9 * (sz >> 3)\n"
+    s += "            nb = nbr_key[b, k]\n"
+    s += "            sl = 8 * (sy & 7) + 64 * (sz & 7)\n"
+    s += f"            dl = {base} + 8 * ly + 64 * lz\n"
+    if cx == 0:
+        s += f"            for lx in range(8):\n                tmp[dl + lx] = src[nb, {q}, sl + lx]\n"
+    elif cx > 0:
+        s += f"            tmp[dl] = src[nbr_key[b, k - 1], {q}, sl + 7]\n"
+        s += f"            for lx in range(1, 8):\n                tmp[dl + lx] = src[nb, {q}, sl + lx - 1]\n"
+    else:
+        s += f"            for lx in range(7):\n                tmp[dl + lx] = src[nb, {q}, sl + lx + 1]\n"
+        s += f"            tmp[dl + 7] = src[nbr_key[b, k + 1], {q}, sl]\n"
+    return s
+
+
+def stream_collide_block_source() -> str:
+    """Python source of the CPU block update ``stream_collide_block(b, *ARGS)`` in three sweeps.
+
+    1. pull: the 27 populations of the 512 cells into a block scratch ``tmp[q * 512 + c]``; a block
+       whose cells are all FLUID is gathered line by line without per-cell neighbour lookups,
+       any other block cell by cell with the boundary rules of the per-cell update;
+    2. collide: one branch-free loop over the 512 cells reading and writing ``tmp`` at constant
+       offsets, which LLVM vectorises across cells (8 float32 or 4 float64 cells per AVX2 lane set);
+    3. write: ``tmp`` to ``dst[b]`` (fluid cells only in a mixed block).
+
+    Same arithmetic as the per-cell form, cell by cell; only the order of the work differs.
+    """
+    s = f"def stream_collide_block(b, {', '.join(ARGS)}):\n"
+    s += f"    tmp = np.empty({Q * CELLS}, rdtype)\n"
+    s += "    full = True\n"
+    s += f"    for c in range({CELLS}):\n        if flags[b, c] != FLUID:\n            full = False\n"
+    s += "    if full:\n"
+    s += "".join("    " + ln + "\n" for q in range(Q) for ln in _line_gather(q).splitlines())
+    s += "    else:\n"
+    zero_fill = "".join(f"                tmp[{q * CELLS} + c] = zero\n" for q in range(Q))
+    body = _pull_body().replace("        return\n", zero_fill + "                continue\n", 1)
+    s += f"        for c in range({CELLS}):\n"
+    s += "".join("        " + ln + "\n" for ln in body.splitlines())
+    s += "".join(f"            tmp[{q * CELLS} + c] = f{q}\n" for q in range(Q))
+    # 2. collide, vectorised across cells
+    s += f"    for c in range({CELLS}):\n"
+    s += "".join(f"        f{q} = tmp[{q * CELLS} + c]\n" for q in range(Q))
+    s += f"        out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
+    s += "".join(f"        tmp[{q * CELLS} + c] = out[{q}]\n" for q in range(Q))
+    # 3. write back
+    s += "    if full:\n"
+    s += f"        for q in range({Q}):\n            for c in range({CELLS}):\n"
+    s += f"                dst[b, q, c] = tmp[q * {CELLS} + c]\n"
+    s += "    else:\n"
+    s += f"        for c in range({CELLS}):\n            if flags[b, c] & FLUID:\n"
+    s += f"                for q in range({Q}):\n                    dst[b, q, c] = tmp[q * {CELLS} + c]\n"
+    return s
 
 
 def cell_device(target):
@@ -125,4 +202,4 @@ def cell_device(target):
     compile time for no speed."""
     if target.is_cuda:
         return target.device
-    return lambda fn: target.kernel(fn, parallel=False)
+    return lambda fn: target.kernel(fn, parallel=False, error_model="numpy")

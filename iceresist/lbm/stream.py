@@ -15,6 +15,11 @@ Populations are stored in the well-conditioned form f - w (rho0 = 1). Cells whos
 26 neighbours are fluid (flag == FLUID) take a short path with no checks; cells
 with boundary links (NEAR_WALL, NEAR_OUTLET) take the general path. The code
 is straight-line over 27 named scalars, generated from the lattice tables.
+
+On the CPU, ``build_stream_collide_block`` updates a whole block per call in three
+sweeps (pull into a block scratch, collision vectorised across cells, write-back),
+reusing the pull code of the per-cell update for blocks with boundary cells
+(docs/PERFORMANCE.md, "LBM CPU kernel optimisation").
 """
 
 from __future__ import annotations

@@ -225,6 +225,6 @@ def test_registry_and_rates_validation():
 
 def test_flop_count_is_pinned():
     """Live arithmetic operations per cell of the generated code (docs/PERFORMANCE.md)."""
-    assert flop_count(1.0)["total"] == 940
+    assert flop_count(1.0)["total"] == 740
     assert flop_count(1.4)["total"] == 1124
     assert flop_count(1.0)["div"] == 1

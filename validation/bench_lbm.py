@@ -1,13 +1,16 @@
 """MLUPS of the fused pull stream-collide kernel on a periodic cube (``python -m validation.bench lbm``).
 
 Measures million lattice-cell updates per second after a warm-up step (compile time reported
-apart) and the memory bandwidth it implies, 2 * 27 * bytes * cells * steps / seconds (read and
-write of every population once per step). On CUDA it adds a 256^3 case, the largest cube that
+apart), the CPU time the timed steps took (``mlups_per_cpu_s``: throughput per busy core-second,
+which a loaded shared machine does not depress the way it does the wall-clock figure) with the
+1-minute load average, and the memory bandwidth it implies, 2 * 27 * bytes * cells * steps / seconds
+(read and write of every population once per step). On CUDA it adds a 256^3 case, the largest cube that
 fits in device memory, and a device-to-device copy bandwidth to set the kernel's figure against.
 """
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -33,16 +36,21 @@ def measure(n, precision, target, operator, steps, tau=0.6):
     s.step(1)
     s.synchronize()
     compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     s.step(steps)
     s.synchronize()
     sec = time.perf_counter() - t0
+    cpu_sec = time.process_time() - c0
     if not np.isfinite(s.mass()):
         raise RuntimeError("benchmark state went non-finite")
     itemsize = np.dtype(precision).itemsize
     return {"name": "lbm", "backend": target.name, "precision": precision, "operator": operator, "cells": s.cells,
             "steps": steps, "seconds": sec, "mlups": s.cells * steps / sec / 1e6,
-            "bandwidth_GBps": 2 * 27 * itemsize * s.cells * steps / sec / 1e9, "compile_seconds": compile_s}
+            "bandwidth_GBps": 2 * 27 * itemsize * s.cells * steps / sec / 1e9, "compile_seconds": compile_s,
+            # CPU time of this process over the timed steps (all threads) and the machine's load: on a
+            # shared machine mlups_per_cpu_s * cores is what the cores would give if they were free
+            "cpu_seconds": cpu_sec, "mlups_per_cpu_s": s.cells * steps / max(cpu_sec, 1e-9) / 1e6,
+            "load_average_1min": os.getloadavg()[0]}
 
 
 def copy_bandwidth(nbytes=1 << 30, repeats=10):

@@ -24,6 +24,7 @@ class CellLauncher:
     def __init__(self, target, cell, argnames, per_block: bool = False):
         """``cell(b, c, *args)``; with ``per_block`` (CPU only) ``cell(b, *args)`` updates a whole block."""
         self.target = target
+        self.cell = cell
         self.argnames = tuple(argnames)
         sig = ", ".join(self.argnames)
         if target.is_cuda:

@@ -255,19 +255,20 @@ def cumulant_source(higher_at_equilibrium: bool = False):
         lines.append(f"    u{comp} = (j{comp} + half * F{comp}) * ir")
     # 2. chimera forward: c_abc = central moments of f~
     _chimera_forward(lines)
-    # n_abc = c_abc + W_abc(u) - drho E_abc  (orders >= 2)
+    # n_abc = c_abc + W_abc(u) - drho E_abc  (orders >= 2); with the higher orders at equilibrium
+    # only the second order is relaxed, and only its deviations are needed
+    hi = higher_at_equilibrium
+    relaxed = [e for e in EXPONENTS if _order(e) >= 2 and not (hi and _order(e) > 2)]
     u = sp.symbols("ux uy uz")
     drho = sp.Symbol("drho")
     pairs = []
-    for e in EXPONENTS:
-        if _order(e) < 2:
-            continue
+    for e in relaxed:
         pairs.append((_mname("n", e), sp.Symbol(_mname("c", e)) + weight_shift_polynomial(e, u)
                       - drho * equilibrium_central_moment(e)))
     _emit(pairs, consts, lines, "w_")
     # 3. cumulant deviations D = n + R(n), relaxation
     R = cumulant_remainders()
-    pairs = [(_mname("d", e), sp.Symbol(_mname("n", e)) + R[e]) for e in EXPONENTS if _order(e) >= 2]
+    pairs = [(_mname("d", e), sp.Symbol(_mname("n", e)) + R[e]) for e in relaxed]
     _emit(pairs, consts, lines, "x_")
     lines.append("    gs = one - omega")
     lines.append("    gb = one - omega_b")
@@ -281,28 +282,45 @@ def cumulant_source(higher_at_equilibrium: bool = False):
     lines.append("    e200 = third * (tr_ + dv1_ + dv2_)")
     lines.append("    e020 = third * (tr_ - dv1_ - dv1_ + dv2_)")
     lines.append("    e002 = third * (tr_ + dv1_ - dv2_ - dv2_)")
-    for e in EXPONENTS:
-        if _order(e) >= 3:
-            # at omega_h = 1 the higher cumulants are set to equilibrium (zero); their
-            # pre-collision values are then dead code the compiler removes
-            rhs = "zero" if higher_at_equilibrium else f"gh * {_mname('d', e)}"
-            lines.append(f"    {_mname('e', e)} = {rhs}")
-    # 4. back to central-moment deviations p = e - R(p), order by order
+    if not hi:
+        for e in EXPONENTS:
+            if _order(e) >= 3:
+                lines.append(f"    {_mname('e', e)} = gh * {_mname('d', e)}")
+    # 4. back to central-moment deviations p = e - R(p), order by order; at omega_h = 1 the
+    # post-collision cumulants of orders 3-6 are zero, substituted symbolically so that no
+    # multiplication by zero is emitted (fast-math without nnan/ninf cannot fold x * 0)
     p_of_n = {sp.Symbol(_mname("n", e)): sp.Symbol(_mname("p", e)) for e in EXPONENTS}
+    zeros = {}
+    p_expr = {}
     for order in range(2, 7):
-        pairs = [(_mname("p", e), sp.Symbol(_mname("e", e)) - R[e].xreplace(p_of_n))
-                 for e in EXPONENTS if _order(e) == order]
+        pairs = []
+        for e in EXPONENTS:
+            if _order(e) != order:
+                continue
+            cum = sp.Integer(0) if (hi and order > 2) else sp.Symbol(_mname("e", e))
+            ex = sp.expand(cum - R[e].xreplace(p_of_n).xreplace(zeros))
+            if ex == 0:
+                zeros[sp.Symbol(_mname("p", e))] = sp.Integer(0)
+                p_expr[e] = sp.Integer(0)
+            else:
+                pairs.append((_mname("p", e), ex))
+                p_expr[e] = sp.Symbol(_mname("p", e))
         _emit(pairs, consts, lines, f"y{order}_")
     # q_abc = p_abc + drho E_abc - W_abc(u) = c_abc + (p_abc - n_abc): central moments of f~';
     # the first order, -F/2 before the collision, is reflected to +F/2
     lines.append("    q000 = drho")
+    pairs = []
     for e in EXPONENTS:
         o = _order(e)
         if o == 1:
             a = e.index(1)
             lines.append(f"    {_mname('q', e)} = half * F{_AXES[a]} + u{_AXES[a]}")
-        elif o >= 2:
+        elif e in relaxed:
             lines.append(f"    {_mname('q', e)} = {_mname('c', e)} + ({_mname('p', e)} - {_mname('n', e)})")
+        elif o >= 2:
+            pairs.append((_mname("q", e), p_expr[e] + drho * equilibrium_central_moment(e)
+                          - weight_shift_polynomial(e, u)))
+    _emit(pairs, consts, lines, "z_")
     # 5. chimera backward
     _chimera_backward(lines)
     lines.append("    return (" + ", ".join(f"o{q}" for q in range(27)) + ")")

@@ -63,7 +63,8 @@ def fused_launcher(target, precision: str, operator: str, free_surface: bool = F
     collide = collide_builder(operator)(target, real)
     if target.is_cuda:
         return CellLauncher(target, build_stream_collide(target, real, collide, free_surface), ARGS)
-    return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface), ARGS, per_block=True)
+    return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface=free_surface), ARGS,
+                        per_block=True)
 
 
 def _equilibrium_minus_w(rho, ux, uy, uz):

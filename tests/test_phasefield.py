@@ -81,42 +81,37 @@ def test_slab_advected_at_the_flow_velocity(name):
     assert np.ptp(phi, axis=(0, 1)).max() < 1e-12
 
 
+def _advected_wavy_surface_float32(steps):
+    """A wavy surface between walls carried by u = (0.05, 0, 0) for ``steps`` steps; returns (field, initial volume)."""
+    fo = _column(2, False)
+    z = np.arange(16) + 0.5
+    x = np.arange(8) + 0.5
+    surf = 8.0 + 2.0 * np.sin(2 * np.pi * x / 8)[:, None, None]
+    phi0 = tanh_profile(surf - z[None, None, :]) * np.ones((8, 8, 16))
+    u = np.zeros((2, 3, CELLS), np.float32)
+    u[:, 0] = 0.05
+    pf = PhaseField(fo, mobility=0.05, precision="float32")
+    pf.initialize(fo.from_dense(phi0), u)
+    v0 = pf.volume()
+    for _ in range(steps):
+        pf.step(u)
+    return pf, v0
+
+
 def test_volume_conserved_float32():
     """sum phi over 1000 steps with walls and a moving interface, float32: relative drift <= 5e-5.
 
     Exact in exact arithmetic (collision keeps sum h, bounce-back keeps it at walls); the float32
     drift is rounding of h ~ w_k, measured +2.6e-5 per 1000 steps on this case.
     """
-    fo = _column(2, False)
-    z = np.arange(16) + 0.5
-    x = np.arange(8) + 0.5
-    surf = 8.0 + 2.0 * np.sin(2 * np.pi * x / 8)[:, None, None]
-    phi0 = tanh_profile(surf - z[None, None, :]) * np.ones((8, 8, 16))
-    u = np.zeros((2, 3, CELLS), np.float32)
-    u[:, 0] = 0.05
-    pf = PhaseField(fo, mobility=0.05, precision="float32")
-    pf.initialize(fo.from_dense(phi0), u)
-    v0 = pf.volume()
-    for _ in range(1000):
-        pf.step(u)
+    pf, v0 = _advected_wavy_surface_float32(steps=1000)
     assert abs(pf.volume() / v0 - 1.0) < 5e-5
 
 
 @pytest.mark.slow
 def test_volume_conserved_float32_10000_steps():
     """The issue's criterion: <= 0.1 % over 10 000 steps in float32 (measured: see docs/VALIDATION.md)."""
-    fo = _column(2, False)
-    z = np.arange(16) + 0.5
-    x = np.arange(8) + 0.5
-    surf = 8.0 + 2.0 * np.sin(2 * np.pi * x / 8)[:, None, None]
-    phi0 = tanh_profile(surf - z[None, None, :]) * np.ones((8, 8, 16))
-    u = np.zeros((2, 3, CELLS), np.float32)
-    u[:, 0] = 0.05
-    pf = PhaseField(fo, mobility=0.05, precision="float32")
-    pf.initialize(fo.from_dense(phi0), u)
-    v0 = pf.volume()
-    for _ in range(10000):
-        pf.step(u)
+    pf, v0 = _advected_wavy_surface_float32(steps=10000)
     assert abs(pf.volume() / v0 - 1.0) < 1e-3
 
 

@@ -120,8 +120,8 @@ def build_phase_cells(target, real, lat: HLattice):
         phi[b, c] = s
 
     @dev
-    def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa):
-        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+    def equilibrium_inputs(b, c, phi, u, nbr, kappa):
+        """Cell coordinates, phi, interface normal n, theta of eq. (9) and u of cell c: the inputs of eq. (7)."""
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -133,6 +133,12 @@ def build_phase_cells(target, real, lat: HLattice):
         uy = u[b, 1, c]
         uz = u[b, 2, c]
         uu = ux * ux + uy * uy + uz * uz
+        return x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu
+
+    @dev
+    def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa):
+        b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+        x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu = equilibrium_inputs(b, c, phi, u, nbr, kappa)
         for k in range(nq):
             hk = pulled(h_in, nbr, b, c, x, y, z, k)
             h_out[b, k, c] = hk + omega * (h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu) - hk)
@@ -140,17 +146,7 @@ def build_phase_cells(target, real, lat: HLattice):
     @dev
     def init_cell(b, c, h_out, phi, u, nbr, kappa):
         b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
-        z = c // 64
-        y = (c // 8) % 8
-        x = c % 8
-        p = phi[b, c]
-        nx, ny, nz = normal(phi, nbr, b, x, y, z)
-        dp = p - half
-        th = kappa * (one - four * dp * dp)
-        ux = u[b, 0, c]
-        uy = u[b, 1, c]
-        uz = u[b, 2, c]
-        uu = ux * ux + uy * uy + uz * uz
+        x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu = equilibrium_inputs(b, c, phi, u, nbr, kappa)
         for k in range(nq):
             h_out[b, k, c] = h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu)
 

@@ -9,7 +9,9 @@ One time step (:meth:`FreeSurfaceFluid.step`):
    gas layer by layer (:mod:`iceresist.freesurface.extension`);
 3. one step of the conservative Allen-Cahn LBM advected by that velocity (eqs. 4-10,
    :class:`~iceresist.freesurface.phasefield.PhaseField`);
-4. reflag from the new phi: GAS where phi < 1/2 (the FLUID bit cleared), NEAR_SURFACE
+4. move the population rows to follow the water (:mod:`iceresist.freesurface.pool`: blocks wholly
+   in the gas and not next to the water hold no f);
+5. reflag from the new phi: GAS where phi < 1/2 (the FLUID bit cleared), NEAR_SURFACE
    on liquid cells with a gas neighbour, the wall flags of the forest kept. A cell
    turning from gas to liquid has no populations: it gets the equilibrium at the
    reference density rho0 = 1 and the extended velocity (eq. 12 with rho0), the
@@ -32,9 +34,9 @@ from iceresist.errors import InputError
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
 from iceresist.freesurface.layout import build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
+from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
-from iceresist.lbm.solver import LBMSolver
 
 log = logging.getLogger(__name__)
 
@@ -42,9 +44,10 @@ log = logging.getLogger(__name__)
 def build_surface_cells(target, real):
     """Compile ``(velocity_cell, reflag_cell)``.
 
-    * ``velocity_cell(b, c, f, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
-      populations f - w with the half-force shift of the force rho g removed; 0 elsewhere;
-    * ``reflag_cell(b, c, phi, base, flags, f, u, nbr)``: the flags of step 4 (module docstring);
+    * ``velocity_cell(b, c, f, fslot, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
+      populations f - w (pool row ``fslot[b]``) with the half-force shift of the force rho g removed;
+      0 elsewhere;
+    * ``reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr)``: the flags of step 4 (module docstring);
       a cell turning liquid gets f - w = f^eq(1, u) - w.
     """
     neighbour, _ = build_neighbour(target)
@@ -56,15 +59,16 @@ def build_surface_cells(target, real):
     dev = target.device
 
     @dev
-    def velocity_cell(b, c, f, flags, u, gx, gy, gz):
+    def velocity_cell(b, c, f, fslot, flags, u, gx, gy, gz):
         b = int64(b)
         if flags[b, c] & fluid:
+            s = int64(fslot[b])
             rho = one
             jx = zero
             jy = zero
             jz = zero
             for q in range(27):
-                fq = f[b, q, c]
+                fq = f[s, q, c]
                 rho += fq
                 jx += cx[q] * fq
                 jy += cy[q] * fq
@@ -78,7 +82,7 @@ def build_surface_cells(target, real):
             u[b, 2, c] = zero
 
     @dev
-    def reflag_cell(b, c, phi, base, flags, f, u, nbr):
+    def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr):
         b = int64(b)
         bf = base[b, c]
         if (bf & fluid) == 0:
@@ -93,9 +97,10 @@ def build_surface_cells(target, real):
             uy = u[b, 1, c]
             uz = u[b, 2, c]
             uu = ux * ux + uy * uy + uz * uz
+            s = int64(fslot[b])
             for q in range(27):
                 cu = cx[q] * ux + cy[q] * uy + cz[q] * uz
-                f[b, q, c] = w[q] * (c3 * cu + c45 * cu * cu - c15 * uu)
+                f[s, q, c] = w[q] * (c3 * cu + c45 * cu * cu - c15 * uu)
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -116,8 +121,8 @@ def build_surface_cells(target, real):
 @lru_cache(maxsize=None)
 def surface_launchers(target, precision: str):
     vel, reflag = build_surface_cells(target, jit.real_type(precision))
-    return (CellLauncher(target, vel, ("f", "flags", "u", "gx", "gy", "gz")),
-            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "u", "nbr")))
+    return (CellLauncher(target, vel, ("f", "fslot", "flags", "u", "gx", "gy", "gz")),
+            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr")))
 
 
 class FreeSurfaceFluid:
@@ -126,12 +131,15 @@ class FreeSurfaceFluid:
     ``tau``: relaxation time of the liquid (lattice units); ``gravity_lattice``: g (lattice units,
     acting along -z); ``depth_cells``: still-water level z_s (cells from the bottom of the domain;
     the cell k spans k..k+1); ``mobility``, ``width``, ``h_lattice``: the phase field (eqs. 9-10);
-    ``operator``, ``precision``, ``target`` as in :class:`~iceresist.lbm.solver.LBMSolver`.
+    ``operator``, ``precision``, ``target`` as in :class:`~iceresist.lbm.solver.LBMSolver`;
+    ``f_pool_margin``: spare population rows as a fraction of the wet blocks at the start, or None for
+    populations in every block (:mod:`iceresist.freesurface.pool`). ``fluid`` is the
+    :class:`~iceresist.freesurface.pool.PooledLBM`; its ``fslot`` maps a block to its row of ``fluid.state``.
     """
 
     def __init__(self, forest, *, tau: float, gravity_lattice: float, depth_cells: float, mobility: float = 0.05,
                  width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
-                 precision: str = "float32", target=jit.cpu):
+                 precision: str = "float32", target=jit.cpu, f_pool_margin: float | None = DEFAULT_MARGIN):
         if not gravity_lattice >= 0:
             raise InputError(f"free_surface.gravity_lattice must be >= 0 (lattice units), not {gravity_lattice}")
         if not 0 < depth_cells < forest.shape_cells[2]:
@@ -142,8 +150,8 @@ class FreeSurfaceFluid:
         self.depth = float(depth_cells)
         self.target = target
         self.real = jit.real_type(precision)
-        self.fluid = LBMSolver(forest, tau=tau, force=(0.0, 0.0, -self.g), operator=operator, precision=precision,
-                               target=target, free_surface=True)
+        self.fluid = PooledLBM(forest, tau=tau, force=(0.0, 0.0, -self.g), operator=operator, precision=precision,
+                               target=target, margin=f_pool_margin)
         self.phase = PhaseField(forest, mobility=mobility, width=width, h_lattice=h_lattice, precision=precision,
                                 target=target)
         self._vel, self._reflag = surface_launchers(target, precision)
@@ -181,11 +189,11 @@ class FreeSurfaceFluid:
         s = zs[:, :, None] - z[None, None, :]
         phi = 0.5 + 0.5 * np.tanh(2.0 * s / self.phase.width)
         rho = np.exp(3.0 * self.g * np.maximum(s, 0.0))
-        self.fluid.initialize(rho=rho, u=tuple(float(v) for v in u))
-        phi_b = self.forest.from_dense(phi)
+        phi_b = np.ascontiguousarray(self.forest.from_dense(phi), dtype=self.real)
+        self.fluid.initialize(rho, tuple(float(v) for v in u), wet=(phi_b >= self.real(0.5)).any(axis=1))
         # flags from phi (the forest's flags carry no GAS bit yet: no cell counts as newly liquid)
-        self._reflag(self.nblocks, self._to_target(np.ascontiguousarray(phi_b, dtype=self.real)), self._base,
-                     self.fluid.flags, self.fluid.state, self._u, self.phase.nbr)
+        self._reflag(self.nblocks, self._to_target(phi_b), self._base,
+                     self.fluid.flags, self.fluid.state, self.fluid.fslot, self._u, self.phase.nbr)
         self._velocity()
         self.phase.initialize(phi_b, self._u)
         self.iteration = 0
@@ -193,20 +201,31 @@ class FreeSurfaceFluid:
     def _velocity(self):
         g = self.real(self.g)
         zero = self.real(0.0)
-        self._vel(self.nblocks, self.fluid.state, self.fluid.flags, self._u, zero, zero, -g)
+        self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
         extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr)
 
     def step(self, n: int = 1):
-        """Advance ``n`` time steps (module docstring, steps 1-4)."""
+        """Advance ``n`` time steps (module docstring, steps 1-5)."""
         for _ in range(int(n)):
             self.fluid.step(1)
             self._velocity()
             self.phase.step(self._u)
-            self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state, self._u,
-                         self.phase.nbr)
+            self.fluid.update_rows(self.phase.phi, self._u)
+            self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state,
+                         self.fluid.fslot, self._u, self.phase.nbr)
             self.iteration += 1
 
     # ------------------------------------------------------------------ diagnostics
+    def allocated_bytes(self) -> dict[str, int]:
+        """Bytes of the state arrays by part: ``f`` (the population pool, both buffers, and its map),
+        ``phase`` (h, both buffers, and phi, every block), ``other`` (velocity, flags, work arrays)."""
+        item = np.dtype(self.real).itemsize
+        nb = self.nblocks
+        return {"f": int(self.fluid.allocated_bytes),
+                "phase": int(nb * CELLS * item * (2 * self.phase.lat.q + 1)),
+                "other": int(nb * CELLS * (3 * item + 1 + 1 + 1) + nb),
+                }
+
     def phi(self) -> np.ndarray:
         """Dense phi (nx, ny, nz), float64."""
         return self.forest.to_dense(self.phase.phi_host().astype(np.float64))

@@ -25,6 +25,8 @@ reusing the pull code of the per-cell update for blocks with boundary cells
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 from iceresist.grid import flags as FL
@@ -34,6 +36,9 @@ from iceresist.lbm.boundary import GHOST, build_link_boundary
 from iceresist.lbm.codegen import F_NAMES, compile_source, term
 
 ARGS = ("src", "dst", "nbr_key", "link_bc", "flags", "bc_kind", "bc_u", "bc_rho", "omega", "Fx", "Fy", "Fz")
+#: Arguments of the slot-indexed free-surface update: ``fslot[block]`` is the row of the population pool
+#: that holds the block (-1 for a block wholly in the gas, which holds none; :mod:`iceresist.freesurface.pool`).
+POOL_ARGS = ARGS + ("fslot",)
 
 
 def _source_lines(q: int):
@@ -133,6 +138,20 @@ def _namespace(target, real, collide):
     ns.update({f"w{q}": real(W[q]) for q in range(Q)})
     ns.update({f"two_w{q}": real(2.0 * W[q]) for q in range(Q)})
     return ns
+
+
+def pooled_source(src: str) -> str:
+    """The update ``src`` with the populations indexed through the block -> pool-row map ``fslot``.
+
+    ``src[b, ...]``/``dst[b, ...]`` become ``src[sb, ...]``/``dst[sb, ...]`` with ``sb = fslot[b]`` and a pull from
+    block ``nb`` reads ``src[fslot[nb], ...]``. Only liquid cells read or write populations and they pull
+    from their 26 neighbours, all in wet blocks or blocks next to one, which the pool always holds; a
+    block without a row (``fslot = -1``) is never touched. The arithmetic is that of ``src`` unchanged.
+    """
+    s = re.sub(r"\b(src|dst)\[b, ", r"\1[sb, ", src)
+    s = re.sub(r"\bsrc\[(nb|nbr_key\[b, [^\]]+\]), ", r"src[fslot[\1], ", s)
+    s = re.sub(r"\n( +)ci = c \+ izero\n", r"\n\1ci = c + izero\n\1sb = fslot[b]\n", s)
+    return s.replace(", ".join(ARGS) + "):", ", ".join(POOL_ARGS) + "):", 1)
 
 
 def build_stream_collide(target, real, collide, free_surface: bool = False):

@@ -2,7 +2,8 @@
 
 :func:`build_model` builds only what the scene asks for. A fluid-only scene
 gets a :class:`FluidModel` (block forest + LBM solver) and nothing else: no
-phase-field arrays, no DEM, no coupling state. The model follows the protocol
+phase-field arrays, no DEM, no coupling state; a scene with ``[free_surface]`` alone
+gets a :class:`FreeSurfaceModel` (LBM + phase field, no DEM, no coupling). The model follows the protocol
 of :mod:`iceresist.simulation` and speaks physical units to the outside
 (``fields()``, ``diagnostics()``, ``time_s``), lattice units inside.
 """
@@ -176,8 +177,208 @@ def _set_populations(solver, f: np.ndarray):
             buf[...] = f
 
 
+class FreeSurfaceModel:
+    """Water with a free surface under gravity (paper section 2.2): a uniform block forest and a
+    :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` (cumulant LBM in the liquid, conservative
+    Allen-Cahn phase field, populations only in the blocks near the water); no DEM, no coupling.
+
+    The water starts still and hydrostatic at ``free_surface.water_depth_m``, over the whole floor or, for a
+    dam break, over x < ``free_surface.column_length_m``; gravity is ``fluid.gravity_m_s2`` (along -z).
+    ``backend`` and ``precision`` override the scene's ``[numerics]``.
+    """
+
+    components = ("fluid", "free_surface")
+
+    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
+        from iceresist.freesurface.fluid import FreeSurfaceFluid
+        from iceresist.grid.forest import BlockForest
+
+        fs = scene.free_surface
+        self.scene = scene
+        self.units = u = scene.units()
+        self.shape_cells = scene.shape_cells()
+        check_block_shape(self.shape_cells)
+        fl = scene.fluid
+        gx, gy, gz = fl.gravity_m_s2
+        if gx != 0.0 or gy != 0.0 or not gz < 0.0:
+            raise InputError(f"fluid.gravity_m_s2: the free surface needs gravity along -z, e.g. [0, 0, -9.81], "
+                             f"not {list(fl.gravity_m_s2)}")
+        if any(fl.body_force_N_m3):
+            raise InputError("fluid.body_force_N_m3: a free-surface scene is driven by gravity alone; "
+                             "leave the body force out")
+        nz = self.shape_cells[2]
+        self.depth_cells = float(u.length_to_lattice(fs.water_depth_m))
+        if not 0.0 < self.depth_cells < nz:
+            raise InputError(f"free_surface.water_depth_m: {fs.water_depth_m} m is {self.depth_cells:g} cells, "
+                             f"outside the {nz}-cell-high domain")
+        self.backend = backend or scene.numerics.backend
+        self.precision = precision or scene.numerics.precision
+        self.target = resolve_target(self.backend)
+        self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u))
+        self.gravity_lattice = float(u.acceleration_to_lattice(-gz))
+        margin = None if fs.f_pool_margin == "full" else float(fs.f_pool_margin)
+        self.fluid = FreeSurfaceFluid(self.forest, tau=u.tau, gravity_lattice=self.gravity_lattice,
+                                      depth_cells=self.depth_cells, mobility=fs.mobility_lattice,
+                                      width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
+                                      precision=self.precision, target=self.target, f_pool_margin=margin)
+        self.fluid.initialize(surface=self.initial_surface_cells(),
+                              u=tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
+        self.volume0_cells = self.fluid.volume()
+        self.cells = int(self.forest.cells)
+        self.dt_s = u.dt_s
+
+    def initial_surface_cells(self) -> np.ndarray:
+        """Water height z_s(x, y) at t = 0 in cells, (nx, ny): the depth where there is water, 1.5 interface
+        widths below the floor (phi < 1 % at the floor) where the floor is dry."""
+        nx, ny, _ = self.shape_cells
+        fs = self.scene.free_surface
+        zs = np.full((nx, ny), self.depth_cells)
+        if fs.column_length_m is not None:
+            x = np.arange(nx) + 0.5
+            dry = x >= self.units.length_to_lattice(fs.column_length_m)
+            zs[dry, :] = -1.5 * fs.interface_width_cells
+        return zs
+
+    def surface_cells(self) -> np.ndarray:
+        """Height of the top-most crossing of phi = 1/2 in each column (nx, ny), cells above z = 0, by linear
+        interpolation; 0 in a dry column, the domain height in a full one."""
+        phi = self.fluid.phi()
+        nz = phi.shape[2]
+        cross = (phi[:, :, :-1] >= 0.5) & (phi[:, :, 1:] < 0.5)
+        k = nz - 2 - np.argmax(cross[:, :, ::-1], axis=2)
+        p0 = np.take_along_axis(phi, k[..., None], axis=2)[..., 0]
+        p1 = np.take_along_axis(phi, (k + 1)[..., None], axis=2)[..., 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            h = k + 0.5 + (p0 - 0.5) / (p0 - p1)
+        h = np.where(cross.any(axis=2), h, 0.0)
+        return np.where(phi[:, :, -1] >= 0.5, float(nz), h)
+
+    # -- protocol -------------------------------------------------------------------------------------
+    @property
+    def iteration(self) -> int:
+        return int(self.fluid.iteration)
+
+    @property
+    def time_s(self) -> float:
+        return self.iteration * self.dt_s
+
+    def step(self, n: int = 1):
+        self.fluid.step(n)
+
+    def _liquid(self):
+        """Dense rho, u (lattice) with the reference state (rho0 = 1, u = 0) in the gas, and the liquid mask."""
+        rho, u = self.fluid.macroscopic()
+        liquid = np.isfinite(rho)
+        return np.where(liquid, rho, 1.0), np.where(liquid[None], u, 0.0), liquid
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge c_s^2 (rho - rho0)), flags (uint8),
+        phi (1 water, 0 gas), surface (height of phi = 1/2 above z = 0 in each column, m, on every cell of
+        the column). In the gas rho = rho0, u = 0 and pressure = 0, the state eq. (11) assumes there."""
+        rho_lat, u_lat, _ = self._liquid()
+        u = self.units
+        flags = np.asarray(self.fluid._host(self.fluid.fluid.flags)).astype(np.float64)
+        surface = self.surface_cells()
+        return {"rho": u.density_to_physical(rho_lat),
+                "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
+                "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
+                "flags": self.forest.to_dense(flags).astype(np.uint8),
+                "phi": self.fluid.phi(),
+                "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
+
+    @staticmethod
+    def field_units(lattice: bool) -> dict[str, str]:
+        units = FluidModel.field_units(lattice)
+        units.update(phi="1", surface="lattice" if lattice else "m")
+        return units
+
+    def is_finite(self) -> bool:
+        return math.isfinite(self.fluid.volume()) and bool(np.isfinite(self.fluid.fluid.rows()[1]).all())
+
+    def diagnostics(self) -> dict[str, float]:
+        """Water volume (m^3, sum phi dx^3, the quantity eqs. 4-10 conserve) and its drift from t = 0,
+        liquid mass (kg), kinetic energy (J), largest speed (m/s and lattice), mean surface height (m),
+        population rows in use."""
+        rho_lat, u_lat, liquid = self._liquid()
+        u = self.units
+        cell_m3 = u.dx_m ** 3
+        speed2 = (u_lat ** 2).sum(axis=0)[liquid]
+        rho_kg = u.density_to_physical(rho_lat[liquid])
+        umax_lat = float(np.sqrt(speed2.max())) if speed2.size else 0.0
+        vol = self.fluid.volume()
+        surface = self.surface_cells()
+        return {"water_volume_m3": float(vol * cell_m3),
+                "water_volume_drift": float((vol - self.volume0_cells) / self.volume0_cells),
+                "mass_kg": float(rho_kg.sum() * cell_m3),
+                "kinetic_energy_J": float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum()
+                                          * cell_m3),
+                "max_speed_m_s": float(u.velocity_to_physical(umax_lat)),
+                "max_lattice_speed": umax_lat,
+                "surface_mean_m": float(u.length_to_physical(surface.mean())),
+                "f_rows_in_use": float(self.fluid.fluid.pool.rows_in_use)}
+
+    def state(self) -> dict:
+        """Everything a bit-for-bit restart needs, in storage precision: the population rows and their
+        blocks, h, phi, the cell flags, the iteration and the initial water volume."""
+        fs = self.fluid
+        blocks, f = fs.fluid.rows()
+        return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(fs.fluid.pool.capacity),
+                "h": fs._host(fs.phase.h), "phi": fs._host(fs.phase.phi),
+                "flags": np.asarray(fs._host(fs.fluid.flags)), "volume0_cells": np.float64(self.volume0_cells),
+                "iteration": np.int64(self.iteration), "precision": self.precision}
+
+    def load_state(self, state: dict):
+        fs = self.fluid
+        if state.get("precision", self.precision) != self.precision:
+            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
+                             f"restart with --precision {state.get('precision')}")
+        if "h" not in state or "f_blocks" not in state:
+            raise InputError("checkpoint holds no free-surface state: it belongs to another scene")
+        h = np.asarray(state["h"])
+        if h.shape != tuple(fs.phase.h.shape):
+            raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs {tuple(fs.phase.h.shape)}: "
+                             f"it belongs to another scene (or another free_surface.h_lattice)")
+        fs.fluid.set_rows(np.asarray(state["f_blocks"]), np.asarray(state["f"]).astype(fs.real),
+                          int(state["f_rows"]))
+        _copy_into(fs.phase.h, h.astype(fs.real))
+        _copy_into(fs.phase.phi, np.asarray(state["phi"]).astype(fs.real))
+        _copy_into(fs.fluid.flags, np.asarray(state["flags"]).astype(np.uint8))
+        self.volume0_cells = float(state["volume0_cells"])
+        fs.iteration = fs.fluid.iteration = int(state["iteration"])
+
+    def describe(self) -> dict:
+        fs = self.scene.free_surface
+        pool = self.fluid.fluid.pool
+        return {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
+                "blocks": int(self.forest.nblocks), "operator": self.scene.fluid.operator,
+                "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
+                "gravity_lattice": self.gravity_lattice, "water_depth_cells": self.depth_cells,
+                "h_lattice": fs.h_lattice, "mobility_lattice": fs.mobility_lattice,
+                "interface_width_cells": fs.interface_width_cells, "f_pool_rows": int(pool.capacity),
+                "f_pool_margin": fs.f_pool_margin, "allocated_bytes": self.fluid.allocated_bytes(),
+                "unit_system": self.scene.scene.units}
+
+    def allocated_bytes(self) -> int:
+        """Bytes of the state arrays this model holds: the population pool, the phase field (h, phi) and the
+        velocity, flag and work arrays (:meth:`FreeSurfaceFluid.allocated_bytes`)."""
+        return int(sum(self.fluid.allocated_bytes().values()))
+
+
+def _copy_into(dst, host: np.ndarray):
+    """Overwrite a target array (NumPy or CUDA device array) with ``host``."""
+    host = np.ascontiguousarray(host)
+    if tuple(dst.shape) != host.shape:
+        raise InputError(f"checkpoint array of shape {host.shape} does not fit {tuple(dst.shape)}: "
+                         f"it belongs to another scene")
+    if hasattr(dst, "copy_to_device"):
+        dst.copy_to_device(host)
+    else:
+        dst[...] = host
+
+
 def build_model(scene: Scene, *, backend: str | None = None, precision: str | None = None):
-    """The model of the components ``scene`` uses: fluid-only scenes, and tier-1 ship scenes ([ship] + [ice])."""
+    """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
+    alone), and tier-1 ship scenes ([ship] + [ice])."""
     if scene.ship is not None and scene.ice is not None:
         if scene.ship.tier != 1:
             raise InputError(f"{scene.source_name}: ship.tier = 2 (coupled LBM-DEM) needs the free-surface LBM "
@@ -186,8 +387,14 @@ def build_model(scene: Scene, *, backend: str | None = None, precision: str | No
 
         return Tier1Model(scene, backend=backend, precision=precision)
     extra = scene.optional_sections()
+    wants = [f for f in scene.output.fields if f in ("phi", "surface")]
+    if wants and scene.free_surface is None:
+        raise InputError(f"output.fields: {', '.join(wants)} need a [free_surface] section; "
+                         f"remove them from output.fields")
+    if extra == ["free_surface"]:
+        return FreeSurfaceModel(scene, backend=backend, precision=precision)
     if extra:
         raise InputError(f"{scene.source_name}: sections {', '.join('[' + s + ']' for s in extra)} need the "
-                         f"free-surface, DEM and coupling engine, which `iceresist run` does not build yet; "
-                         f"remove them to run the fluid alone")
+                         f"DEM and coupling engine, which `iceresist run` does not build yet; "
+                         f"remove them to run the fluid alone or with [free_surface] only")
     return FluidModel(scene, backend=backend, precision=precision)

@@ -157,7 +157,7 @@ class FPool:
         if n > self.capacity:
             raise InputError(f"free_surface.f_pool_margin: the water now needs populations in {n} blocks but the "
                              f"pool holds {self.capacity} (margin {self.margin} of the wet blocks at the start); "
-                             f"raise free_surface.f_pool_margin, or leave it out for the full box")
+                             f"raise free_surface.f_pool_margin, or set it to \"full\"")
 
     def update(self, wet: np.ndarray) -> np.ndarray:
         """Release the rows of blocks no longer needed, give rows to blocks newly needed; returns the block
@@ -322,7 +322,7 @@ class PooledLBM:
         if self.pool.full:
             if len(blocks) != nb:
                 raise InputError(f"checkpoint holds populations of {len(blocks)} blocks, this run keeps all {nb} "
-                                 f"(free_surface.f_pool_margin left out): restart with the margin of the first run")
+                                 f"(free_surface.f_pool_margin = \"full\"): restart with the margin of the first run")
         else:
             if capacity is not None:
                 self.pool.capacity = int(min(nb, capacity))

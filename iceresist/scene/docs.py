@@ -152,8 +152,8 @@ from its checkpoint to the (new) stop criterion.
 | path | content |
 |---|---|
 | `meta` (attributes) | scene TOML text, version, git revision, backend, device, precision, cells, steps, wall time, MLUPS, units, stop reason |
-| `fields/<iteration>/rho`, `u`, `pressure`, `flags` | snapshots, float32 (flags uint8), stored `[z, y, x]` (`u`: `[z, y, x, 3]`) as ParaView reads them; attributes `iteration`, `time_s`, `units` |
-| `timeseries/iteration`, `time_s`, `mass_kg`, `kinetic_energy_J`, `max_speed_m_s`, `max_lattice_speed` | one row every `output.timeseries_every_steps` |
+| `fields/<iteration>/rho`, `u`, `pressure`, `flags` (free surface also `phi`, `surface`) | snapshots, float32 (flags uint8), stored `[z, y, x]` (`u`: `[z, y, x, 3]`) as ParaView reads them; attributes `iteration`, `time_s`, `units` |
+| `timeseries/iteration`, `time_s`, `mass_kg`, `kinetic_energy_J`, `max_speed_m_s`, `max_lattice_speed` (free surface also `water_volume_m3`, `water_volume_drift`, `surface_mean_m`, `f_rows_in_use`) | one row every `output.timeseries_every_steps` |
 
 Read a field back in the engine's `[x, y, z]` order with
 `iceresist.io.RunFile(path).read_field(iteration, "u")`.
@@ -163,7 +163,7 @@ Read a field back in the engine's `[x, y, z]` order with
 """
 
 FULL_EXAMPLE = """# Paper case (Watanabe, Hu and Aoki 2023, section 3): the keys of a ship in a brash-ice channel.
-# `iceresist run` refuses [free_surface]/[ship]/[ice]/[contact] until the coupled engine is built.
+# `iceresist run` runs [free_surface] alone; it refuses [ship]/[ice] at tier 2 until the coupled engine is built.
 [scene]
 name = "b063_bow_a_c68_1kn"
 description = "B-063 Bow A, 68 % brash ice, 1 knot, model scale 1:25"
@@ -227,7 +227,9 @@ def scenes_markdown() -> str:
     """The whole of docs/SCENES.md."""
     out = [INTRO, reference_markdown(), "## Complete examples\n\n"]
     for name, what in (("cavity", "Lid-driven cavity in lattice units (the default scene)"),
-                       ("poiseuille", "Plane Poiseuille flow of water in SI units")):
+                       ("poiseuille", "Plane Poiseuille flow of water in SI units"),
+                       ("still_tank", "Still water in a closed tank (free surface), lattice units"),
+                       ("dam_break", "Dam break in a flume (free surface), lattice units")):
         out.append(f"### `{name}` — {what}\n\n```toml\n{preset_text(name).rstrip()}\n```\n\n")
     out.append(f"### A ship in a brash-ice channel (all sections)\n\n```toml\n{FULL_EXAMPLE.rstrip()}\n```\n")
     return "".join(out)

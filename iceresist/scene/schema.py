@@ -28,7 +28,7 @@ Vec3 = tuple[float, float, float]
 PositiveFloat = Annotated[float, Field(gt=0)]
 FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet")
 FACE_NAMES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
-FIELD_NAMES = ("rho", "u", "pressure", "flags")
+FIELD_NAMES = ("rho", "u", "pressure", "flags", "phi", "surface")
 
 
 class _Section(BaseModel):
@@ -205,7 +205,24 @@ class FreeSurface(_Section):
 
     water_depth_m: float = Field(..., gt=0, description="Still-water depth measured from z = 0 (m).")
     mobility_lattice: float = Field(0.02, gt=0, description="Interface mobility M in lattice units (eq. 4, 10).")
-    interface_width_cells: float = Field(3.0, ge=1, description="Interface thickness W in cells (eq. 4).")
+    interface_width_cells: float = Field(3.0, ge=2, description="Interface thickness W in cells (eq. 4).")
+    h_lattice: Literal["D3Q7", "D3Q15", "D3Q19", "D3Q27"] = Field(
+        "D3Q15", description="Velocity set of the phase-field populations h (eqs. 5-8); D3Q15 is the measured "
+                             "choice (docs/VALIDATION.md).")
+    column_length_m: float | None = Field(None, gt=0, description="Dam break: water only over x < "
+                                                                  "column_length_m (m), the rest of the floor "
+                                                                  "dry. Default: water over the whole floor.")
+    f_pool_margin: float | Literal["full"] = Field(
+        0.25, description="Spare rows of LBM populations, as a fraction of the blocks holding water at the "
+                          "start (blocks wholly in the gas hold none); `\"full\"`: populations in every block. "
+                          "Raise it when a run stops because the water needs more.")
+
+    @field_validator("f_pool_margin")
+    @classmethod
+    def _margin(cls, v):
+        if v != "full" and not v >= 0:
+            raise ValueError("f_pool_margin must be >= 0 or \"full\"")
+        return v
 
 
 class Ship(_Section):

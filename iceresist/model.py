@@ -395,6 +395,6 @@ def build_model(scene: Scene, *, backend: str | None = None, precision: str | No
         return FreeSurfaceModel(scene, backend=backend, precision=precision)
     if extra:
         raise InputError(f"{scene.source_name}: sections {', '.join('[' + s + ']' for s in extra)} need the "
-                         f"DEM and coupling engine, which `iceresist run` does not build yet; "
-                         f"remove them to run the fluid alone or with [free_surface] only")
+                         f"free-surface, DEM and coupling engine, which `iceresist run` does not build yet; "
+                         f"remove them to run the fluid alone")
     return FluidModel(scene, backend=backend, precision=precision)

@@ -120,8 +120,10 @@ class FPool:
         self.nbr = np.asarray(nbr, dtype=np.int64)
         self.nblocks = int(self.nbr.shape[0])
         self.margin = None if margin is None else float(margin)
-        self.fslot = np.arange(self.nblocks, dtype=np.int32)
-        self.capacity = self.nblocks
+        # the full box: every block its own row for good; a pool: no rows until :meth:`start` sizes it
+        self.fslot = np.arange(self.nblocks, dtype=np.int32) if margin is None else np.full(self.nblocks, -1,
+                                                                                             dtype=np.int32)
+        self.capacity = self.nblocks if margin is None else 0
         self._free: list[int] = []
 
     @property

@@ -3,7 +3,8 @@
 One time step (:meth:`FreeSurfaceFluid.step`):
 
 1. fused stream-collide of the liquid (phi >= 1/2) with the body force rho g;
-   populations pulled from a GAS cell follow eq. (11) (:mod:`iceresist.lbm.stream`,
+   populations pulled from a GAS cell follow eq. (11) with the hydrostatic density of the
+   link midpoint below the sub-cell phi = 1/2 surface (:mod:`iceresist.lbm.stream`,
    ``free_surface=True``); gas cells are skipped like solids;
 2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), extended into the
    gas layer by layer (:mod:`iceresist.freesurface.extension`);
@@ -11,9 +12,9 @@ One time step (:meth:`FreeSurfaceFluid.step`):
    :class:`~iceresist.freesurface.phasefield.PhaseField`);
 4. reflag from the new phi: GAS where phi < 1/2 (the FLUID bit cleared), NEAR_SURFACE
    on liquid cells with a gas neighbour, the wall flags of the forest kept. A cell
-   turning from gas to liquid has no populations: it gets the equilibrium at the
-   reference density rho0 = 1 and the extended velocity (eq. 12 with rho0), the
-   same state eq. (11) assumes for the gas side of the surface.
+   turning from gas to liquid has no populations: it gets the equilibrium (eq. 12) at
+   the extended velocity and the hydrostatic density 1 + 3 g s below the surface,
+   s = (W / 2) artanh(2 phi - 1), the same rule step 1 applies at the link midpoints.
 
 All-liquid cells keep the short path of the fused kernel.
 """
@@ -21,6 +22,7 @@ All-liquid cells keep the short path of the fused kernel.
 from __future__ import annotations
 
 import logging
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -34,9 +36,22 @@ from iceresist.freesurface.layout import build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
-from iceresist.lbm.solver import LBMSolver
+from iceresist.lbm.solver import LBMSolver, collide_builder
+from iceresist.lbm.stream import FS_ARGS, TANH_CLIP, build_stream_collide, build_stream_collide_block
 
 log = logging.getLogger(__name__)
+
+
+@lru_cache(maxsize=None)
+def free_surface_launcher(target, precision: str, operator: str) -> CellLauncher:
+    """Compile (once per target, precision, operator) the free-surface fused stream-collide, arguments
+    ``FS_ARGS`` (:func:`iceresist.lbm.stream.stream_collide_source`, eq. 11 with the sub-cell link density)."""
+    real = jit.real_type(precision)
+    collide = collide_builder(operator)(target, real)
+    if target.is_cuda:
+        return CellLauncher(target, build_stream_collide(target, real, collide, free_surface=True), FS_ARGS)
+    return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface=True), FS_ARGS,
+                        per_block=True)
 
 
 def build_surface_cells(target, real):
@@ -44,13 +59,16 @@ def build_surface_cells(target, real):
 
     * ``velocity_cell(b, c, f, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
       populations f - w with the half-force shift of the force rho g removed; 0 elsewhere;
-    * ``reflag_cell(b, c, phi, base, flags, f, u, nbr)``: the flags of step 4 (module docstring);
-      a cell turning liquid gets f - w = f^eq(1, u) - w.
+    * ``reflag_cell(b, c, phi, base, flags, f, u, nbr, g, half_width)``: the flags of step 4 (module
+      docstring); a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
+      rho = 1 + 3 g s, s = (W / 2) artanh(2 phi - 1) its depth below the phi = 1/2 surface (the rule
+      of the link density in :func:`iceresist.lbm.stream.stream_collide_source`).
     """
     neighbour, _ = build_neighbour(target)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
     w = L.W.astype(real)
-    zero, one, half, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 3.0, 4.5, 1.5))
+    zero, one, half, two, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 2.0, 3.0, 4.5, 1.5))
+    tclip = real(TANH_CLIP)
     fluid, gas, near_surface = np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE)
     int64 = np.int64
     dev = target.device
@@ -78,7 +96,7 @@ def build_surface_cells(target, real):
             u[b, 2, c] = zero
 
     @dev
-    def reflag_cell(b, c, phi, base, flags, f, u, nbr):
+    def reflag_cell(b, c, phi, base, flags, f, u, nbr, g, half_width):
         b = int64(b)
         bf = base[b, c]
         if (bf & fluid) == 0:
@@ -88,14 +106,16 @@ def build_surface_cells(target, real):
             flags[b, c] = gas
             return
         if flags[b, c] & gas:
-            # gas -> liquid: equilibrium at rho0 = 1 and the extended velocity (eq. 12)
+            # gas -> liquid: equilibrium at the hydrostatic density below the surface and the extended velocity
             ux = u[b, 0, c]
             uy = u[b, 1, c]
             uz = u[b, 2, c]
             uu = ux * ux + uy * uy + uz * uz
+            t = min(two * phi[b, c] - one, tclip)
+            drho = c3 * g * half_width * math.atanh(t)
             for q in range(27):
                 cu = cx[q] * ux + cy[q] * uy + cz[q] * uz
-                f[b, q, c] = w[q] * (c3 * cu + c45 * cu * cu - c15 * uu)
+                f[b, q, c] = w[q] * (drho + (one + drho) * (c3 * cu + c45 * cu * cu - c15 * uu))
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -117,7 +137,7 @@ def build_surface_cells(target, real):
 def surface_launchers(target, precision: str):
     vel, reflag = build_surface_cells(target, jit.real_type(precision))
     return (CellLauncher(target, vel, ("f", "flags", "u", "gx", "gy", "gz")),
-            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "u", "nbr")))
+            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "u", "nbr", "g", "half_width")))
 
 
 class FreeSurfaceFluid:
@@ -146,6 +166,7 @@ class FreeSurfaceFluid:
                                target=target, free_surface=True)
         self.phase = PhaseField(forest, mobility=mobility, width=width, h_lattice=h_lattice, precision=precision,
                                 target=target)
+        self._stream = free_surface_launcher(target, precision, operator)
         self._vel, self._reflag = surface_launchers(target, precision)
         self._ext = extension_launcher(target, precision)
         self.nblocks = forest.nblocks
@@ -185,7 +206,7 @@ class FreeSurfaceFluid:
         phi_b = self.forest.from_dense(phi)
         # flags from phi (the forest's flags carry no GAS bit yet: no cell counts as newly liquid)
         self._reflag(self.nblocks, self._to_target(np.ascontiguousarray(phi_b, dtype=self.real)), self._base,
-                     self.fluid.flags, self.fluid.state, self._u, self.phase.nbr)
+                     self.fluid.flags, self.fluid.state, self._u, self.phase.nbr, *self._surface_scalars())
         self._velocity()
         self.phase.initialize(phi_b, self._u)
         self.iteration = 0
@@ -196,14 +217,28 @@ class FreeSurfaceFluid:
         self._vel(self.nblocks, self.fluid.state, self.fluid.flags, self._u, zero, zero, -g)
         extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr)
 
+    def _surface_scalars(self):
+        """(g, W / 2) in the real type: the inputs of the sub-cell surface density."""
+        return self.real(self.g), self.real(0.5 * self.phase.width)
+
+    def _stream_collide(self):
+        """Step 1: the fused update of the liquid with the current phi (``FS_ARGS``); the solver's buffers swap."""
+        fl = self.fluid
+        t = fl._tables
+        src, dst = fl._f
+        self._stream(self.nblocks, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
+                     t["bc_rho"], *fl._scalars, self.phase.phi, self.real(0.5 * self.phase.width))
+        fl._f = [dst, src]
+        fl.iteration += 1
+
     def step(self, n: int = 1):
         """Advance ``n`` time steps (module docstring, steps 1-4)."""
         for _ in range(int(n)):
-            self.fluid.step(1)
+            self._stream_collide()
             self._velocity()
             self.phase.step(self._u)
             self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state, self._u,
-                         self.phase.nbr)
+                         self.phase.nbr, *self._surface_scalars())
             self.iteration += 1
 
     # ------------------------------------------------------------------ diagnostics

@@ -38,7 +38,7 @@ REFERENCE = ("linear standing gravity wave, omega^2 = g k tanh(k h); viscous dec
 
 #: Defaults of one rung (lattice units unless named otherwise).
 DEFAULTS = dict(cells_per_wavelength=32, depth_wavelengths=0.5, amplitude_wavelengths=1 / 64, periods=2.0,
-                period_over_wavelength=14.0, tau=0.51, operator="bgk", ny=8, mobility=0.05)
+                period_over_wavelength=14.0, tau=0.51, operator="bgk", ny=8, mobility=0.01)
 
 
 def theory(params: dict) -> dict:

@@ -25,7 +25,25 @@ def test_liquid_velocity_extended_three_layers_then_zero():
     # a uniform-in-z liquid velocity is carried unchanged into the three gas layers
     for k in (8, 9, 10):
         assert np.allclose(ud[2, :, :, k], 0.02, atol=1e-15)
-        # linear in x: the symmetric mean keeps it, away from the x walls (one cell of bias per layer)
+    # linear in x: the symmetric mean keeps it, away from the x walls (two cells of bias in the first layer,
+    # where the link extrapolation meets the wall, one more per layer)
+    for k in (8, 9):
         assert np.allclose(ud[0, 3:5, :, k], u_dense[0, 3:5, :, 0], atol=1e-15)
+
+
+def test_first_gas_layer_extrapolates_linearly():
+    """A liquid velocity linear in z is continued linearly into the first gas layer (the kinematic condition at
+    the sub-cell surface), then copied into the next layers."""
+    fo = BlockForest.uniform((8, 8, 16), {f: Face("wall") for f in ("z-", "z+")})
+    z = np.arange(16)
+    phi = fo.from_dense(np.broadcast_to((z < 8).astype(float), (8, 8, 16)).copy())
+    u_dense = np.zeros((3, 8, 8, 16))
+    u_dense[2] = 0.001 * z                              # w = 0.001 z in the liquid
+    u = np.ascontiguousarray(fo.from_dense(u_dense).transpose(1, 0, 2))
+    dist = np.zeros((fo.nblocks, CELLS), np.int8)
+    extend_velocity(extension_launcher(jit.cpu, "float64"), fo.nblocks, phi, u, dist, fo.nbr.astype(np.int64))
+    ud = fo.to_dense(u.transpose(1, 0, 2))
+    assert np.allclose(ud[2, :, :, 8], 0.008, atol=1e-15)
+    assert np.allclose(ud[2, :, :, 9:11], 0.008, atol=1e-15)
     assert np.all(ud[:, :, :, 11:] == 0.0)
     assert np.array_equal(ud[:, :, :, :8], u_dense[:, :, :, :8])

@@ -23,8 +23,9 @@ def _tank():
     return BlockForest.uniform((8, 8, 16), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
 
 
-def _still_water(steps):
-    fs = FreeSurfaceFluid(_tank(), tau=0.6, gravity_lattice=G, depth_cells=DEPTH, operator="bgk", precision="float64")
+def _still_water(steps, operator="bgk", precision="float64"):
+    fs = FreeSurfaceFluid(_tank(), tau=0.6, gravity_lattice=G, depth_cells=DEPTH, operator=operator,
+                          precision=precision)
     fs.initialize()
     v0 = fs.volume()
     fs.step(steps)
@@ -68,8 +69,11 @@ def test_still_water_tank_stays_still_and_flat():
 
 
 @pytest.mark.slow
-def test_still_water_tank_10000_steps():
-    fs, v0, rho, u = _still_water(10000)
+@pytest.mark.parametrize("operator", ["bgk", "cumulant"])
+def test_still_water_tank_10000_steps(operator):
+    """The issue's still tank: 10 000 steps in float32, spurious |u| < 1e-4, surface flat within 0.1 cell,
+    sum phi within 0.1 % (figures in docs/VALIDATION.md)."""
+    fs, v0, rho, u = _still_water(10000, operator=operator, precision="float32")
     h = fs.surface_height()
     assert np.nanmax(np.abs(u)) < 1e-4
     assert h.max() - h.min() < 0.1 and abs(h.mean() - DEPTH) < 0.1

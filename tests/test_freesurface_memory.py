@@ -52,20 +52,19 @@ def test_f_bytes_follow_the_wet_blocks(depth, wet_layers):
     assert np.array_equal(np.asarray(pooled.fluid.flags), np.asarray(full.fluid.flags))
 
 
-def test_pool_releases_reuses_and_refuses_without_corrupting():
+def test_pool_releases_reuses_and_grows():
     """Host book-keeping on a 4 x 1 x 1 row of blocks: water moving from block 0 to block 3 releases the rows
-    behind it and reuses them; a pool too small raises an InputError naming free_surface.f_pool_margin and
-    leaves the map unchanged."""
+    behind it and reuses them; a pool too small for the blocks the water now needs grows (by the needed
+    blocks plus 1/4 of the wet ones) and keeps the rows it had."""
     fo = BlockForest.uniform((32, 8, 8), WALLS)
     pool = FPool(fo.nbr, margin=0.0)
     wet = np.array([1, 0, 0, 0], bool)
     pool.start(wet)
     assert pool.capacity == 2 and list(pool.fslot) == [0, 1, -1, -1]
     assert list(needed_blocks(np.array([0, 1, 0, 0], bool), fo.nbr)) == [True, True, True, False]
-    before = pool.fslot.copy()
-    with pytest.raises(InputError, match=r"free_surface\.f_pool_margin.*3 blocks.*holds 2"):
-        pool.update(np.array([0, 1, 0, 0], bool))
-    assert np.array_equal(pool.fslot, before)
+    assert list(pool.update(np.array([0, 1, 0, 0], bool))) == [2]
+    assert pool.capacity == 3 + 1 and pool.grown == 1
+    assert list(pool.fslot[:2]) == [0, 1] and pool.fslot[2] in (2, 3)
     big = FPool(fo.nbr, margin=1.0)
     big.start(wet)
     assert big.capacity == 3
@@ -121,9 +120,20 @@ def test_dam_break_pooled_equals_full_box_bit_for_bit():
     assert pooled.volume() == full.volume()
 
 
-def test_dam_break_pool_exhausted_is_an_input_error():
-    with pytest.raises(InputError, match=r"free_surface\.f_pool_margin.*6 blocks.*holds 4"):
-        _dam_break(jit.cpu, 0.0, 60)
+def test_dam_break_pool_grows_and_still_equals_full_box():
+    """With no margin the pool of the same dam break must grow (6 blocks needed, 4 rows at the start); the
+    grown run still matches the full-box run bit for bit."""
+    grown = _dam_break(jit.cpu, 0.0, 60)
+    full = _dam_break(jit.cpu, None, 60)
+    assert grown.fluid.pool.grown >= 1 and grown.fluid.pool.capacity >= 6
+    df, dphi = _compare(grown, full)
+    assert df == 0.0 and dphi == 0.0
+
+
+def test_pool_margin_must_be_non_negative():
+    fo = BlockForest.uniform((32, 8, 8), WALLS)
+    with pytest.raises(InputError, match=r"free_surface\.f_pool_margin must be >= 0"):
+        FPool(fo.nbr, margin=-0.5)
 
 
 def test_cuda_pooled_matches_cpu_full_box():

@@ -5,7 +5,14 @@ in the gas; yet the gas half of the diffuse interface (phi from 1/2 down to ~0.0
 over about 1.5 W = 4.5 cells) must move with the liquid, or the profile is
 sheared and the interface lags. We extend the liquid velocity into the gas layer
 by layer: pass k gives every gas cell that has a neighbour filled by pass k-1
-(liquid = pass 0) the w_q-weighted mean velocity of those neighbours. After
+(liquid = pass 0) the w_q-weighted mean velocity of those neighbours. In pass 1
+each liquid neighbour x + c_q contributes the velocity extrapolated linearly along
+the link, 2 u(x + c_q) - u(x + 2 c_q), where x + 2 c_q is liquid too (else
+u(x + c_q)): the phi = 1/2 surface lies between the last liquid and the first gas
+cell, and a copied velocity would move it with the liquid velocity of up to one
+cell below it, a first-order error in the kinematic condition (a standing wave of
+16-32 cells per wavelength ran 3-6 % slow with the copy, docs/VALIDATION.md).
+Passes 2 and more copy (a constant velocity across the rest of the profile). After
 ``layers`` passes (default 3, covering phi > 0.02 for W = 3) the remaining gas
 cells get u = 0; their phi is below 2 % of the jump, so their velocity barely
 moves phi, and conservation of sum phi does not depend on u at all.
@@ -33,7 +40,7 @@ def build_extension_cell(target, real):
     neighbour, _ = build_neighbour(target)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
     w = L.W.astype(real)
-    zero, half = real(0.0), real(0.5)
+    zero, half, two = real(0.0), real(0.5), real(2.0)
     int64, int8 = np.int64, np.int8
     unfilled = UNFILLED
 
@@ -62,10 +69,20 @@ def build_extension_cell(target, real):
             bn, cn = neighbour(nbr, b, x, y, z, cx[q], cy[q], cz[q])
             if bn >= 0:
                 if dist[bn, cn] <= layer - 1:
+                    vx = u[bn, 0, cn]
+                    vy = u[bn, 1, cn]
+                    vz = u[bn, 2, cn]
+                    if layer == 1:
+                        b2, c2 = neighbour(nbr, b, x, y, z, 2 * cx[q], 2 * cy[q], 2 * cz[q])
+                        if b2 >= 0:
+                            if dist[b2, c2] == 0:
+                                vx = two * vx - u[b2, 0, c2]
+                                vy = two * vy - u[b2, 1, c2]
+                                vz = two * vz - u[b2, 2, c2]
                     sw += w[q]
-                    sx += w[q] * u[bn, 0, cn]
-                    sy += w[q] * u[bn, 1, cn]
-                    sz += w[q] * u[bn, 2, cn]
+                    sx += w[q] * vx
+                    sy += w[q] * vy
+                    sz += w[q] * vz
         if sw > zero:
             u[b, 0, c] = sx / sw
             u[b, 1, c] = sy / sw

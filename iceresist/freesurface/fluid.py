@@ -3,7 +3,8 @@
 One time step (:meth:`FreeSurfaceFluid.step`):
 
 1. fused stream-collide of the liquid (phi >= 1/2) with the body force rho g;
-   populations pulled from a GAS cell follow eq. (11) (:mod:`iceresist.lbm.stream`,
+   populations pulled from a GAS cell follow eq. (11) with the hydrostatic density of the
+   link midpoint below the sub-cell phi = 1/2 surface (:mod:`iceresist.lbm.stream`,
    ``free_surface=True``); gas cells are skipped like solids;
 2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), extended into the
    gas layer by layer (:mod:`iceresist.freesurface.extension`);
@@ -13,9 +14,9 @@ One time step (:meth:`FreeSurfaceFluid.step`):
    in the gas and not next to the water hold no f);
 5. reflag from the new phi: GAS where phi < 1/2 (the FLUID bit cleared), NEAR_SURFACE
    on liquid cells with a gas neighbour, the wall flags of the forest kept. A cell
-   turning from gas to liquid has no populations: it gets the equilibrium at the
-   reference density rho0 = 1 and the extended velocity (eq. 12 with rho0), the
-   same state eq. (11) assumes for the gas side of the surface.
+   turning from gas to liquid has no populations: it gets the equilibrium (eq. 12) at
+   the extended velocity and the hydrostatic density 1 + 3 g s below the surface,
+   s = (W / 2) artanh(2 phi - 1), the same rule step 1 applies at the link midpoints.
 
 All-liquid cells keep the short path of the fused kernel.
 """
@@ -23,6 +24,7 @@ All-liquid cells keep the short path of the fused kernel.
 from __future__ import annotations
 
 import logging
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -37,8 +39,10 @@ from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
+from iceresist.lbm.stream import TANH_CLIP
 
 log = logging.getLogger(__name__)
+
 
 
 def build_surface_cells(target, real):
@@ -47,13 +51,16 @@ def build_surface_cells(target, real):
     * ``velocity_cell(b, c, f, fslot, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
       populations f - w (pool row ``fslot[b]``) with the half-force shift of the force rho g removed;
       0 elsewhere;
-    * ``reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr)``: the flags of step 4 (module docstring);
-      a cell turning liquid gets f - w = f^eq(1, u) - w.
+    * ``reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width)``: the flags of step 5 (module
+      docstring); a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
+      rho = 1 + 3 g s, s = (W / 2) artanh(2 phi - 1) its depth below the phi = 1/2 surface (the rule
+      of the link density in :func:`iceresist.lbm.stream.stream_collide_source`).
     """
     neighbour, _ = build_neighbour(target)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
     w = L.W.astype(real)
-    zero, one, half, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 3.0, 4.5, 1.5))
+    zero, one, half, two, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 2.0, 3.0, 4.5, 1.5))
+    tclip = real(TANH_CLIP)
     fluid, gas, near_surface = np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE)
     int64 = np.int64
     dev = target.device
@@ -82,7 +89,7 @@ def build_surface_cells(target, real):
             u[b, 2, c] = zero
 
     @dev
-    def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr):
+    def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width):
         b = int64(b)
         bf = base[b, c]
         if (bf & fluid) == 0:
@@ -92,15 +99,17 @@ def build_surface_cells(target, real):
             flags[b, c] = gas
             return
         if flags[b, c] & gas:
-            # gas -> liquid: equilibrium at rho0 = 1 and the extended velocity (eq. 12)
+            # gas -> liquid: equilibrium at the hydrostatic density below the surface and the extended velocity
             ux = u[b, 0, c]
             uy = u[b, 1, c]
             uz = u[b, 2, c]
             uu = ux * ux + uy * uy + uz * uz
             s = int64(fslot[b])
+            t = min(two * phi[b, c] - one, tclip)
+            drho = c3 * g * half_width * math.atanh(t)
             for q in range(27):
                 cu = cx[q] * ux + cy[q] * uy + cz[q] * uz
-                f[s, q, c] = w[q] * (c3 * cu + c45 * cu * cu - c15 * uu)
+                f[s, q, c] = w[q] * (drho + (one + drho) * (c3 * cu + c45 * cu * cu - c15 * uu))
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -122,7 +131,7 @@ def build_surface_cells(target, real):
 def surface_launchers(target, precision: str):
     vel, reflag = build_surface_cells(target, jit.real_type(precision))
     return (CellLauncher(target, vel, ("f", "fslot", "flags", "u", "gx", "gy", "gz")),
-            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr")))
+            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width")))
 
 
 class FreeSurfaceFluid:
@@ -192,8 +201,8 @@ class FreeSurfaceFluid:
         phi_b = np.ascontiguousarray(self.forest.from_dense(phi), dtype=self.real)
         self.fluid.initialize(rho, tuple(float(v) for v in u), wet=(phi_b >= self.real(0.5)).any(axis=1))
         # flags from phi (the forest's flags carry no GAS bit yet: no cell counts as newly liquid)
-        self._reflag(self.nblocks, self._to_target(phi_b), self._base,
-                     self.fluid.flags, self.fluid.state, self.fluid.fslot, self._u, self.phase.nbr)
+        self._reflag(self.nblocks, self._to_target(phi_b), self._base, self.fluid.flags, self.fluid.state,
+                     self.fluid.fslot, self._u, self.phase.nbr, *self._surface_scalars())
         self._velocity()
         self.phase.initialize(phi_b, self._u)
         self.iteration = 0
@@ -204,15 +213,23 @@ class FreeSurfaceFluid:
         self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
         extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr)
 
+    def _surface_scalars(self):
+        """(g, W / 2) in the real type: the inputs of the sub-cell surface density."""
+        return self.real(self.g), self.real(0.5 * self.phase.width)
+
+    def _stream_collide(self):
+        """Step 1: the fused update of the liquid with the current phi (``POOL_ARGS``); the buffers swap."""
+        self.fluid.step(1, self.phase.phi, self.real(0.5 * self.phase.width))
+
     def step(self, n: int = 1):
         """Advance ``n`` time steps (module docstring, steps 1-5)."""
         for _ in range(int(n)):
-            self.fluid.step(1)
+            self._stream_collide()
             self._velocity()
             self.phase.step(self._u)
             self.fluid.update_rows(self.phase.phi, self._u)
             self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state,
-                         self.fluid.fslot, self._u, self.phase.nbr)
+                         self.fluid.fslot, self._u, self.phase.nbr, *self._surface_scalars())
             self.iteration += 1
 
     # ------------------------------------------------------------------ diagnostics

@@ -124,6 +124,7 @@ class FPool:
         self.fslot = np.arange(self.nblocks, dtype=np.int32) if margin is None else np.full(self.nblocks, -1,
                                                                                              dtype=np.int32)
         self.capacity = self.nblocks if margin is None else 0
+        self.grown = 0   #: times the pool had to grow during the run
         self._free: list[int] = []
 
     @property
@@ -157,21 +158,34 @@ class FPool:
 
     def _check(self, n: int) -> None:
         if n > self.capacity:
-            raise InputError(f"free_surface.f_pool_margin: the water now needs populations in {n} blocks but the "
+            raise InputError(f"free_surface.f_pool_margin: the water needs populations in {n} blocks but the "
                              f"pool holds {self.capacity} (margin {self.margin} of the wet blocks at the start); "
                              f"raise free_surface.f_pool_margin, or set it to \"full\"")
 
+    def grow(self, n: int, n_wet: int) -> bool:
+        """Make room for ``n`` needed blocks: the capacity rises to ``n`` plus the margin of the ``n_wet``
+        wet blocks now (at least 1/4 of them, at most every block); the new rows join the free list.
+        Returns True when the capacity changed (the caller then enlarges its buffers, keeping the rows)."""
+        if n <= self.capacity:
+            return False
+        old = self.capacity
+        self.capacity = min(self.nblocks, n + math.ceil(max(self.margin, DEFAULT_MARGIN) * n_wet))
+        self._free = list(range(self.capacity - 1, old - 1, -1)) + self._free
+        self.grown += 1
+        log.info("f pool: grown from %d to %d rows (%d blocks need populations)", old, self.capacity, n)
+        return True
+
     def update(self, wet: np.ndarray) -> np.ndarray:
         """Release the rows of blocks no longer needed, give rows to blocks newly needed; returns the block
-        ids (int64) that took a row, whose populations the caller must fill. Raises before any change when
-        the pool is too small."""
+        ids (int64) that took a row, whose populations the caller must fill. When the water needs more rows
+        than the pool holds, the pool grows first (:meth:`grow`; the caller compares ``capacity``)."""
         if self.full:
             return np.zeros(0, dtype=np.int64)
         need = needed_blocks(wet, self.nbr)
         has = self.fslot >= 0
         release = np.flatnonzero(has & ~need)
         acquire = np.flatnonzero(need & ~has)
-        self._check(int(need.sum()))
+        self.grow(int(need.sum()), int(np.count_nonzero(wet)))
         self._free.extend(int(r) for r in self.fslot[release])
         self.fslot[release] = -1
         for b in acquire:
@@ -264,10 +278,23 @@ class PooledLBM:
         if self.pool.full:
             return 0
         acquired = self.pool.update(self.wet_blocks(phi))
+        if self.pool.capacity > self._f[0].shape[0]:
+            self._enlarge(self.pool.capacity)
         self._upload_map()
         if len(acquired):
             self._fill(len(acquired), self._to_device(acquired), self.fslot, self._f[0], self._f[1], u)
         return len(acquired)
+
+    def _enlarge(self, capacity: int):
+        """Both population buffers with ``capacity`` rows, the old rows copied unchanged (a rare event:
+        the water spread over more blocks than the pool's margin allowed)."""
+        bufs = []
+        for buf in self._f:
+            old = self._host(buf)
+            new = np.zeros((capacity, L.Q, CELLS), self.real)
+            new[:old.shape[0]] = old
+            bufs.append(self._to_device(new))
+        self._f = bufs
 
     # ------------------------------------------------------------------ state
     def initialize(self, rho, u, wet: np.ndarray):
@@ -288,16 +315,24 @@ class PooledLBM:
         self._upload_map()
         self.iteration = 0
 
-    def step(self, n: int = 1):
-        """Advance ``n`` fused stream-collide steps; the buffers swap after each."""
+    def step(self, n: int, phi, half_width):
+        """Advance ``n`` fused stream-collide steps with the phase field ``phi[block, cell]`` and W / 2
+        (lattice units) placing the surface inside the cell (eq. 11); the buffers swap after each."""
         t = self._tables
         nb = self.forest.nblocks
         for _ in range(int(n)):
             src, dst = self._f
             self._launch(nb, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
-                         t["bc_rho"], *self._scalars, self.fslot)
+                         t["bc_rho"], *self._scalars, phi, half_width, self.fslot)
             self._f = [dst, src]
             self.iteration += 1
+
+    def synchronize(self):
+        """Wait for the device (CUDA); a no-op on the CPU."""
+        if self.target.is_cuda:
+            from numba import cuda
+
+            cuda.synchronize()
 
     def populations(self) -> np.ndarray:
         """Host copy of f - w per block, (nblocks, 27, 512) float64, 0 in blocks without a row."""

@@ -25,6 +25,7 @@ reusing the pull code of the per-cell update for blocks with boundary cells
 
 from __future__ import annotations
 
+import math
 import re
 
 import numpy as np
@@ -36,9 +37,15 @@ from iceresist.lbm.boundary import GHOST, build_link_boundary
 from iceresist.lbm.codegen import F_NAMES, compile_source, term
 
 ARGS = ("src", "dst", "nbr_key", "link_bc", "flags", "bc_kind", "bc_u", "bc_rho", "omega", "Fx", "Fy", "Fz")
+#: Arguments of the free-surface variant: ``ARGS`` plus the phase field ``phi[block, cell]`` and half the
+#: interface width W / 2 (lattice units), which place the surface inside the cell (eq. 11 with a sub-cell
+#: hydrostatic link density, :func:`stream_collide_source`).
+FS_ARGS = ARGS + ("phi", "half_width")
+#: |2 phi - 1| is clamped below this before artanh (a signed distance of at most ~3.8 W / 2).
+TANH_CLIP = 0.999
 #: Arguments of the slot-indexed free-surface update: ``fslot[block]`` is the row of the population pool
 #: that holds the block (-1 for a block wholly in the gas, which holds none; :mod:`iceresist.freesurface.pool`).
-POOL_ARGS = ARGS + ("fslot",)
+POOL_ARGS = FS_ARGS + ("fslot",)
 
 
 def _source_lines(q: int):
@@ -62,13 +69,32 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
     ``b`` (``stream_collide_block(b, ...)``): the CPU form, one call per block.
 
     With ``free_surface`` (paper section 2.2): a population whose source is a GAS cell
-    is given by eq. (11), and (Fx, Fy, Fz) is an acceleration g: the body force of the
-    cell is rho g (gravity). Eq. (11) with rho0 = 1 in the form f - w reads
-    f_q = -f*_opp + 2 w_q [9/2 (c_q . u)^2 - 3/2 u^2] (the odd terms of f^eq cancel),
-    the anti-bounce-back at rho0 = 1; u is the cell's own velocity from its
-    post-collision populations of the previous step, as at an outlet.
+    is given by eq. (11), and (Fx, Fy, Fz) is an acceleration g (gravity, along -z:
+    g = -Fz): the body force of the cell is rho g. The arguments are ``FS_ARGS``.
+
+    Eq. (11) is an anti-bounce-back: it imposes the density it is given at the link
+    midpoint x - c_q / 2. The paper's rho0 there puts the gas pressure on the cell
+    staircase, so a sub-cell displacement of the surface feels no restoring pressure.
+    We impose instead the density that the hydrostatic liquid has at the link midpoint
+    when the gas pressure c_s^2 rho0 acts exactly on the phi = 1/2 surface:
+
+        s(x)    = (W / 2) artanh(2 phi(x) - 1)            (signed distance to the surface,
+                                                           > 0 in the liquid; the profile of eq. 4)
+        s_mid   = [s(x) + s(x - c_q)] / 2                 (linear along the link, exact for a plane)
+        rho_mid = rho0 + 3 g s_mid                        (c_s^2 d(rho)/d(depth) = rho0 g)
+
+    with |2 phi - 1| clamped to ``TANH_CLIP``; s_mid stands for the depth below the surface,
+    exact for a level surface (a relative error of slope^2 / 2 on a tilted one). In the form
+    f - w with rho0 = 1, eq. (11) with f^eq(rho_mid, u) of eq. (12) reads
+
+        f_q = -f*_opp + 2 w_q [(rho_mid - 1) + rho_mid (9/2 (c_q . u)^2 - 3/2 u^2)]
+
+    (the odd terms of f^eq cancel); u is the cell's own velocity from its post-collision
+    populations of the previous step, as at an outlet. A level surface at a cell face
+    (s_mid = 0) gives back the paper's rule at rho0 = 1.
     """
-    s = "def stream_collide_cell(b, c, " + ", ".join(ARGS) + "):\n"
+    args = FS_ARGS if free_surface else ARGS
+    s = "def stream_collide_cell(b, c, " + ", ".join(args) + "):\n"
     s += "    flag = flags[b, c]\n"
     s += "    if (flag & FLUID) == 0:\n        return\n"
     s += "    ci = c + izero\n    lx = ci & 7\n    ly = (ci >> 3) & 7\n    lz = ci >> 6\n"
@@ -94,6 +120,10 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
             s += f"            ul{comp} = (zero{expr} - half * F{comp}) / rho_l\n"
     if free_surface:
         s += "        uu_l = ulx * ulx + uly * uly + ulz * ulz\n"
+        s += "        g3 = -three * Fz\n"
+        s += "        t = two * phi[b, c] - one\n"
+        s += "        t = min(max(t, -tclip), tclip)\n"
+        s += "        s_c = half_width * atanh(t)\n"
     for q in range(1, Q):
         key, cell = _source_lines(q)
         cx, cy, cz = (int(v) for v in C[q])
@@ -108,7 +138,10 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
             cu = "".join(term(C[q, a], f"ul{'xyz'[a]}") for a in range(3))
             s += "            elif flags[nb, sc] & GAS:\n"
             s += f"                cu = zero{cu}\n"
-            s += f"                f{q} = -fopp + two_w{q} * (c45 * cu * cu - c15 * uu_l)\n"
+            s += "                t = two * phi[nb, sc] - one\n"
+            s += "                t = min(max(t, -tclip), tclip)\n"
+            s += "                d3g = g3 * half * (s_c + half_width * atanh(t))\n"
+            s += (f"                f{q} = -fopp + two_w{q} * (d3g + (one + d3g) * (c45 * cu * cu - c15 * uu_l))\n")
         s += "            else:\n"
         s += f"                f{q} = fopp\n"
         s += "        else:\n"
@@ -124,7 +157,7 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
     if loop_cells:
         body = s.split("\n", 1)[1].replace("        return\n", "        continue\n")
         body = "".join("    " + line + "\n" for line in body.splitlines())
-        s = (f"def stream_collide_block(b, {', '.join(ARGS)}):\n"
+        s = (f"def stream_collide_block(b, {', '.join(args)}):\n"
              f"    for c in range({CELLS}):\n" + body)
     return s
 
@@ -133,7 +166,8 @@ def _namespace(target, real, collide):
     ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "NEAR_OUTLET": FL.NEAR_OUTLET, "GAS": FL.GAS,
           "NEED_U": FL.NEAR_OUTLET | FL.NEAR_SURFACE, "c45": real(4.5), "c15": real(1.5),
           "izero": np.int64(0), "zero": real(0.0),
-          "one": real(1.0), "half": real(0.5), "r0": real(-1.0), "r1": real(0.0), "r2": real(1.0),
+          "one": real(1.0), "half": real(0.5), "two": real(2.0), "three": real(3.0), "tclip": real(TANH_CLIP),
+          "atanh": math.atanh, "r0": real(-1.0), "r1": real(0.0), "r2": real(1.0),
           "collide": collide, "link_boundary": build_link_boundary(target, real, cell_device(target))}
     ns.update({f"w{q}": real(W[q]) for q in range(Q)})
     ns.update({f"two_w{q}": real(2.0 * W[q]) for q in range(Q)})
@@ -151,12 +185,13 @@ def pooled_source(src: str) -> str:
     s = re.sub(r"\b(src|dst)\[b, ", r"\1[sb, ", src)
     s = re.sub(r"\bsrc\[(nb|nbr_key\[b, [^\]]+\]), ", r"src[fslot[\1], ", s)
     s = re.sub(r"\n( +)ci = c \+ izero\n", r"\n\1ci = c + izero\n\1sb = fslot[b]\n", s)
-    return s.replace(", ".join(ARGS) + "):", ", ".join(POOL_ARGS) + "):", 1)
+    return s.replace(", ".join(FS_ARGS) + "):", ", ".join(POOL_ARGS) + "):", 1)
 
 
 def build_stream_collide(target, real, collide, free_surface: bool = False):
     """The fused pull stream-collide update of one cell, ``stream_collide_cell(b, c, *ARGS)``;
-    ``free_surface``: eq. (11) at GAS sources and the force rho g (see :func:`stream_collide_source`)."""
+    ``free_surface``: eq. (11) at GAS sources with the sub-cell link density and the force rho g,
+    arguments ``FS_ARGS`` (see :func:`stream_collide_source`)."""
     return compile_source(stream_collide_source(free_surface=free_surface), "stream_collide_cell", _namespace(target, real, collide),
                           cell_device(target))
 

@@ -215,7 +215,8 @@ class FreeSurface(_Section):
     f_pool_margin: float | Literal["full"] = Field(
         0.25, description="Spare rows of LBM populations, as a fraction of the blocks holding water at the "
                           "start (blocks wholly in the gas hold none); `\"full\"`: populations in every block. "
-                          "Raise it when a run stops because the water needs more.")
+                          "When the water spreads over more blocks the pool grows (its buffers are copied once), so "
+                          "a larger margin only saves that copy.")
 
     @field_validator("f_pool_margin")
     @classmethod

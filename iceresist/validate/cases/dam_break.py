@@ -1,0 +1,129 @@
+"""Reference case: collapse of a water column (dam break) against Martin and Moyce (1952).
+
+Set-up (lattice units): a column of width a (``cells_per_column``) and height 2 a (Martin and Moyce's
+n^2 = 2) at rest against the wall x = 0 of a closed tank 4.5 a long (no-slip walls at x and z), a quasi-2D
+slab of 8 cells along periodic y. The column starts hydrostatic with a sharp vertical face at x = a, which
+the phase field widens to its profile within a few steps; there is no gate. Gravity g is set from the
+Mach limit: the Ritter front speed 2 sqrt(2 g a) is held at ``front_speed`` (lattice units).
+
+Measured: the surge front x_f(t), the largest x where the y-mean phi of the bottom cell layer crosses 1/2
+(linear interpolation; ``front_rows`` > 1 takes the furthest crossing of that many bottom layers), as Z = x_f / a against Martin and Moyce's T = n t sqrt(g / a) = t sqrt(2 g / a).
+Reference: their n^2 = 2, a = 2.25 in measurements (``iceresist/validate/data/martin_moyce_1952.csv``).
+Headline: the largest relative error of Z over the measured points with T <= ``t_compare`` (default 2).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from iceresist.freesurface.fluid import FreeSurfaceFluid
+from iceresist.grid.forest import BlockForest, Face
+from iceresist.validate.result import CaseResult
+
+log = logging.getLogger(__name__)
+
+NAME = "dam_break"
+REFERENCE = ("Martin and Moyce (1952), Phil. Trans. R. Soc. Lond. A 244, 312-324: surge front of a column "
+             "n^2 = 2, a = 2.25 in (fig. 3)")
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "martin_moyce_1952.csv"
+
+DEFAULTS = dict(cells_per_column=16, front_speed=0.1, tau=0.51, operator="cumulant", mobility=0.01, ny=8,
+                t_end=2.6, t_compare=2.0, length_columns=4.5, front_rows=1)
+
+
+def measurements() -> tuple[np.ndarray, np.ndarray]:
+    """(T, Z) of Martin and Moyce (1952), n^2 = 2, a = 2.25 in."""
+    import pandas as pd
+
+    d = pd.read_csv(DATA, comment="#")
+    return d["T"].to_numpy(float), d["Z"].to_numpy(float)
+
+
+def ladder(quick: bool) -> list[dict]:
+    """Columns of 8, 12, 16 cells (quick; < 2 min in all on a 2-core x86 VM after compilation) or 16-48."""
+    sizes = (8, 12, 16) if quick else (16, 24, 32, 48)
+    return [dict(label=f"a = {n} cells", resolution=n, cells_per_column=n) for n in sizes]
+
+
+def gravity(params: dict) -> float:
+    """g (lattice units) from the Ritter front speed 2 sqrt(2 g a) = ``front_speed``."""
+    p = {**DEFAULTS, **params}
+    return p["front_speed"] ** 2 / (8.0 * p["cells_per_column"])
+
+
+def build(params: dict, *, backend: str = "cpu", precision: str = "float32") -> FreeSurfaceFluid:
+    """The initialised :class:`FreeSurfaceFluid` of a rung."""
+    from iceresist.backends import jit
+
+    p = {**DEFAULTS, **params}
+    a = int(p["cells_per_column"])
+    nx = 8 * math.ceil(p["length_columns"] * a / 8)
+    nz = 8 * math.ceil((2 * a + 6) / 8)
+    ny = int(p["ny"])
+    walls = {k: Face("wall") for k in ("x-", "x+", "z-", "z+")}
+    forest = BlockForest.uniform((nx, ny, nz), walls)
+    target = jit.cuda() if backend == "cuda" else jit.cpu
+    fs = FreeSurfaceFluid(forest, tau=p["tau"], gravity_lattice=gravity(p), depth_cells=2.0 * a,
+                          mobility=p["mobility"], operator=p["operator"], precision=precision, target=target)
+    x = np.arange(nx) + 0.5
+    surface = np.where(x < a, 2.0 * a, -4.0)
+    fs.initialize(surface=np.broadcast_to(surface[:, None], (nx, ny)))
+    return fs
+
+
+def front_position(phi: np.ndarray, rows: int = 1) -> float:
+    """x (cells from the wall x = 0) of the leading edge: the largest x where the y-mean phi of one of the
+    bottom ``rows`` cell layers crosses 1/2 (the surge's nose rides slightly above the no-slip bottom)."""
+    best = 0.0
+    for k in range(rows):
+        row = phi[:, :, k].mean(axis=1)
+        wet = np.nonzero(row >= 0.5)[0]
+        if wet.size == 0:
+            continue
+        i = int(wet[-1])
+        x = float(row.size) if i + 1 >= row.size else i + 0.5 + (row[i] - 0.5) / (row[i] - row[i + 1])
+        best = max(best, x)
+    return best
+
+
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+    """Run one rung: Z(T) sampled every 0.05 T; the error of Z at the measured T <= t_compare in ``extra``."""
+    p = {**DEFAULTS, **params}
+    a = float(p["cells_per_column"])
+    fs = build(p, backend=backend, precision=precision)
+    t_unit = math.sqrt(a / (2.0 * gravity(p)))          # steps per unit of T = t sqrt(2 g / a)
+    steps = int(math.ceil(p["t_end"] * t_unit))
+    sample = max(1, int(round(0.05 * t_unit)))
+    rows = int(p["front_rows"])
+    fs.step(1)                                          # compile outside the timing
+    ts, zs = [1.0 / t_unit], [front_position(fs.phi(), rows) / a]
+    t0 = time.perf_counter()
+    n = 1
+    while n < steps:
+        fs.step(sample)
+        n += sample
+        ts.append(n / t_unit)
+        zs.append(front_position(fs.phi(), rows) / a)
+    fs.fluid.synchronize()
+    wall = time.perf_counter() - t0
+    ts, zs = np.array(ts), np.array(zs)
+    t_ref, z_ref = measurements()
+    keep = t_ref <= p["t_compare"] + 1e-9
+    z_sim = np.interp(t_ref, ts, zs)
+    err = np.abs(z_sim - z_ref) / z_ref
+    worst = int(np.argmax(np.where(keep, err, -1.0)))
+    extra = dict(T=ts.tolist(), Z=zs.tolist(), T_ref=t_ref.tolist(), Z_ref=z_ref.tolist(), Z_sim=z_sim.tolist(),
+                 error_at_ref=err.tolist(), g=gravity(p), tau=p["tau"], operator=p["operator"],
+                 mobility=p["mobility"], steps_per_T=t_unit, volume=fs.volume())
+    log.info("dam break a = %d: Z errors %s at T = %s", int(a), np.round(err, 3), t_ref)
+    return CaseResult(case=NAME, label=p.get("label", f"a = {int(a)} cells"),
+                      resolution=float(p.get("resolution", a)), cells=fs.forest.cells, steps=n, wall_s=wall,
+                      quantity=f"surge front Z = x/a at T = {t_ref[worst]:.3f} (worst of T <= {p['t_compare']})",
+                      value=float(z_sim[worst]), reference=float(z_ref[worst]), error=float(err[worst]),
+                      backend=backend, precision=precision, extra=extra)

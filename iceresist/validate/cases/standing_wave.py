@@ -1,0 +1,140 @@
+"""Reference case: a standing gravity wave in a periodic channel (free surface, paper section 2.2).
+
+Set-up (lattice units): one wavelength lambda = ``cells_per_wavelength`` cells along periodic x, a quasi-2D
+slab of 8 cells along periodic y, still depth h = ``depth_wavelengths`` lambda over a no-slip bottom, a closed
+lid above the gas. The surface starts at rest, z_s = h + a cos(k x), with the hydrostatic density under it
+(:meth:`~iceresist.freesurface.fluid.FreeSurfaceFluid.initialize`), and oscillates as the standing wave
+
+    eta(x, t) = a e^(-gamma t) cos(omega t) cos(k x),   omega^2 = g k tanh(k h)      (linear theory)
+
+with the viscous amplitude decay gamma = 2 nu k^2 (Lamb 1932, Hydrodynamics, section 348, deep water; a
+no-slip bottom and the diffuse interface add to it). The case measures the mode amplitude
+A(t) = (2 / n_x) sum_x (z_s(x) - mean) cos(k x) each step, and fits omega and gamma to
+A = A0 e^(-gamma t) cos(omega t + psi) + A_inf (linear least squares in the offset, nonlinear in omega,
+gamma). Headline: the period 2 pi / omega against linear theory.
+
+g is chosen from the target period in steps (``period_steps``), so the Mach number a omega / c_s
+stays ~ 1e-2 and the run length scales with the wavelength (acoustic scaling at fixed lambda / period
+ratio of c_s / c_wave).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from iceresist.freesurface.fluid import FreeSurfaceFluid
+from iceresist.grid.forest import BlockForest, Face
+from iceresist.validate.result import CaseResult, relative_error
+
+log = logging.getLogger(__name__)
+
+NAME = "standing_wave"
+REFERENCE = ("linear standing gravity wave, omega^2 = g k tanh(k h); viscous decay 2 nu k^2 "
+             "(Lamb 1932, Hydrodynamics, 6th ed., section 348)")
+
+#: Defaults of one rung (lattice units unless named otherwise).
+DEFAULTS = dict(cells_per_wavelength=32, depth_wavelengths=0.5, amplitude_wavelengths=1 / 64, periods=2.0,
+                period_over_wavelength=14.0, tau=0.51, operator="bgk", ny=8, mobility=0.01)
+
+
+def theory(params: dict) -> dict:
+    """Linear-theory figures of a rung: k, h, a, g, omega, period_steps, decay (2 nu k^2), nu."""
+    p = {**DEFAULTS, **params}
+    lam = float(p["cells_per_wavelength"])
+    k = 2.0 * math.pi / lam
+    h = p["depth_wavelengths"] * lam
+    period = p["period_over_wavelength"] * lam
+    omega = 2.0 * math.pi / period
+    g = omega ** 2 / (k * math.tanh(k * h))
+    nu = (p["tau"] - 0.5) / 3.0
+    return dict(k=k, h=h, a=p["amplitude_wavelengths"] * lam, g=g, omega=omega, period_steps=period,
+                decay=2.0 * nu * k * k, nu=nu)
+
+
+def ladder(quick: bool) -> list[dict]:
+    """Three (quick) or four rungs of cells per wavelength; the quick ladder totals well under 2 min on a
+    2-core x86 VM after compilation."""
+    if quick:
+        return [dict(label=f"{n} cells/wavelength", resolution=n, cells_per_wavelength=n, periods=1.5)
+                for n in (16, 24, 32)]
+    return [dict(label=f"{n} cells/wavelength", resolution=n, cells_per_wavelength=n, periods=3.0)
+            for n in (16, 32, 48, 64)]
+
+
+def fit_damped_cosine(t: np.ndarray, a: np.ndarray, omega0: float) -> tuple[float, float, float]:
+    """(omega, gamma, amplitude) of A = A0 e^(-gamma t) cos(omega t + psi) + A_inf fitted to ``a(t)``;
+    a grid search in omega around ``omega0`` then scipy least squares."""
+    from scipy.optimize import least_squares
+
+    def model(x):
+        om, ga, c, s, off = x
+        return np.exp(-ga * t) * (c * np.cos(om * t) + s * np.sin(om * t)) + off
+
+    x0 = np.array([omega0, 0.0, a[0], 0.0, 0.0])
+    sol = least_squares(lambda x: model(x) - a, x0, x_scale=np.array([omega0, omega0, abs(a[0]), abs(a[0]),
+                                                                        abs(a[0])]))
+    om, ga, c, s, _ = sol.x
+    return abs(float(om)), float(ga), float(math.hypot(c, s))
+
+
+def mode_amplitude(surface: np.ndarray, k: float) -> float:
+    """A = (2 / n_x) sum_x (z_s - mean) cos(k x) of the y-mean surface height (cells), x at cell centres."""
+    zs = surface.mean(axis=1)
+    x = np.arange(zs.size) + 0.5
+    return float(2.0 / zs.size * np.sum((zs - zs.mean()) * np.cos(k * x)))
+
+
+def build(params: dict, *, backend: str = "cpu", precision: str = "float32") -> tuple[FreeSurfaceFluid, dict]:
+    """The initialised :class:`FreeSurfaceFluid` of a rung and its :func:`theory`."""
+    from iceresist.backends import jit
+
+    p = {**DEFAULTS, **params}
+    th = theory(p)
+    nx = int(p["cells_per_wavelength"])
+    nz = 8 * math.ceil((th["h"] + th["a"] + 6.0) / 8)
+    forest = BlockForest.uniform((nx, int(p["ny"]), nz), {"z-": Face("wall"), "z+": Face("wall")})
+    target = jit.cuda() if backend == "cuda" else jit.cpu
+    fs = FreeSurfaceFluid(forest, tau=p["tau"], gravity_lattice=th["g"], depth_cells=th["h"],
+                          mobility=p["mobility"], operator=p["operator"], precision=precision, target=target)
+    x = np.arange(nx) + 0.5
+    surface = np.broadcast_to((th["h"] + th["a"] * np.cos(th["k"] * x))[:, None], (nx, int(p["ny"])))
+    fs.initialize(surface=surface)
+    return fs, th
+
+
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+    """Run one rung; the period error against linear theory, with the decay rate in ``extra``."""
+    p = {**DEFAULTS, **params}
+    fs, th = build(p, backend=backend, precision=precision)
+    steps = int(round(p["periods"] * th["period_steps"]))
+    fs.step(1)                                   # compiles every kernel outside the timing
+    amp = [mode_amplitude(fs.surface_height(), th["k"])]
+    sample = max(1, int(th["period_steps"] // 40))
+    t0 = time.perf_counter()
+    for _ in range(steps // sample):
+        fs.step(sample)
+        amp.append(mode_amplitude(fs.surface_height(), th["k"]))
+    fs.fluid.synchronize()
+    wall = time.perf_counter() - t0
+    t = 1.0 + sample * np.arange(len(amp))
+    amp = np.array(amp)
+    omega, gamma, a0 = fit_damped_cosine(t, amp, th["omega"])
+    period = 2.0 * math.pi / omega
+    _, u = fs.macroscopic()
+    extra = dict(omega=omega, omega_theory=th["omega"], decay_per_step=gamma, decay_lamb=th["decay"],
+                 log_decrement=gamma * period, log_decrement_lamb=th["decay"] * th["period_steps"],
+                 amplitude0=a0, g=th["g"], tau=p["tau"], operator=p["operator"], volume=fs.volume(),
+                 max_u_final=float(np.nanmax(np.abs(u))), mach=th["a"] * th["omega"] * math.sqrt(3.0),
+                 t=t.tolist(), amplitude=amp.tolist())
+    log.info("standing wave %s: period %.1f steps vs %.1f (%.2f %%), decay %.3g vs Lamb %.3g per step",
+             p.get("label", ""), period, th["period_steps"], 100 * relative_error(period, th["period_steps"]),
+             gamma, th["decay"])
+    return CaseResult(case=NAME, label=p.get("label", f"{p['cells_per_wavelength']} cells/wavelength"),
+                      resolution=float(p.get("resolution", p["cells_per_wavelength"])), cells=fs.forest.cells,
+                      steps=steps, wall_s=wall, quantity="period (steps)", value=period,
+                      reference=th["period_steps"], error=relative_error(period, th["period_steps"]),
+                      backend=backend, precision=precision, extra=extra)

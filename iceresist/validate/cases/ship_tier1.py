@@ -62,6 +62,6 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> Ca
                       cells=int(row["spheres"]), steps=int(row["dem_substeps"]), wall_s=float(row["wall_time_s"]),
                       quantity="mean ice force in the steady window (N, model scale)",
                       value=float(row["mean_force_N"]), reference=float("nan"), error=float("nan"),
-                      backend=backend, precision="float64",
-                      extra={"ci95_N": float(row["ci95_N"]), "records": int(row["steps"]), "total_s": total,
+                      backend=backend, precision=precision,
+                      extra={"dem_precision": "float64", "ci95_N": float(row["ci95_N"]), "records": int(row["steps"]), "total_s": total,
                              "R_sim_kN": float(row["R_sim_kN"])})

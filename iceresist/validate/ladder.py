@@ -94,7 +94,7 @@ def append_row(out_dir, row: dict):
     if path.is_file() and path.stat().st_size > 0:
         old = pd.read_csv(path)
         if set(new.columns) <= set(old.columns):
-            new[old.columns].to_csv(path, mode="a", header=False, index=False, float_format="%.10g")
+            new.reindex(columns=old.columns).to_csv(path, mode="a", header=False, index=False, float_format="%.10g")
             return
         new = pd.concat([old, new], ignore_index=True)
     new.to_csv(path, index=False, float_format="%.10g")

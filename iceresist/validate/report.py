@@ -37,6 +37,8 @@ def cheapest_columns(thresholds=THRESHOLDS) -> dict:
 
 def fig_error_time(plt, table: pd.DataFrame, summary: pd.DataFrame):
     """One log-log panel per case: error against wall time per ladder, observed order in the legend."""
+    from matplotlib.ticker import NullFormatter
+
     cases = list(dict.fromkeys(table.case))
     ncol = min(3, max(1, len(cases)))
     nrow = math.ceil(len(cases) / ncol)
@@ -53,6 +55,7 @@ def fig_error_time(plt, table: pd.DataFrame, summary: pd.DataFrame):
                             textcoords="offset points")
         for thr in THRESHOLDS:
             ax.axhline(thr, color="0.7", lw=0.6, ls=":")
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(case, fontsize=8, loc="left")
         ax.set_xlabel("wall time [s]")
         ax.set_ylabel("relative error")
@@ -138,7 +141,9 @@ def markdown_table(table: pd.DataFrame) -> str:
     summary = case_summary(t)
     lines = ["| case | ladder | rung | cells | steps | wall [s] | MLUPS | value | reference | error | order p |",
              "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for _, r in t.sort_values(["case", "ladder", "resolution"], kind="stable").iterrows():
+    order = {c: i for i, c in enumerate(dict.fromkeys(t.case))}
+    for _, r in t.sort_values(["case", "ladder", "resolution"], key=lambda c: c.map(order) if c.name == "case" else c,
+                              kind="stable").iterrows():
         s = summary[(summary.case == r.case) & (summary.ladder == r.ladder)].iloc[0]
         lines.append(f"| {r.case} | {r.ladder} | {r.label} | {int(r.cells)} | {int(r.steps)} | {r.wall_s:.3g} | "
                      f"{r.mlups:.3g} | {r.value:.5g} | {r.reference:.5g} | {r.error:.3g} | "

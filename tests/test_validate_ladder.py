@@ -159,6 +159,42 @@ def test_cli_rejects_bad_flags_with_one_line_and_status_2(capsys, tmp_path):
     assert len(err) == 3 and "unknown case 'nosuch'" in err[-1]
 
 
+def test_stability_flag_without_the_stability_module_is_one_line_and_status_2(capsys, tmp_path):
+    import importlib.util
+
+    from iceresist.validate.cli import main
+
+    if importlib.util.find_spec("iceresist.validate.stability") is not None:
+        pytest.skip("the stability matrix is present: its own tests cover --stability")
+    assert main(["--stability", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--stability" in err[0]
+
+
+def test_report_notes_a_stability_table(tmp_path):
+    from iceresist.validate.report import write_validation_report
+
+    _rows("poiseuille", [8, 16, 32], [4e-3, 1e-3, 2.5e-4], [0.1, 0.8, 6.0]).to_csv(tmp_path / "ladder.csv",
+                                                                                  index=False)
+    pd.DataFrame({"tau": [0.51, 0.6], "u": [0.1, 0.05], "stable": [False, True]}).to_csv(
+        tmp_path / "stability.csv", index=False)
+    html, _ = write_validation_report(tmp_path)
+    assert "Stability map" in html.read_text()
+
+
+@pytest.mark.parametrize("name", ["poiseuille", "taylor_green", "sphere_drag", "ship_tier1"])
+def test_case_ladders_follow_the_protocol(name):
+    import importlib
+
+    mod = importlib.import_module(f"iceresist.validate.cases.{name}")
+    assert mod.NAME == name and len(mod.REFERENCE) > 40
+    for quick in (True, False):
+        rungs = mod.ladder(quick)
+        res = [r["resolution"] for r in rungs]
+        assert len(rungs) >= 3 and np.all(np.diff(res) > 0)
+        assert len({r["label"] for r in rungs}) == len(rungs)
+
+
 # -- the quick ladders of the cheap cases -------------------------------------------------------------------
 @pytest.mark.parametrize("case", ["poiseuille", "taylor_green"])
 def test_quick_ladder_error_falls_as_resolution_rises(case, tmp_path):

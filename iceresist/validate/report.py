@@ -77,7 +77,13 @@ def stability_section(plt, out: Path):
         return {"note": f"stability.csv holds {len(df)} runs; the map needs iceresist.validate.stability ({exc})",
                 "fig": None}
     fig, ax = plt.subplots(figsize=(6.0, 4.5), layout="constrained")
-    plot_stability_map(df, ax)
+    try:
+        plot_stability_map(df, ax)
+    except Exception as exc:  # a table the map cannot read must not cost the rest of the report
+        plt.close(fig)
+        log.error("stability map: %s: %s", type(exc).__name__, exc)
+        return {"note": f"stability.csv holds {len(df)} runs; the map could not be drawn ({type(exc).__name__}: "
+                        f"{exc})", "fig": None}
     return {"note": f"{len(df)} runs from {path.name}.", "fig": fig}
 
 

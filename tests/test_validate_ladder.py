@@ -69,6 +69,7 @@ def test_self_referenced_case_measured_against_its_richardson_limit():
     assert (e.reference_kind == "Richardson").all()
     assert np.allclose(e.reference, 2.0)
     assert np.allclose(e.error, np.abs(f - 2.0) / 2.0)
+    assert np.allclose(e.error_vs_finest, np.abs(f - f[-1]) / f[-1]) and np.allclose(e.richardson_order, 2.0)
     # an oscillating ladder falls back on its finest rung
     e2 = L.with_errors(_rows("ship", n, np.nan, [1.0, 2.0, 3.0], value=[2.1, 1.9, 2.0], reference=np.nan))
     assert (e2.reference_kind == "finest rung").all() and np.allclose(e2.error, [0.05, 0.05, 0.0])
@@ -143,7 +144,7 @@ def test_report_writes_html_and_pdf_from_a_table(tmp_path):
     html, pdf = write_validation_report(tmp_path)
     text = html.read_text()
     assert text.startswith("<!DOCTYPE html>") and "data:image/png;base64," in text
-    assert "poiseuille" in text and "ship_tier1" in text and "Richardson" in text
+    assert "poiseuille" in text and "ship_tier1" in text and "Richardson" in text and "error vs finest" in text
     assert pdf.read_bytes()[:4] == b"%PDF"
     md = markdown_table(L.load_table(tmp_path))
     assert "| poiseuille | quick | 32 cells |" in md and "2.00 |" in md

@@ -201,7 +201,8 @@ def richardson(resolution, value) -> tuple[float, float]:
 
 def with_errors(table: pd.DataFrame) -> pd.DataFrame:
     """The table with ``error`` filled in for cases measured against their own ladder, and the column
-    ``reference_kind`` ("external", "Richardson" or "finest rung"). Rows of a case without an external
+    ``reference_kind`` ("external", "Richardson" or "finest rung"), and for those cases ``error_vs_finest`` (the
+    error against the finest rung) and ``richardson_order``. Rows of a case without an external
     reference get the Richardson value of their ladder where it exists, else the finest rung's value."""
     if table.empty:
         return table.assign(reference_kind=pd.Series(dtype=str))
@@ -211,10 +212,12 @@ def with_errors(table: pd.DataFrame) -> pd.DataFrame:
         if np.isfinite(g.reference.astype(float)).all():
             continue
         p, f_ext = richardson(g.resolution, g.value)
+        finest = float(g.loc[g.resolution.idxmax(), "value"])
+        t.loc[g.index, "error_vs_finest"] = (g.value - finest).abs() / abs(finest) if finest != 0 else np.nan
         if np.isfinite(f_ext) and f_ext != 0.0:
             ref, kind = f_ext, "Richardson"
         else:
-            ref, kind = float(g.loc[g.resolution.idxmax(), "value"]), "finest rung"
+            ref, kind = finest, "finest rung"
         t.loc[g.index, "reference"] = ref
         t.loc[g.index, "error"] = (g.value - ref).abs() / abs(ref) if ref != 0 else np.nan
         t.loc[g.index, "reference_kind"] = kind

@@ -110,8 +110,11 @@ def write_validation_report(out_dir) -> tuple[Path, Path]:
     for case in dict.fromkeys(table.case):
         mod = available.get(case)
         rows = table[table.case == case].sort_values(["ladder", "resolution"])
+        cols = dict(RUN_COLUMNS)
+        if "error_vs_finest" in rows and rows.error_vs_finest.notna().any():
+            cols["error_vs_finest"] = "error vs finest rung"
         cases.append({"name": case, "reference": getattr(mod, "REFERENCE", "") if mod else "",
-                      "table": html_table(rows, RUN_COLUMNS, na_rep=""), "rows": rows})
+                      "table": html_table(rows, cols, na_rep=""), "rows": rows, "columns": cols})
     missing_list = [(n, why) for n, why in missing.items() if n not in set(table.case)]
     html = template_env().get_template("validation.html.j2").render(
         out_dir=str(out), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -129,7 +132,7 @@ def write_validation_report(out_dir) -> tuple[Path, Path]:
                                    na_rep=""))
         pdf.savefig(figs["error_time"])
         for c in cases:
-            pdf.savefig(pdf_table_page(plt, c["rows"], RUN_COLUMNS, f"{c['name']}", na_rep=""))
+            pdf.savefig(pdf_table_page(plt, c["rows"], c["columns"], f"{c['name']}", na_rep=""))
         if missing_list:
             pdf.savefig(pdf_table_page(plt, pd.DataFrame(missing_list, columns=["case", "status"]),
                                        {"case": "case", "status": "status"}, "Cases not available"))

@@ -8,9 +8,7 @@ tables (matplotlib ``PdfPages``).
 from __future__ import annotations
 
 import argparse
-import base64
 import datetime as _dt
-import io
 import json
 import logging
 from pathlib import Path
@@ -21,25 +19,13 @@ from iceresist.errors import InputError
 
 log = logging.getLogger(__name__)
 
-HERE = Path(__file__).parent
-STYLE = HERE / "iceresist.mplstyle"
+from reports.common import HERE, STYLE  # noqa: F401 - re-exported for callers of the ship report
+from reports.common import html_table as _html_table
+from reports.common import pdf_table_page as _pdf_table_page
+from reports.common import png64 as _png64
+from reports.common import pyplot as _plt
+from reports.common import template_env
 PAPER_TABLE2_KN = {"A": (188.0, 293.0), "B": (330.0, 355.0)}
-
-
-def _plt():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    plt.style.use(str(STYLE))
-    return plt
-
-
-def _png64(fig) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
 def load_case(path) -> dict:
@@ -162,26 +148,8 @@ RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "c
                "backend": "backend", "ci_method": "CI method"}
 
 
-def _html_table(table, columns) -> str:
-    return table[list(columns)].rename(columns=columns).to_html(index=False, float_format=lambda v: f"{v:.4g}",
-                                                                 border=0)
-
-
-def _pdf_table_page(plt, table, columns, title):
-    fig, ax = plt.subplots(figsize=(11.0, 0.4 * len(table) + 1.2))
-    ax.axis("off")
-    cells = [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row] for row in table[list(columns)].values]
-    t = ax.table(cellText=cells, colLabels=list(columns.values()), loc="center")
-    t.auto_set_font_size(False)
-    t.set_fontsize(7)
-    t.scale(1.0, 1.3)
-    ax.set_title(title)
-    return fig
-
-
 def write_report(sweep_dir) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.pdf`` into ``sweep_dir``; returns their paths."""
-    import jinja2
     from matplotlib.backends.backend_pdf import PdfPages
 
     from iceresist.sweep import SCALE, case_path, sweep_table
@@ -207,7 +175,7 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     if info.get("preset") == "quick":
         note = ("Quick preset: " + presets_doc.split("* ``quick``:")[1].split("Tier 2")[0].strip()
                 .replace("\n ", "").replace("  ", " "))
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(HERE / "templates")), autoescape=False)
+    env = template_env()
     html = env.get_template("report.html.j2").render(
         title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),
         tier=info.get("tier"), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),

@@ -1,0 +1,90 @@
+"""``iceresist validate [--quick|--full] [--cases a,b] [--out DIR] [--backend cpu|cuda] [--stability]``.
+
+Runs the resolution ladders of the reference cases (:mod:`iceresist.validate.ladder`) into ``DIR/ladder.csv``
+(a rerun skips finished rungs) and writes the validation report (:mod:`iceresist.validate.report`).
+``--stability`` runs the stability matrix of :mod:`iceresist.validate.stability` instead. Bad flags: one line
+on stderr, exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from iceresist.errors import InputError
+
+log = logging.getLogger(__name__)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse reporting usage errors as one line and exit status 2."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def add_validate_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Arguments of ``iceresist validate``; sets ``func=cmd_validate``."""
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--quick", dest="quick", action="store_true", default=True,
+                   help="small ladders, minutes on a 2-core CPU (default)")
+    g.add_argument("--full", dest="quick", action="store_false", help="the full ladders (a GPU run)")
+    p.add_argument("--cases", default="all", help="comma-separated case names or 'all'")
+    p.add_argument("--out", metavar="DIR", help="output folder (default runs/validate-quick or runs/validate-full)")
+    p.add_argument("--backend", choices=("cpu", "cuda"), default="cpu")
+    p.add_argument("--precision", choices=("float32", "float64"), default="float32")
+    p.add_argument("--threads", type=int, help="CPU threads of the numba kernels")
+    p.add_argument("--stability", action="store_true", help="run the stability matrix instead of the ladders")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_validate)
+    return p
+
+
+def cmd_validate(args) -> int:
+    from iceresist.sweep import set_threads
+
+    out = args.out or f"runs/validate-{'quick' if args.quick else 'full'}"
+    set_threads(args.threads)
+    if args.stability:
+        try:
+            from iceresist.validate.stability import main as stability_main
+        except ImportError as exc:
+            raise InputError(f"--stability: the stability matrix is not available in this version ({exc})")
+        argv = ["--quick" if args.quick else "--full", "--out", out, "--backend", args.backend]
+        return int(stability_main(argv) or 0)
+    from iceresist.validate.ladder import run_ladders
+    from iceresist.validate.report import markdown_table, write_validation_report
+
+    table = run_ladders(out, quick=args.quick, cases=args.cases, backend=args.backend, precision=args.precision,
+                        progress=not args.no_progress)
+    if table.empty:
+        raise InputError(f"{out}: no rung finished; see the errors above")
+    html, pdf = write_validation_report(out)
+    print(markdown_table(table))
+    print(f"report: {html}\n        {pdf}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="iceresist validate", description="Error against run time of the reference cases.")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return add_validate_arguments(p)
+
+
+def main(argv=None) -> int:
+    """``iceresist validate`` as a function: returns the exit status (2 for bad flags or input)."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:           # --help (0) or a usage error (2, one line already on stderr)
+        return int(exc.code or 0)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"iceresist validate: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("iceresist validate: interrupted; the rungs already in ladder.csv are kept", file=sys.stderr)
+        return 130

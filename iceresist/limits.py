@@ -42,8 +42,9 @@ LATTICE_SPEED_MAX = {"bgk": 0.3, "cumulant": 0.3}
 MAX_STEPS = 10_000_000
 #: Most DEM sub-steps one tier-1 run may take.
 MAX_DEM_SUBSTEPS = 20_000_000
-#: Largest hull travel in one DEM sub-step, in sphere radii.
-SHIP_TRAVEL_PER_SUBSTEP = 0.1
+#: Largest hull travel in one DEM sub-step, in sphere radii (beyond it a hull sphere passes half way through an
+#: ice sphere between two contact evaluations).
+SHIP_TRAVEL_PER_SUBSTEP = 0.5
 
 
 def _g(x: float) -> str:

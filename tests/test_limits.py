@@ -195,3 +195,18 @@ def test_stiffness_raises_the_substep_count_as_sqrt_k():
 
 def test_input_errors_are_stability_errors_or_input_errors():
     assert issubclass(StabilityError, InputError)
+
+
+def test_cell_reynolds_limit_falls_above_the_reference_lattice_speed():
+    """Measured: the cumulant cavity at lid speed 0.2 blew up at Re_cell = 60 (stable at 0.1) and ran at 20."""
+    assert limits.cell_reynolds_max("cumulant", 0.05) == limits.CELL_REYNOLDS_MAX["cumulant"]
+    assert limits.cell_reynolds_max("cumulant", 0.2) == pytest.approx(15.0)
+    for eps, refused in ((3 * 0.2 / 60, True), (3 * 0.2 / 20, True), (3 * 0.2 / 14.9, False)):
+        d = _cavity(0.5 + eps, lid=0.2)
+        d["numerics"]["mach"] = 0.2
+        scene = parse_scene(to_toml(d))
+        if refused:
+            with pytest.raises(StabilityError, match="numerics.tau >="):
+                limits.check_fluid(scene, scene.units())
+        else:
+            limits.check_fluid(scene, scene.units())

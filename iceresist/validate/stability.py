@@ -167,7 +167,7 @@ def run_setting(s: Setting, out_dir: Path, name: str, *, backend: str = "cpu") -
         scene = parse_scene(to_toml(data), f"{name}.toml")
         model = build_model(scene, backend=backend)
     except InputError as exc:
-        row.update(outcome="refused", message=str(exc).split(": ", 1)[-1], wall_s=time.perf_counter() - t0)
+        row.update(outcome="refused", message=str(exc).removeprefix(f"{name}.toml: "), wall_s=time.perf_counter() - t0)
         return row
     if s.kind == "tier1":
         row.update(dem_substeps=int(model.substeps_per_step), dem_substep_s=float(model.substep_s))

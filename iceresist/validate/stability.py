@@ -136,9 +136,10 @@ def settings(quick: bool = True) -> list[Setting]:
         rows.append(Setting("tier-1 record interval (s)", f"{dt:.0e} s", dt, "tier1",
                             _tier1(quick, contact={"sample_interval_s": dt})))
     for op, e in (("bgk", 1e-3), ("cumulant", 1e-4)):
+        d = _cavity(quick, lid=0.1, tau=0.5 + e, operator=op, check=False)
+        d["run"]["steps"] = BEYOND_STEPS[quick]
         rows.append(Setting("beyond the limits (check_limits = false)", f"{op} tau - 1/2 = {e:.0e}, u = 0.1", e,
-                            "fluid", _cavity(quick, lid=0.1, tau=0.5 + e, operator=op, check=False),
-                            steps=BEYOND_STEPS[quick]))
+                            "fluid", d))
     return rows
 
 

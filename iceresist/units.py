@@ -51,7 +51,8 @@ def check_tau(tau: float, *, min_tau_excess: float = MIN_TAU_EXCESS, what: str =
         )
     if excess < min_tau_excess:
         raise StabilityError(
-            f"{what} - 1/2 = {excess:.3g} is below the floor {min_tau_excess:.3g}: use a coarser cell (larger dx), "
+            f"{what} - 1/2 = {excess:.3g} is below the floor {min_tau_excess:.3g}: use {what} >= "
+            f"{0.5 + min_tau_excess:.12g}, a coarser cell (larger dx), "
             f"a larger viscosity or a smaller lattice velocity limit (mach), or lower numerics.min_tau_excess"
         )
     if excess < WARN_TAU_EXCESS:

@@ -138,7 +138,7 @@ def settings(quick: bool = True) -> list[Setting]:
     for op, e in (("bgk", 1e-3), ("cumulant", 1e-4)):
         d = _cavity(quick, lid=0.1, tau=0.5 + e, operator=op, check=False)
         d["run"]["steps"] = BEYOND_STEPS[quick]
-        rows.append(Setting("beyond the limits (check_limits = false)", f"{op} tau - 1/2 = {e:.0e}, u = 0.1", e,
+        rows.append(Setting("beyond the limits (tau - 1/2, lid 0.1, check_limits = false)", f"{op} {e:.0e}", e,
                             "fluid", d))
     return rows
 

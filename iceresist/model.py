@@ -71,6 +71,9 @@ class FluidModel:
         u = self.units
         self.shape_cells = scene.shape_cells()
         check_block_shape(self.shape_cells)
+        from iceresist.limits import check_fluid
+
+        check_fluid(scene, u)
         from iceresist.grid.forest import BlockForest
         from iceresist.lbm.solver import LBMSolver
 
@@ -133,6 +136,19 @@ class FluidModel:
                                                  * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * cell_m3),
                 "max_speed_m_s": float(u.velocity_to_physical(umax_lat)),
                 "max_lattice_speed": umax_lat}
+
+    def watchdog_probe(self) -> dict:
+        """Lattice quantities the run watchdog checks (:mod:`iceresist.watchdog`); the reference kinetic energy
+        is that of the whole fluid moving at the scene's largest speed (at least a tenth of numerics.mach)."""
+        from iceresist.watchdog import fluid_probe
+
+        if getattr(self, "_fluid_dense", None) is None:
+            dense = self.forest.to_dense(self.forest.fluid.astype(np.float64))
+            self._fluid_dense = np.nan_to_num(dense, nan=0.0) > 0.5
+        rho_lat, u_lat = self.solver.macroscopic()
+        u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
+                    0.1 * self.scene.numerics.mach)
+        return fluid_probe(rho_lat, u_lat, self._fluid_dense, 0.5 * self.cells * u_ref ** 2)
 
     def state(self) -> dict:
         """Populations in storage precision (bit for bit) and the iteration."""

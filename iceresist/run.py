@@ -77,6 +77,10 @@ def build_simulation(scene: Scene, model, runfile: RunFile, checkpoint_path, *, 
     else:
         chk_schedule = None
     sim.output_writers["checkpointer"] = Checkpointer(checkpoint_path, chk_schedule)
+    from iceresist import watchdog
+
+    watchdog.install(sim, interval=r.watchdog_every_steps, runfile=runfile,
+                     json_path=Path(runfile.path).with_suffix(".watchdog.json"))
     return sim
 
 
@@ -106,6 +110,9 @@ def cmd_run(args) -> int:
     h5_path.parent.mkdir(parents=True, exist_ok=True)
     if not pickup and chk_path.exists():
         chk_path.unlink()  # a stale checkpoint of the overwritten result
+    stale = h5_path.with_suffix(".watchdog.json")
+    if stale.exists():
+        stale.unlink()  # the diagnostic of an earlier run of this result
     mode = "a" if pickup else "w"
     u = model.units
     with RunFile(h5_path, mode, shape_cells=model.shape_cells, dx_m=u.dx_m) as rf:

@@ -255,6 +255,11 @@ class Simulation:
                   f"diverged; outputs written before stay. Lower the lattice velocity limit (numerics.mach), "
                   f"refine the grid or raise the viscosity")
 
+    def abort(self, reason: str):
+        """Stop as diverged for ``reason`` (e.g. the watchdog): no output is written from this state."""
+        self.diverged = True
+        self.stop(reason)
+
     @property
     def running(self) -> bool:
         return self.stop_reason is None
@@ -283,14 +288,19 @@ class Simulation:
         return acts
 
     def _actuate(self):
-        for _, act in self._actions():
-            if act.schedule is not None and act.schedule(self):
-                if isinstance(act, Callback):
-                    act(self)
-                else:
-                    act.write(self)
-                if self.diverged:
-                    return
+        acts = self._actions()
+        due = [(name, act) for name, act in acts if act.schedule is not None and act.schedule(self)]
+        guard = self.callbacks.get("watchdog")
+        if guard is not None and any(not isinstance(a, Callback) for _, a in due) and \
+                not any(name == "watchdog" for name, _ in due):
+            due.insert(0, ("watchdog", guard))  # outputs are written only from a state the watchdog passed
+        for _, act in due:
+            if isinstance(act, Callback):
+                act(self)
+            else:
+                act.write(self)
+            if self.diverged:
+                return
 
     def _chunk(self) -> int:
         m = self.model

@@ -97,6 +97,9 @@ class Tier1Model:
         g = self.geometry
         self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
         width = ice.channel_width_m or self.domain_m[1]
+        from iceresist.limits import check_scene_ice, check_tier1
+
+        check_scene_ice(scene, width)
         jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
         self.layout = channel_layout(width_m=width, length_m=ice.channel_length_m, cube_m=ice.size_m,
                                      concentration=ice.concentration, count=ice.count,
@@ -134,6 +137,7 @@ class Tier1Model:
         self.dt_s = self.substeps_per_step * self.substep_s
         self.substep_s = self.dt_s / self.substeps_per_step  # the sub-step DEMSystem.step takes, to the last bit
         self.units = Tier1Units(dx_m=2 * self.cube.sphere_radius_m, dt_s=self.dt_s)
+        check_tier1(self)
         self.cells = 0
         self.shape_cells = None
         self.iteration = 0
@@ -181,6 +185,27 @@ class Tier1Model:
         return {"Fx_N": self._force_mean[0], "Fy_N": self._force_mean[1], "Fz_N": self._force_mean[2],
                 "Fx_last_N": self._force_last[0], "x_bow_m": self.x_bow_m, "contacts": self.dem.contact_count(),
                 "ice_kinetic_energy_J": self.dem.kinetic_energy()}
+
+    def watchdog_probe(self) -> dict:
+        """What the run watchdog checks (:mod:`iceresist.watchdog`): finite state, the fastest ice body against
+        10 x max(ship speed, sqrt(g a)), and the growth of the ice kinetic energy,
+        counted from at least that of all the ice moving at max(ship speed, sqrt(g a))."""
+        ice = np.arange(self.dem.n_bodies) != self.hull_body
+        pos, vel = self.dem.positions[ice], self.dem.velocities[ice]
+        bad = ~(np.isfinite(pos).all(axis=1) & np.isfinite(vel).all(axis=1))
+        if bad.any() or not np.isfinite(self._force_mean).all():
+            where = int(np.flatnonzero(ice)[np.flatnonzero(bad)[0]]) if bad.any() else self.hull_body
+            return {"finite": (False, {"body": where})}
+        speed = np.sqrt((vel ** 2).sum(axis=1))
+        b = int(np.argmax(speed)) if speed.size else 0
+        g = float(np.linalg.norm(self.scene.fluid.gravity_m_s2)) or 9.81
+        u_ref = max(self.speed_m_s, math.sqrt(g * self.layout.cube_m))
+        mass = self.layout.count * self.cube.mass_kg
+        return {"finite": (True, None),
+                "max_body_speed_m_s": (float(speed[b]) if speed.size else 0.0,
+                                       {"body": int(np.flatnonzero(ice)[b])} if speed.size else None),
+                "max_body_speed_limit_m_s": 10.0 * u_ref,
+                "kinetic_energy": self.dem.kinetic_energy(), "kinetic_energy_ref": 0.5 * mass * u_ref ** 2}
 
     def ice_state(self) -> dict:
         """Cube centres (n, 3) m, quaternions (n, 4) and velocities (n, 3) m/s now (hull excluded)."""

@@ -51,7 +51,8 @@ def check_tau(tau: float, *, min_tau_excess: float = MIN_TAU_EXCESS, what: str =
         )
     if excess < min_tau_excess:
         raise StabilityError(
-            f"{what} - 1/2 = {excess:.3g} is below the floor {min_tau_excess:.3g}: use a coarser cell (larger dx), "
+            f"{what} - 1/2 = {excess:.3g} is below the floor {min_tau_excess:.3g}: use {what} >= "
+            f"{0.5 + min_tau_excess:.12g}, a coarser cell (larger dx), "
             f"a larger viscosity or a smaller lattice velocity limit (mach), or lower numerics.min_tau_excess"
         )
     if excess < WARN_TAU_EXCESS:
@@ -135,8 +136,21 @@ class Units:
                 raise StabilityError("no speed to set the time step from: give the largest flow speed "
                                      "(numerics.u_max_m_s), a moving face, or a water depth")
             dt_s = mach_lattice * dx_m / u_ref
-        elif not dt_s > 0.0:
-            raise StabilityError(f"time step dt = {dt_s:g} s must be > 0")
+        else:
+            if not dt_s > 0.0:
+                raise StabilityError(f"time step dt = {dt_s:g} s must be > 0")
+            u_lat = u_ref * dt_s / dx_m
+            if u_lat > mach_lattice * (1.0 + 1e-12):
+                raise StabilityError(
+                    f"numerics.dt_s: {dt_s:.4g} s puts the reference speed max(u_max, sqrt(g h)) = {u_ref:.4g} m/s at "
+                    f"{u_lat:.4g} in lattice units, above the limit {mach_lattice:.3g} (numerics.mach): use "
+                    f"numerics.dt_s <= {mach_lattice * dx_m / u_ref:.4g} s, or leave it out")
+            tau_dt = 0.5 + nu_m2_s * dt_s / (CS2 * dx_m * dx_m)
+            if tau_dt - 0.5 < min_tau_excess:
+                raise StabilityError(
+                    f"numerics.dt_s: {dt_s:.4g} s gives tau - 1/2 = {tau_dt - 0.5:.3g}, below the floor "
+                    f"numerics.min_tau_excess = {min_tau_excess:.3g}: use numerics.dt_s >= "
+                    f"{min_tau_excess * CS2 * dx_m * dx_m / nu_m2_s:.4g} s, or leave it out")
         check_lattice_velocity(u_ref * dt_s / dx_m, mach_lattice,
                                what="the reference speed max(u_max, sqrt(g h))")
         tau = 0.5 + nu_m2_s * dt_s / (CS2 * dx_m * dx_m)

@@ -158,6 +158,10 @@ class Numerics(_Section):
     tau: float | None = Field(None, gt=0.5, description="Shear relaxation time (lattice scenes only; "
                                                         "instead of fluid.nu_m2_s).")
     min_tau_excess: float = Field(MIN_TAU_EXCESS, gt=0, description="Smallest tau - 1/2 accepted.")
+    check_limits: bool = Field(True, description="Refuse settings beyond the measured limits of the collision "
+                                                 "operator (cell Reynolds number, lattice speed; docs/VALIDATION.md). "
+                                                 "`false` runs them anyway; the run watchdog still stops a run "
+                                                 "that goes unstable.")
 
 
 class RunSettings(_Section):
@@ -166,6 +170,10 @@ class RunSettings(_Section):
     steps: int | None = Field(None, ge=0, description="Number of time steps.")
     end_time_s: float | None = Field(None, ge=0, description="Simulated time to stop at (s).")
     wall_time_limit_s: float | None = Field(None, gt=0, description="Stop (with output written) after this wall time.")
+    watchdog_every_steps: int | None = Field(None, ge=1, description="Check for NaN, runaway speed, density out of "
+                                             "band and kinetic-energy growth every N steps, and stop the run with a "
+                                             "diagnostic. Default: 100 (fluid), 1 (tier-1 DEM, one step = one "
+                                             "record).")
 
     @model_validator(mode="after")
     def _a_stop(self):

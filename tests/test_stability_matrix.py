@@ -1,0 +1,107 @@
+"""The stability matrix: every setting ends stable, refused or stopped by the watchdog -- nothing in between."""
+
+import h5py
+import numpy as np
+import pytest
+
+from iceresist.validate import stability as st
+
+
+def _check_rows(df):
+    assert set(df["outcome"]) <= set(st.OUTCOMES), df[~df["outcome"].isin(st.OUTCOMES)][["setting", "message"]]
+    stable = df[df["outcome"] == "stable"]
+    assert np.isfinite(stable["kinetic_energy_final"]).all()
+    fluid = stable[stable["mass_drift"].notna()]
+    assert (fluid["mass_drift"] <= st.MASS_TOLERANCE).all()
+    for _, r in df[df["outcome"] == "refused"].iterrows():
+        assert ":" in r["message"] and ("use " in r["message"] or "must be" in r["message"]), r["message"]
+
+
+def _pick(quick, wanted):
+    rows = st.settings(quick)
+    return [s for s in rows if (s.axis, s.label) in wanted]
+
+
+def test_settings_cover_every_axis_of_the_issue():
+    axes = {s.axis for s in st.settings(True)}
+    for a in ("DEM stiffness", "tau - 1/2 (cumulant)", "tau - 1/2 (bgk)", "lattice Mach (cumulant)",
+              "ship speed (knots)", "ice concentration", "ice density (kg/m^3)", "fluid time step (s)",
+              "tier-1 record interval (s)"):
+        assert a in axes
+    labels = {(s.axis, s.label) for s in st.settings(True)}
+    assert ("DEM stiffness", "k x 1000") in labels and ("ship speed (knots)", "4 kn") in labels
+    assert ("tau - 1/2 (cumulant)", "1e-06") in labels and ("lattice Mach (cumulant)", "u = 0.3") in labels
+    assert ("ice density (kg/m^3)", "999") in labels
+
+
+def test_small_matrix_outcomes(tmp_path):
+    """A cheap cut through the matrix: refusals on every axis that has one, stable DEM rows with their sub-steps,
+    and a fluid row beyond the limits stopped by the watchdog with a readable result."""
+    wanted = {("DEM stiffness", "k x 100"), ("ice density (kg/m^3)", "999"), ("ice density (kg/m^3)", "1000"),
+              ("ice concentration", "100.0 %"), ("tau - 1/2 (bgk)", "1e-04"), ("tau - 1/2 (cumulant)", "1e-09"),
+              ("lattice Mach (cumulant)", "u = 0.35"), ("fluid time step (s)", "dt = 1e-01 s"),
+              ("fluid time step (s)", "dt = 1e-06 s"), ("ship speed (knots)", "4 kn"),
+              ("beyond the limits (tau - 1/2, lid 0.1, check_limits = false)", "cumulant 1e-04")}
+    rows = []
+    for i, s in enumerate(_pick(True, wanted)):
+        if s.kind == "tier1":
+            s.data["run"]["end_time_s"] = 0.03
+        rows.append(st.run_setting(s, tmp_path, f"r{i}", backend="cpu"))
+    import pandas as pd
+
+    df = pd.DataFrame(rows).set_index("setting")
+    assert len(df) == len(wanted)
+    _check_rows(df.reset_index())
+    out = df["outcome"]
+    for label in ("1000", "100.0 %", "1e-04", "1e-09", "u = 0.35", "dt = 1e-01 s", "dt = 1e-06 s"):
+        assert out[label] == "refused", (label, df.loc[label, "message"])
+    assert "ice.density_kg_m3" in df.loc["1000", "message"] and "e.g." in df.loc["1000", "message"]
+    assert "numerics.tau >=" in df.loc["1e-04", "message"]
+    assert "run.end_time_s" in df.loc["dt = 1e-06 s", "message"]
+    assert out["999"] == "stable" and out["4 kn"] == "stable" and out["k x 100"] == "stable"
+    # the DEM's sub-steps follow sqrt(k): 10x the stiffness of the base case -> about 10x the sub-steps
+    assert df.loc["k x 100", "dem_substeps"] >= 8 * df.loc["999", "dem_substeps"]
+    beyond = "cumulant 1e-04"
+    assert out[beyond] == "stopped by watchdog", df.loc[beyond, "message"]
+    h5 = sorted((tmp_path / "cases").glob("*.h5"))
+    stopped = [p for p in h5 if p.with_suffix(".watchdog.json").exists()]
+    assert len(stopped) == 1
+    with h5py.File(stopped[0], "r") as f:
+        assert f["meta"].attrs["diverged"] and f["watchdog"].attrs["quantity"]
+        assert np.isfinite(f["timeseries/iteration"][...]).all()
+
+
+def test_plot_and_table(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    df = pd.DataFrame([
+        {"axis": "DEM stiffness", "setting": "k x 1", "value": 1, "outcome": "stable", "message": "",
+         "dem_substeps": 2, "dem_substep_s": 1e-3},
+        {"axis": "ice density", "setting": "1000", "value": 1000, "outcome": "refused",
+         "message": "ice.density_kg_m3: ... e.g. 950", "dem_substeps": np.nan, "dem_substep_s": np.nan},
+        {"axis": "beyond", "setting": "bgk", "value": 1, "outcome": "stopped by watchdog", "message": "watchdog",
+         "dem_substeps": np.nan, "dem_substep_s": np.nan}])
+    fig, ax = plt.subplots()
+    st.plot_stability_map(df, ax, csv_path=tmp_path / "stability.csv")
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["DEM stiffness", "ice density", "beyond"]
+    assert len(ax.collections) >= 3
+    plt.close(fig)
+    back = pd.read_csv(tmp_path / "stability.csv")
+    assert list(back["outcome"]) == list(df["outcome"])
+    md = st.markdown_table(df)
+    assert "| DEM stiffness | k x 1 | stable | 2 x 1.00e-03 s |" in md
+
+
+@pytest.mark.slow
+def test_quick_matrix_has_nothing_in_between(tmp_path):
+    rc = st.run_and_plot(tmp_path, quick=True)
+    import pandas as pd
+
+    df = pd.read_csv(tmp_path / "stability.csv")
+    _check_rows(df)
+    assert rc == 0 and (tmp_path / "stability.png").is_file()
+    assert set(df["outcome"]) == set(st.OUTCOMES)

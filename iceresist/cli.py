@@ -53,6 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_sweep_arguments(s)
     rp = sub.add_parser("report", help="write report.html and report.pdf of a sweep folder")
     add_report_arguments(rp)
+
+    from iceresist.validate.cli import add_validate_arguments
+
+    v = sub.add_parser("validate", help="error against run time of the reference cases, or (--stability) the "
+                                        "stability matrix; report.html and report.pdf")
+    add_validate_arguments(v)
     return p
 
 

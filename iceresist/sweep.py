@@ -98,11 +98,17 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         g["hull_vertices_m"] = model.geometry.vertices()
         sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
+        from iceresist import watchdog
+
+        dog = watchdog.install(sim, runfile=rf, json_path=partial.with_suffix(".watchdog.json"))
         for name, (func, every) in (callbacks or {}).items():
             sim.callbacks[name] = Callback(func, IterationInterval(every))
         log.info("case %s (%s, tier %d): %d cubes, %d spheres, %.3g s simulated", case, fidelity, tier,
                  model.layout.count, model.dem.n_spheres, scene.run.end_time_s)
         sim.run()
+        if dog.report is not None:
+            raise InputError(f"case {case}: stopped by the watchdog: {dog.report.message} "
+                             f"(diagnostic in {partial.with_suffix('.watchdog.json').name})")
         if sim.diverged:
             raise InputError(f"case {case}: the DEM run diverged ({sim.stop_reason}); lower contact.dem_safety")
         st = model.ice_state()

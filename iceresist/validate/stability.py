@@ -332,6 +332,7 @@ def measure_operator_limits(operators=("cumulant", "bgk"), speeds=(0.02, 0.05, 0
 # -- command line ---------------------------------------------------------------------------------------
 def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--out", "--output", dest="out", default="runs/validate", help="result folder")
+    p.add_argument("--quick", action="store_true", help="the short matrix (the default)")
     p.add_argument("--full", action="store_true", help="longer runs and a longer channel (minutes)")
     p.add_argument("--backend", choices=("cpu", "cuda", "auto"), default="cpu")
     p.add_argument("--json", action="store_true", help="one JSON object per row on stdout")

@@ -54,11 +54,18 @@ ROOT_ITERATIONS = 5
 Q_MIN = 1e-3
 
 MARK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner")
-LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "f", "bforce", "btorque", "nlinks")
+LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "f", "bforce", "btorque", "nlinks",
+             "flags")
 REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                "block_evt", "Fx", "Fy", "Fz")
 REDIST_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
 POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
+REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
+REDIST_FS_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f", "phi", "h")
+MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "phi")
+#: Covered cells deeper than this (lattice units of signed distance) keep their phi: the gradient stencil of a
+#: cell outside reaches only covered cells within sqrt(3) of the surface.
+MIRROR_DEPTH = 2.0
 
 
 def build_geometry_functions(target, real):
@@ -156,8 +163,9 @@ def build_accumulate(target):
     return accumulate
 
 
-def build_visits(target, real):
-    """The per-cell functions of the passes (see the module docstring)."""
+def build_visits(target, real, free_surface: bool = False):
+    """The per-cell functions of the passes (see the module docstring); ``free_surface``: links only to liquid
+    cells (``flags`` has the FLUID bit, :mod:`iceresist.freesurface`)."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
     accumulate = build_accumulate(target)
     zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
@@ -179,8 +187,10 @@ def build_visits(target, real):
         if sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid) < zero:
             owner[b, c] = k
 
+    fs = bool(free_surface)
+
     @dev
-    def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks):
+    def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks, flags):
         b, c = lookup(gx, gy, gz, grid, block_map)
         if b < 0:
             return
@@ -193,6 +203,8 @@ def build_visits(target, real):
             if xb < 0:
                 continue
             if (flags0[xb, xc] & fluid) == 0 or owner[xb, xc] >= 0:
+                continue
+            if fs and (flags[xb, xc] & fluid) == 0:
                 continue
             cx, cy, cz = CXR[q], CYR[q], CZR[q]
             px, py, pz = yx + cx, yy + cy, yz + cz
@@ -222,6 +234,8 @@ def build_visits(target, real):
                 far = False
                 if x2b >= 0:
                     far = (flags0[x2b, x2c] & fluid) != 0 and owner[x2b, x2c] < 0
+                    if fs:
+                        far = far and (flags[x2b, x2c] & fluid) != 0
                 if far:
                     fnew = two * qd * gopp + (one - two * qd) * f[x2b, o, x2c] + mom
                 else:
@@ -443,16 +457,28 @@ class ActiveLauncher:
 _CACHE: dict = {}
 
 
-def coupling_launchers(target, real):
-    """Compiled launchers ``mark, links, refill, redistribute, poison`` (cached per target and precision)."""
-    key = (target.name, target.simulator, np.dtype(real).name)
+def coupling_launchers(target, real, h_lattice=None):
+    """Compiled launchers ``mark, links, refill, redistribute, poison`` (cached per target and precision); with
+    the h lattice of a free surface (``h_lattice``, an :class:`~iceresist.freesurface.hlattice.HLattice`) the
+    free-surface variants ``links, refill, redistribute`` and the ``mirror`` pass
+    (:mod:`iceresist.coupling.surface_kernels`)."""
+    key = (target.name, target.simulator, np.dtype(real).name, None if h_lattice is None else h_lattice.name)
     if key not in _CACHE:
-        mark, links, refill, redist, poison = build_visits(target, real)
-        _CACHE[key] = {
+        mark, links, refill, redist, poison = build_visits(target, real, free_surface=h_lattice is not None)
+        launchers = {
             "mark": BodyLauncher(target, mark, MARK_ARGS),
             "links": BodyLauncher(target, links, LINK_ARGS),
-            "refill": ActiveLauncher(target, refill, REFILL_ARGS),
-            "redistribute": ActiveLauncher(target, redist, REDIST_ARGS),
             "poison": ActiveLauncher(target, poison, POISON_ARGS),
         }
+        if h_lattice is None:
+            launchers["refill"] = ActiveLauncher(target, refill, REFILL_ARGS)
+            launchers["redistribute"] = ActiveLauncher(target, redist, REDIST_ARGS)
+        else:
+            from iceresist.coupling.surface_kernels import build_surface_visits
+
+            refill_fs, redist_fs, mirror = build_surface_visits(target, real, h_lattice)
+            launchers["refill"] = ActiveLauncher(target, refill_fs, REFILL_FS_ARGS)
+            launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS)
+            launchers["mirror"] = BodyLauncher(target, mirror, MIRROR_ARGS)
+        _CACHE[key] = launchers
     return _CACHE[key]

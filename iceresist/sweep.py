@@ -46,7 +46,7 @@ TINY_TIER2_OVERRIDES = {
     "fluid": {"nu_m2_s": 1.0e-5},
     "numerics": {"mach": 0.1, "precision": "float32"},
     "ship": {"length_m": 0.48, "beam_m": 0.08, "draught_m": 0.06, "parallel_length_m": 0.2, "start_x_m": 0.42,
-             "sphere_spacing_m": 0.02, "sphere_band_m": 0.03, "steady_window_m": [0.42, 0.5]},
+             "sphere_spacing_m": 0.02, "sphere_band_m": 0.03, "steady_window_m": [0.43, 0.45]},
     "ice": {"concentration": None, "count": 4, "channel_length_m": 0.1, "channel_start_x_m": 0.42},
     "contact": {"sample_interval_s": 0.004},
     "run": {"end_time_s": 0.06},

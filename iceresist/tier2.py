@@ -220,13 +220,16 @@ class Tier2Model:
 
     def fields(self) -> dict:
         """Dense fields (physical units): rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge
-        c_s^2 (rho - 1) rho_w (dx/dt)^2), flags (1 liquid, 0 gas or solid), phi (phase field, 1 water, 0 air);
-        rho, u, pressure NaN outside the liquid."""
+        c_s^2 (rho - 1) rho_w (dx/dt)^2, zero at the free surface), flags (1 liquid, 0 gas or solid), phi (phase
+        field, 1 water, 0 air). rho, u and pressure are 0 outside the liquid (where flags = 0), so that the NaN
+        check of the field writer sees only real blow-ups."""
         phi, rho, u = self.fb.fields()
         c = self.units.dx_m / self.units.lbm_dt_s
-        return {"rho": rho * self.rho_w, "u": np.moveaxis(u, 0, -1) * c,
-                "pressure": (rho - 1.0) / 3.0 * self.rho_w * c * c,
-                "flags": np.isfinite(rho).astype(np.uint8), "phi": phi}
+        liquid = np.isfinite(rho)
+        return {"rho": np.where(liquid, rho * self.rho_w, 0.0),
+                "u": np.where(liquid[..., None], np.moveaxis(u, 0, -1) * c, 0.0),
+                "pressure": np.where(liquid, (rho - 1.0) / 3.0 * self.rho_w * c * c, 0.0),
+                "flags": liquid.astype(np.uint8), "phi": phi}
 
     @staticmethod
     def field_units(lattice: bool) -> dict:

@@ -133,3 +133,35 @@ def test_paper_tier2_preset_is_the_papers_resolution():
     q = case_scene(CASE, "quick", 2)
     assert q.ice.size_m / q.domain.dx_m == pytest.approx(3.07, abs=0.01)
     assert all(n % 8 == 0 for n in q.shape_cells())
+
+
+def test_tier2_scene_runs_through_iceresist_run_with_hydrostatic_fields(tmp_path):
+    """`iceresist run` of the CI-sized tier-2 scene: exit 0, finite fields; at t = 0 the pressure at the tank
+    bottom is the hydrostatic rho g h in pascals (away from the hull and the cubes)."""
+    from iceresist.cli import main
+    from iceresist.ship.presets import scene_data, to_toml
+
+    d = scene_data(CASE, "quick", 2)
+    for k, v in TINY_TIER2_OVERRIDES.items():
+        d.setdefault(k, {}).update(v)
+    d["ice"] = {k: v for k, v in d["ice"].items() if v is not None}
+    d["output"]["fields"] = ["rho", "u", "pressure", "flags"]
+    scene = tmp_path / "tiny_t2.toml"
+    scene.write_text(to_toml(d))
+    name = d["scene"]["name"]
+    for steps, out in ((0, "t0"), (2, "t2")):
+        rc = main(["run", str(scene), "--output", str(tmp_path / out), "--backend", "cpu", "--steps", str(steps),
+                   "--no-progress"])
+        assert rc == 0
+    from iceresist.io.hdf5 import RunFile
+
+    with RunFile(tmp_path / "t0" / f"{name}.h5", "r") as rf:
+        p = rf.read_field(rf.snapshot_iterations()[-1], "pressure")
+    assert p.shape == (64, 16, 16)
+    dx = TINY_TIER2_OVERRIDES["domain"]["dx_m"]
+    depth = TINY_TIER2_OVERRIDES["free_surface"]["water_depth_m"]
+    assert p[60, 1, 0] == pytest.approx(1000 * 9.81 * (depth - 0.5 * dx), rel=0.03)
+    with h5py.File(tmp_path / "t2" / f"{name}.h5", "r") as h5:
+        snap = h5["fields"][sorted(h5["fields"].keys())[-1]]
+        assert int(snap.attrs["iteration"]) == 2
+        assert all(np.isfinite(snap[k][...]).all() for k in ("rho", "u", "pressure"))

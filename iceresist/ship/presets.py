@@ -8,14 +8,13 @@ Fidelities (tier 1 = DEM with water models; tier 2 = the coupled LBM-DEM):
 
 * ``paper``: the paper's tank (11.15 x 1.39 x 1.39 m, depth 1.11 m), the full 1.39 x 5.56 m channel, cubes of
   3 x 3 x 3 surface spheres, hull spheres 20 mm apart, k = 1e4 N/m; the run lasts until the stem reaches the
-  channel end, and the steady window holds the whole waterline inside the channel. Tier 2 at the paper's
-  finest cell 2.72 mm.
+  channel end, and the steady window holds the whole waterline inside the channel.
 * ``quick``: a 1.39 m long channel (same width, pitch and concentration: 28 x 28 cubes at 68 %), cubes of 2 x 2 x 2 corner spheres,
   hull spheres 30 mm apart up to 6 cm above the waterline, a softer contact (k = 5e3 N/m) with a larger
   sub-step; the ship stops when the stem leaves the channel. It trades away: the parallel middle body never
   runs fully in ice (the steady window starts once the bow wedge is in, so side friction along the whole
   body is missing), a short window (about 0.8 m of travel, so a wide confidence interval), rounder cubes
-  and a softer contact. Runs in well under a minute per case on a 2-core x86 VM. Tier 2 at 10.9 mm cells.
+  and a softer contact. Runs in well under a minute per case on a 2-core x86 VM (tier 1).
 
 Tier 2 (coupled LBM-DEM, :mod:`iceresist.tier2`) changes the tank where the flow field makes it expensive
 (``TIER2``):

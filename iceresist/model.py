@@ -394,11 +394,12 @@ def _copy_into(dst, host: np.ndarray):
 
 def build_model(scene: Scene, *, backend: str | None = None, precision: str | None = None):
     """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
-    alone), and tier-1 ship scenes ([ship] + [ice])."""
+    alone), and tier-1 and tier-2 ship scenes ([ship] + [ice])."""
     if scene.ship is not None and scene.ice is not None:
-        if scene.ship.tier != 1:
-            raise InputError(f"{scene.source_name}: ship.tier = 2 (coupled LBM-DEM) needs the free-surface LBM "
-                             f"and the coupling engine, which are not built yet: set ship.tier = 1")
+        if scene.ship.tier == 2:
+            from iceresist.tier2 import Tier2Model
+
+            return Tier2Model(scene, backend=backend, precision=precision)
         from iceresist.tier1 import Tier1Model
 
         return Tier1Model(scene, backend=backend, precision=precision)

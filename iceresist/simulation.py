@@ -267,7 +267,9 @@ class Simulation:
     @property
     def mlups(self) -> float:
         """Million cell updates per second over the time spent stepping (compilation of the first step included)."""
-        return mlups(getattr(self.model, "cells", 0), self.steps_done, self.step_time_s)
+        # a model step may hold several lattice steps (tier 2: one record = lbm_steps_per_record LBM steps)
+        lattice_steps = getattr(self.model, "lbm_steps_per_record", 1)
+        return mlups(getattr(self.model, "cells", 0) * lattice_steps, self.steps_done, self.step_time_s)
 
     def _check_stop(self):
         m = self.model

@@ -38,8 +38,19 @@ TINY_OVERRIDES = {"ice": {"channel_length_m": 0.3}, "run": {"end_time_s": 0.75},
 #: Batches used where the window is too short for the automatic choice (the table says so).
 FALLBACK_BATCHES = 5
 
-TIER2_MESSAGE = ("tier 2 (coupled LBM-DEM, the paper's method) needs the free-surface LBM and the coupling "
-                 "engine, which are not built yet: run the sweep with --tier 1")
+#: Scene overrides of the CI-sized tier-2 case: a 0.48 m hull (B-063 proportions at about 1:7, 30 deg bow)
+#: stem-on to four cubes in a 64 x 16 x 16-cell tank of 41/3 mm cells, 0.06 s: the machinery, not the physics.
+TINY_TIER2_OVERRIDES = {
+    "domain": {"cells": [64, 16, 16], "dx_m": 0.041 / 3},
+    "free_surface": {"water_depth_m": 0.14},
+    "fluid": {"nu_m2_s": 1.0e-5},
+    "numerics": {"mach": 0.1, "precision": "float32"},
+    "ship": {"length_m": 0.48, "beam_m": 0.08, "draught_m": 0.06, "parallel_length_m": 0.2, "start_x_m": 0.42,
+             "sphere_spacing_m": 0.02, "sphere_band_m": 0.03, "steady_window_m": [0.43, 0.45]},
+    "ice": {"concentration": None, "count": 4, "channel_length_m": 0.1, "channel_start_x_m": 0.42},
+    "contact": {"sample_interval_s": 0.004},
+    "run": {"end_time_s": 0.06},
+}
 
 
 def case_path(out_dir, case: str) -> Path:
@@ -76,20 +87,21 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     from iceresist.io.meta import run_meta
     from iceresist.simulation import Callback, IterationInterval, Simulation, TimeSeriesWriter
     from iceresist.tier1 import Tier1Model
+    from iceresist.tier2 import Tier2Model
 
-    if tier != 1:
-        raise InputError(TIER2_MESSAGE)
+    if tier not in (1, 2):
+        raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     scene = case_scene(case, fidelity, tier, **(overrides or {}))
     final = case_path(out_dir, case)
     partial = final.with_name(f"{case}.partial.h5")
     final.parent.mkdir(parents=True, exist_ok=True)
     t_build = time.perf_counter()
-    model = Tier1Model(scene, backend=backend)
+    model = (Tier1Model if tier == 1 else Tier2Model)(scene, backend=backend)
     build_s = time.perf_counter() - t_build
     with RunFile(partial, "w", write_xdmf=False) as rf:
         desc = model.describe()
         rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"], precision=model.precision,
-                                 cells=0),
+                                 cells=model.cells),
                       scene_name=scene.scene.name, case=case, fidelity=fidelity, tier=tier,
                       bow=get_case(case).bow, concentration_nominal=get_case(case).concentration,
                       knots=get_case(case).knots, model=desc, finished=False)
@@ -116,6 +128,10 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         g["final_quaternions"] = st["quaternions"]
         rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=sim.steps_done,
                       dem_substeps=int(model.dem.substeps_taken), wall_time_s=sim.wall_time_s + build_s,
+                      build_time_s=build_s, step_time_s=sim.step_time_s,
+                      lbm_steps=int(getattr(model, "lbm_steps", 0)),
+                      mlups=(model.cells * getattr(model, "lbm_steps", 0) / sim.step_time_s / 1e6
+                             if sim.step_time_s > 0 else 0.0),
                       final_x_bow_m=model.x_bow_m, stop_reason=sim.stop_reason,
                       finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     partial.replace(final)
@@ -130,8 +146,6 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     names = resolve_cases(cases)
-    if tier == 2:
-        raise InputError(TIER2_MESSAGE)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     info = {"preset": fidelity, "tier": tier, "cases": names, "overrides": overrides or {}}

@@ -73,8 +73,6 @@ def test_refusals(tmp_path):
         run_sweep("quick", 1, tmp_path, ["A-c99-v1.0"])
     with pytest.raises(InputError, match="unknown preset"):
         run_sweep("fast", 1, tmp_path)
-    with pytest.raises(InputError, match="tier 2"):
-        run_sweep("quick", 2, tmp_path)
     with pytest.raises(InputError, match="--tier"):
         run_sweep("quick", 3, tmp_path)
 
@@ -85,7 +83,7 @@ def test_cli_errors_exit_2(tmp_path, capsys):
     from iceresist.sweep import add_sweep_arguments
 
     p = add_sweep_arguments(argparse.ArgumentParser())
-    for argv in (["--cases", "nope"], ["--preset", "huge"], ["--tier", "2"]):
+    for argv in (["--cases", "nope"], ["--preset", "huge"], ["--tier", "3"]):
         args = p.parse_args(argv + ["--output", str(tmp_path / "s")])
         with pytest.raises(InputError):
             args.func(args)

@@ -16,14 +16,20 @@ A kinematic DEM body (the ship) moves at its prescribed velocity and only acts o
 
 Buoyancy: a fluid without a gravity body force has no hydrostatic pressure, so by default
 (``buoyancy=None`` and a zero LBM force) each body also gets -rho_f V g, the buoyancy of a submerged body.
-With the gravity body force in the LBM the hydrostatic pressure acts through the momentum exchange instead.
+With the gravity body force in the LBM (always the case for a free surface with g > 0) the hydrostatic
+pressure acts through the momentum exchange instead, and ``buoyancy=None`` adds nothing.
 
 Units (:class:`LatticeUnits`): lattice velocity = v dt/dx, lattice force = F dt^2 / (rho_f dx^4), lattice
 torque = M dt^2 / (rho_f dx^5). Positions: the centre of cell (i, j, k) lies at origin + (i + 1/2) dx.
 
-Free surface: the GHOST flag and the link pass act on the population buffer of the flow solver only;
-a phase-field solver on the same forest reads ``owner``/``flags`` of this class to apply its own
-wall rule at the bodies, and the refill of its second distribution follows the same pattern.
+Free surface: given a :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` instead of an
+:class:`~iceresist.lbm.solver.LBMSolver`, the passes act on its flow populations and its phase field
+(:mod:`iceresist.coupling.surface_kernels`): bounce-back only on links to liquid cells, phi and h refilled in
+uncovered cells and the phi of covered cells handed to their neighbours (the water volume outside the
+bodies is kept), phi mirrored into the bodies (neutral wetting), h bounced back at the bodies; step 4 is
+the free-surface step (LBM, velocity, phase field, reflag). Bodies present at the first step are placed,
+not moved in: the water in the cells they cover at the start leaves the water volume and is not handed on.
+The lattice gravity of the fluid must equal the DEM gravity in lattice units, |g| dt^2 / dx.
 """
 
 from __future__ import annotations
@@ -90,6 +96,14 @@ class FluidStructureCoupling:
 
     def __init__(self, solver, dem, geometries, units: LatticeUnits, buoyancy: bool | None = None,
                  debug: bool = False):
+        self.surface = solver if hasattr(solver, "phase") else None
+        if self.surface is not None:
+            solver = self.surface.fluid
+            g_dem = float(np.linalg.norm(dem.gravity)) * units.dt_s ** 2 / units.dx_m
+            if not np.isclose(g_dem, self.surface.g, rtol=1e-3, atol=1e-12):
+                raise InputError(f"free-surface gravity_lattice {self.surface.g:.6g} differs from the DEM gravity in "
+                                 f"lattice units |g| dt^2/dx = {g_dem:.6g}; build the fluid with gravity_lattice = "
+                                 "|g| dt^2 / dx")
         self.solver, self.dem, self.units = solver, dem, units
         self.target, self.real = solver.target, solver.real
         geometries = list(geometries)
@@ -127,7 +141,9 @@ class FluidStructureCoupling:
                    "owner": dev(owner), "owner_prev": dev(owner.copy())}
         if self.target.is_cuda:
             self._minus_one = dev(owner.copy())
-        self._k = coupling_launchers(self.target, self.real)
+        self._k = coupling_launchers(self.target, self.real,
+                                     None if self.surface is None else self.surface.phase.lat)
+        self._placed = self.surface is None
         self._prev_boxes = None
         self._force_prev = None
         self.force_lattice = np.zeros((self.n, 3))
@@ -229,22 +245,37 @@ class FluidStructureCoupling:
             d["owner"].fill(-1)
         f, flags = self.solver.state, self.solver.flags
         k["mark"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
+        if not self._placed:        # first step with a free surface: the bodies are placed, not moved in
+            d["owner_prev"] = self._dev(self._host(d["owner"]).copy())
+            self._placed = True
         Fx, Fy, Fz = (real(v) for v in self.solver.force)
         na = len(active_h)
         evt = self._dev(np.zeros(self.forest.nblocks, dtype=np.int32))
-        k["refill"](na, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
-                    d["owner_prev"], f, evt, Fx, Fy, Fz)
+        if self.surface is None:
+            k["refill"](na, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+                        d["owner_prev"], f, evt, Fx, Fy, Fz)
+        else:
+            phase = self.surface.phase
+            phase.solid = d["owner"]
+            k["refill"](na, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+                        d["owner_prev"], f, evt, Fx, Fy, Fz, phase.phi, phase.h)
         near = self._near_events(self._host(evt))
         self.event_blocks = len(near)
-        k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"], d["owner"],
-                          d["owner_prev"], f)
+        if self.surface is None:
+            k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"],
+                              d["owner"], d["owner_prev"], f)
+        else:
+            k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"],
+                              flags, d["owner"], d["owner_prev"], f, phase.phi, phase.h)
+            k["mirror"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"],
+                        phase.phi)
         if self.debug:
             k["poison"](na, active, d["flags0"], d["owner"], d["owner_prev"], f)
         bforce = self._dev(np.zeros((self.n, 3)))
         btorque = self._dev(np.zeros((self.n, 3)))
         nlinks = self._dev(np.zeros((self.n, 1), dtype=np.int64))
         k["links"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
-                   bforce, btorque, nlinks)
+                   bforce, btorque, nlinks, flags)
         self.force_lattice = self._host(bforce).copy()
         self.torque_lattice = self._host(btorque).copy()
         self.links = self._host(nlinks)[:, 0].copy()
@@ -255,7 +286,7 @@ class FluidStructureCoupling:
         g = np.asarray(self.dem.gravity, dtype=float)
         for _ in range(int(n)):
             self.update_boundaries()
-            self.solver.step(1)
+            (self.solver if self.surface is None else self.surface).step(1)
             f_now = np.concatenate([self.force_lattice, self.torque_lattice], axis=1)
             prev = f_now if self._force_prev is None else self._force_prev
             avg = 0.5 * (f_now + prev)
@@ -276,8 +307,19 @@ class FluidStructureCoupling:
         return self._host(self._d["owner"]).copy()
 
     def fluid_mask(self) -> np.ndarray:
-        """Cells that are fluid now (nblocks, 512): static fluid and not covered by a body."""
-        return (self.forest.flags & FL.FLUID != 0) & (self.owners() < 0)
+        """Cells that are fluid now (nblocks, 512): static fluid and not covered by a body (with a free surface:
+        liquid, phi >= 1/2)."""
+        m = (self.forest.flags & FL.FLUID != 0) & (self.owners() < 0)
+        if self.surface is not None:
+            m &= (self._host(self.solver.flags) & FL.FLUID) != 0
+        return m
+
+    def water_volume(self) -> float:
+        """With a free surface: sum phi over the cells not covered by a body (cells^3), the volume that the
+        phase field and the coupling conserve."""
+        if self.surface is None:
+            raise InputError("water_volume needs a free surface (a FreeSurfaceFluid)")
+        return self.surface.phase.volume()
 
     def fluid_mass(self) -> tuple[float, int]:
         """Sum of rho over the fluid cells now (lattice units) and the number of those cells."""

@@ -54,11 +54,18 @@ ROOT_ITERATIONS = 5
 Q_MIN = 1e-3
 
 MARK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner")
-LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "f", "bforce", "btorque", "nlinks")
+LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "f", "bforce", "btorque", "nlinks",
+             "flags")
 REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                "block_evt", "Fx", "Fy", "Fz")
 REDIST_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
 POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
+REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
+REDIST_FS_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f", "phi", "h")
+MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "phi")
+#: Covered cells deeper than this (lattice units of signed distance) keep their phi: the gradient stencil of a
+#: cell outside reaches only covered cells within sqrt(3) of the surface.
+MIRROR_DEPTH = 2.0
 
 
 def build_geometry_functions(target, real):
@@ -156,8 +163,9 @@ def build_accumulate(target):
     return accumulate
 
 
-def build_visits(target, real):
-    """The per-cell functions of the passes (see the module docstring)."""
+def build_visits(target, real, free_surface: bool = False):
+    """The per-cell functions of the passes (see the module docstring); ``free_surface``: links only to liquid
+    cells (``flags`` has the FLUID bit, :mod:`iceresist.freesurface`)."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
     accumulate = build_accumulate(target)
     zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
@@ -179,8 +187,10 @@ def build_visits(target, real):
         if sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid) < zero:
             owner[b, c] = k
 
+    fs = bool(free_surface)
+
     @dev
-    def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks):
+    def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks, flags):
         b, c = lookup(gx, gy, gz, grid, block_map)
         if b < 0:
             return
@@ -193,6 +203,8 @@ def build_visits(target, real):
             if xb < 0:
                 continue
             if (flags0[xb, xc] & fluid) == 0 or owner[xb, xc] >= 0:
+                continue
+            if fs and (flags[xb, xc] & fluid) == 0:
                 continue
             cx, cy, cz = CXR[q], CYR[q], CZR[q]
             px, py, pz = yx + cx, yy + cy, yz + cz
@@ -222,6 +234,8 @@ def build_visits(target, real):
                 far = False
                 if x2b >= 0:
                     far = (flags0[x2b, x2c] & fluid) != 0 and owner[x2b, x2c] < 0
+                    if fs:
+                        far = far and (flags[x2b, x2c] & fluid) != 0
                 if far:
                     fnew = two * qd * gopp + (one - two * qd) * f[x2b, o, x2c] + mom
                 else:
@@ -350,12 +364,29 @@ def build_visits(target, real):
     return mark, links, classify_refill, redistribute, poison
 
 
+def _cpu_kernel(loop_name, loop_src, launch_name, launch_src, visit, variant):
+    """The CPU launcher: ``loop_src`` (serial, calling ``visit``) compiled once, ``launch_src`` (prange over it);
+    cached on disk by :mod:`iceresist.coupling.kcache` where the cache is on, else compiled in memory."""
+    import numba
+
+    from iceresist.coupling import kcache
+
+    cached = kcache.cpu_launcher(loop_name, loop_src, launch_name, launch_src, visit, variant)
+    if cached is not None:
+        return cached
+    ns = {"visit": visit}
+    exec(compile(loop_src, f"<iceresist {loop_name} cpu>", "exec"), ns)
+    ns = {"prange": numba.prange, f"{loop_name}_jit": numba.njit(ns[loop_name], fastmath=set(CPU_FASTMATH))}
+    exec(compile(launch_src, f"<iceresist {launch_name} cpu>", "exec"), ns)
+    return numba.njit(ns[launch_name], parallel=True, fastmath=set(CPU_FASTMATH))
+
+
 class BodyLauncher:
     """``launcher(nbodies, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over every cell of the cell
     box ``bint[k, 3:9]`` of every body k: CPU prange over bodies; CUDA one thread block per body, threads
     striding over its cells."""
 
-    def __init__(self, target, visit, argnames):
+    def __init__(self, target, visit, argnames, name="launch_bodies", variant=""):
         self.target = target
         sig = ", ".join(argnames)
         if target.is_cuda:
@@ -372,23 +403,16 @@ class BodyLauncher:
             exec(compile(src, "<iceresist body launcher cuda>", "exec"), ns)
             self._kernel = cuda.jit(ns["launch_bodies"])
         else:
-            import numba
-
             # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
             loop = (f"def body_loop(k, {sig}):\n"
                     "    for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
                     "        for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
                     "            for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
                     f"                visit(k, gx, gy, gz, {sig})\n")
-            ns = {"visit": visit}
-            exec(compile(loop, "<iceresist body loop cpu>", "exec"), ns)
-            src = (f"def launch_bodies(nbodies, {sig}):\n"
+            src = (f"def {name}(nbodies, {sig}):\n"
                    "    for k in prange(nbodies):\n"
-                   f"        body_loop(k, {sig})\n")
-            ns = {"prange": numba.prange,
-                  "body_loop": numba.njit(ns["body_loop"], fastmath=set(CPU_FASTMATH))}
-            exec(compile(src, "<iceresist body launcher cpu>", "exec"), ns)
-            self._kernel = numba.njit(ns["launch_bodies"], parallel=True, fastmath=set(CPU_FASTMATH))
+                   f"        body_loop_jit(k, {sig})\n")
+            self._kernel = _cpu_kernel("body_loop", loop, name, src, visit, variant)
 
     def __call__(self, nbodies, *args):
         if nbodies == 0:
@@ -403,7 +427,7 @@ class ActiveLauncher:
     """``launcher(nactive, active, *rest)`` runs ``visit(b, c, *rest)`` for the 512 cells of each block
     ``active[i]``: CPU prange over the list; CUDA one thread per cell."""
 
-    def __init__(self, target, visit, argnames):
+    def __init__(self, target, visit, argnames, name="launch_active", variant=""):
         self.target = target
         rest = ", ".join(argnames[1:])
         sig = ", ".join(argnames)
@@ -417,19 +441,13 @@ class ActiveLauncher:
             exec(compile(src, "<iceresist active launcher cuda>", "exec"), ns)
             self._kernel = cuda.jit(ns["launch_active"])
         else:
-            import numba
-
             loop = (f"def block_loop(b, {rest}):\n"
                     f"    for c in range({CUDA_BLOCK_CELLS}):\n"
                     f"        visit(b, c, {rest})\n")
-            ns = {"visit": visit}
-            exec(compile(loop, "<iceresist block loop cpu>", "exec"), ns)
-            src = (f"def launch_active(nactive, {sig}):\n"
+            src = (f"def {name}(nactive, {sig}):\n"
                    "    for i in prange(nactive):\n"
-                   f"        block_loop(active[i], {rest})\n")
-            ns = {"prange": numba.prange, "block_loop": numba.njit(ns["block_loop"], fastmath=set(CPU_FASTMATH))}
-            exec(compile(src, "<iceresist active launcher cpu>", "exec"), ns)
-            self._kernel = numba.njit(ns["launch_active"], parallel=True, fastmath=set(CPU_FASTMATH))
+                   f"        block_loop_jit(active[i], {rest})\n")
+            self._kernel = _cpu_kernel("block_loop", loop, name, src, visit, variant)
 
     def __call__(self, nactive, *args):
         if nactive == 0:
@@ -443,16 +461,33 @@ class ActiveLauncher:
 _CACHE: dict = {}
 
 
-def coupling_launchers(target, real):
-    """Compiled launchers ``mark, links, refill, redistribute, poison`` (cached per target and precision)."""
-    key = (target.name, target.simulator, np.dtype(real).name)
+def coupling_launchers(target, real, h_lattice=None):
+    """Compiled launchers ``mark, links, refill, redistribute, poison`` (cached per target and precision); with
+    the h lattice of a free surface (``h_lattice``, an :class:`~iceresist.freesurface.hlattice.HLattice`) the
+    free-surface variants ``links, refill, redistribute`` and the ``mirror`` pass
+    (:mod:`iceresist.coupling.surface_kernels`)."""
+    key = (target.name, target.simulator, np.dtype(real).name, None if h_lattice is None else h_lattice.name)
     if key not in _CACHE:
-        mark, links, refill, redist, poison = build_visits(target, real)
-        _CACHE[key] = {
-            "mark": BodyLauncher(target, mark, MARK_ARGS),
-            "links": BodyLauncher(target, links, LINK_ARGS),
-            "refill": ActiveLauncher(target, refill, REFILL_ARGS),
-            "redistribute": ActiveLauncher(target, redist, REDIST_ARGS),
-            "poison": ActiveLauncher(target, poison, POISON_ARGS),
+        from iceresist.coupling.kcache import variant_of
+
+        fs = h_lattice is not None
+        v = variant_of(real, h_lattice, fs)
+        mark, links, refill, redist, poison = build_visits(target, real, free_surface=fs)
+        launchers = {
+            "mark": BodyLauncher(target, mark, MARK_ARGS, "launch_mark", v),
+            "links": BodyLauncher(target, links, LINK_ARGS, "launch_links", v),
+            "poison": ActiveLauncher(target, poison, POISON_ARGS, "launch_poison", v),
         }
+        if not fs:
+            launchers["refill"] = ActiveLauncher(target, refill, REFILL_ARGS, "launch_refill", v)
+            launchers["redistribute"] = ActiveLauncher(target, redist, REDIST_ARGS, "launch_redistribute", v)
+        else:
+            from iceresist.coupling.surface_kernels import build_surface_visits
+
+            refill_fs, redist_fs, mirror = build_surface_visits(target, real, h_lattice)
+            launchers["refill"] = ActiveLauncher(target, refill_fs, REFILL_FS_ARGS, "launch_refill_fs", v)
+            launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS, "launch_redistribute_fs",
+                                                       v)
+            launchers["mirror"] = BodyLauncher(target, mirror, MIRROR_ARGS, "launch_mirror", v)
+        _CACHE[key] = launchers
     return _CACHE[key]

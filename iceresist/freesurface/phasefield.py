@@ -23,6 +23,12 @@ Walls (``nbr == -1``): h bounces back half-way (no flux of phi through a wall, s
 sum phi is conserved to round-off), and the gradient stencil clamps to the
 boundary cell along the wall normal: zero normal gradient, a neutral (90 degree)
 contact angle.
+
+Moving solids (``solid[block, cell] >= 0``, the index of the body covering the
+cell, set by :mod:`iceresist.coupling`): h pulled from a solid cell bounces back
+half-way as at a wall, solid cells are not updated, and the gradient stencil reads
+the phi the coupling writes into them (phi at the mirror point across the surface:
+zero normal gradient, neutral wetting). ``solid`` is -1 everywhere by default.
 """
 
 from __future__ import annotations
@@ -52,8 +58,8 @@ def tau_phi(mobility: float, lat: HLattice) -> float:
 def build_phase_cells(target, real, lat: HLattice):
     """Compile the cell functions ``(phi_cell, stream_collide_cell, init_cell)`` for ``target``.
 
-    * ``phi_cell(b, c, h_in, phi, nbr)``: phi = sum of pulled h (pass 1);
-    * ``stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa)``: pass 2, with
+    * ``phi_cell(b, c, h_in, phi, nbr, solid)``: phi = sum of pulled h (pass 1);
+    * ``stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa, solid)``: pass 2, with
       omega = 1/tau_phi and kappa = M / (c_s^2 W);
     * ``init_cell(b, c, h_out, phi, u, nbr, kappa)``: h = h^eq(phi, u, n).
 
@@ -76,11 +82,12 @@ def build_phase_cells(target, real, lat: HLattice):
     int64 = np.int64
 
     @dev
-    def pulled(h_in, nbr, b, c, x, y, z, k):
-        """h_k(x - c_k) from the post-collision buffer; half-way bounce-back where x - c_k is outside."""
+    def pulled(h_in, nbr, solid, b, c, x, y, z, k):
+        """h_k(x - c_k) from the post-collision buffer; half-way bounce-back where x - c_k is outside or solid."""
         bs, cs_ = neighbour(nbr, b, x, y, z, -hcx[k], -hcy[k], -hcz[k])
         if bs >= 0:
-            return h_in[bs, k, cs_]
+            if solid[bs, cs_] < 0:
+                return h_in[bs, k, cs_]
         return h_in[b, hopp[k], c]
 
     @dev
@@ -109,14 +116,16 @@ def build_phase_cells(target, real, lat: HLattice):
         return hw[k] * (p * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu)) + th * cn)
 
     @dev
-    def phi_cell(b, c, h_in, phi, nbr):
+    def phi_cell(b, c, h_in, phi, nbr, solid):
         b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+        if solid[b, c] >= 0:
+            return
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
         s = zero
         for k in range(nq):
-            s += pulled(h_in, nbr, b, c, x, y, z, k)
+            s += pulled(h_in, nbr, solid, b, c, x, y, z, k)
         phi[b, c] = s
 
     @dev
@@ -136,11 +145,13 @@ def build_phase_cells(target, real, lat: HLattice):
         return x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu
 
     @dev
-    def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa):
+    def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa, solid):
         b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
+        if solid[b, c] >= 0:
+            return
         x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu = equilibrium_inputs(b, c, phi, u, nbr, kappa)
         for k in range(nq):
-            hk = pulled(h_in, nbr, b, c, x, y, z, k)
+            hk = pulled(h_in, nbr, solid, b, c, x, y, z, k)
             h_out[b, k, c] = hk + omega * (h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu) - hk)
 
     @dev
@@ -157,8 +168,8 @@ def build_phase_cells(target, real, lat: HLattice):
 def phase_launchers(target, precision: str, lattice_name: str):
     """Compile (once per target, precision and h lattice) the launchers ``(phi, stream_collide, init)``."""
     phi_cell, sc_cell, init_cell = build_phase_cells(target, jit.real_type(precision), lookup_h_lattice(lattice_name))
-    return (CellLauncher(target, phi_cell, ("h_in", "phi", "nbr")),
-            CellLauncher(target, sc_cell, ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa")),
+    return (CellLauncher(target, phi_cell, ("h_in", "phi", "nbr", "solid")),
+            CellLauncher(target, sc_cell, ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa", "solid")),
             CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa")))
 
 
@@ -194,6 +205,8 @@ class PhaseField:
         self.h = self._to_target(np.zeros(shape, self.real))
         self.h_next = self._to_target(np.zeros(shape, self.real))
         self.phi = self._to_target(np.zeros((self.nblocks, CELLS), self.real))
+        #: Body covering each cell (-1: none), ``[block, cell]`` int32; the coupling replaces it by its own table.
+        self.solid = self._to_target(np.full((self.nblocks, CELLS), -1, np.int32))
 
     @property
     def omega(self):
@@ -224,8 +237,8 @@ class PhaseField:
 
     def step(self, u) -> None:
         """One time step: phi(t+1) by pull streaming, then stream + collide h with u (``[block, 3, cell]``)."""
-        self._phi(self.nblocks, self.h, self.phi, self.nbr)
-        self._sc(self.nblocks, self.h, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa)
+        self._phi(self.nblocks, self.h, self.phi, self.nbr, self.solid)
+        self._sc(self.nblocks, self.h, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa, self.solid)
         self.h, self.h_next = self.h_next, self.h
 
     def phi_host(self) -> np.ndarray:
@@ -233,5 +246,6 @@ class PhaseField:
         return self._host(self.phi)
 
     def volume(self) -> float:
-        """sum_k h_k over all cells (the conserved phase volume, cells^3), in float64."""
-        return float(self._host(self.h).astype(np.float64).sum())
+        """sum_k h_k over the cells not covered by a solid (the conserved phase volume, cells^3), in float64."""
+        h = self._host(self.h).astype(np.float64).sum(axis=1)
+        return float(h[self._host(self.solid) < 0].sum())

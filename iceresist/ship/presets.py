@@ -8,14 +8,33 @@ Fidelities (tier 1 = DEM with water models; tier 2 = the coupled LBM-DEM):
 
 * ``paper``: the paper's tank (11.15 x 1.39 x 1.39 m, depth 1.11 m), the full 1.39 x 5.56 m channel, cubes of
   3 x 3 x 3 surface spheres, hull spheres 20 mm apart, k = 1e4 N/m; the run lasts until the stem reaches the
-  channel end, and the steady window holds the whole waterline inside the channel. Tier 2 at the paper's
-  finest cell 2.72 mm.
+  channel end, and the steady window holds the whole waterline inside the channel.
 * ``quick``: a 1.39 m long channel (same width, pitch and concentration: 28 x 28 cubes at 68 %), cubes of 2 x 2 x 2 corner spheres,
   hull spheres 30 mm apart up to 6 cm above the waterline, a softer contact (k = 5e3 N/m) with a larger
   sub-step; the ship stops when the stem leaves the channel. It trades away: the parallel middle body never
   runs fully in ice (the steady window starts once the bow wedge is in, so side friction along the whole
   body is missing), a short window (about 0.8 m of travel, so a wide confidence interval), rounder cubes
-  and a softer contact. Runs in well under a minute per case on a 2-core x86 VM. Tier 2 at 10.9 mm cells.
+  and a softer contact. Runs in well under a minute per case on a 2-core x86 VM (tier 1).
+
+Tier 2 (coupled LBM-DEM, :mod:`iceresist.tier2`) changes the tank where the flow field makes it expensive
+(``TIER2``):
+
+* ``paper`` tier 2: the paper's tank and water depth on a uniform grid of 2.715 mm cells (1.39 m / 512; the
+  paper's finest cell is 2.72 mm, with AMR coarsening to 43.4 mm): 4104 x 512 x 512 cells (1.08e9 cells, the
+  paper's AMR grid has 1.6e8), the water's viscosity (cumulant operator without a turbulence model, as the
+  paper), lattice velocity limit 0.1. A job for GPUs, not for a CPU.
+* ``quick`` tier 2: 3 cells per 41 mm cube (dx = 1.39 m / 104 = 13.4 mm), a shorter and shallower tank
+  (5.13 x 1.39 x 0.64 m, 384 x 104 x 48 = 1.92e6 cells): water 0.56 m deep (0.12 m under the keel instead of
+  0.67 m), 0.08 m of air above it (the hull's deck reaches out of the top of the domain, where no fluid is),
+  the channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending 0.34 m after the
+  channel. Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic density
+  changes by 3 x 0.2^2 = 12 % over the depth, against 3 % at the default 0.1) and a viscosity of 1e-5 m^2/s
+  (tau - 1/2 = 1.9e-4; ten times water) as a stability floor at this resolution. It trades away, beyond the
+  tier-1 quick trades: resolved cubes (3 cells per edge: their wake, the water between them and their
+  buoyancy distribution are coarse), the flow under the keel (a shallow-water tank, more blockage and squat),
+  the true viscosity, and compressibility (12 % density change). About 2400 LBM steps per case: hours on
+  a 2-core x86 VM (docs/PERFORMANCE.md "Tier 2 ship"); ``TINY_TIER2_OVERRIDES`` of :mod:`iceresist.sweep` is
+  the CI-sized version.
 """
 
 from __future__ import annotations
@@ -62,6 +81,16 @@ FIDELITIES = {
 }
 
 
+#: Tier-2 (coupled LBM-DEM) tank and lattice per fidelity (module docstring): domain cells, cell size, water
+#: depth, channel start, lattice velocity limit, viscosity (m^2/s; 1e-6 = water).
+TIER2 = {
+    "paper": {"cells": (4104, 512, 512), "dx_m": 1.39 / 512, "water_depth_m": WATER_DEPTH_M,
+              "channel_start_x_m": CHANNEL_START_X_M, "mach": 0.1, "nu_m2_s": 1.0e-6},
+    "quick": {"cells": (384, 104, 48), "dx_m": 1.39 / 104, "water_depth_m": 0.56, "channel_start_x_m": 3.4,
+              "mach": 0.2, "nu_m2_s": 1.0e-5},
+}
+
+
 def case_names() -> list[str]:
     return list(CASES)
 
@@ -80,24 +109,37 @@ def scene_data(case: str, fidelity: str, tier: int = 1) -> dict:
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     f = FIDELITIES[fidelity]
-    start = CHANNEL_START_X_M - 0.05
-    end = CHANNEL_START_X_M + f["channel_length_m"]
+    t2 = TIER2[fidelity] if tier == 2 else None
+    channel_start = CHANNEL_START_X_M if t2 is None else t2["channel_start_x_m"]
+    start = channel_start - 0.05
+    end = channel_start + f["channel_length_m"]
+    if t2 is None:
+        domain = {"size_m": list(DOMAIN_M), "dx_m": f["dx_m"]}
+        fluid = {"nu_m2_s": 1.0e-6, "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81]}
+        numerics = {"precision": "float64" if tier == 1 else "float32", "backend": "auto"}
+        depth = WATER_DEPTH_M
+    else:
+        domain = {"cells": list(t2["cells"]), "dx_m": t2["dx_m"]}
+        fluid = {"nu_m2_s": t2["nu_m2_s"], "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81],
+                 "operator": "cumulant"}
+        numerics = {"precision": "float32", "backend": "auto", "mach": t2["mach"]}
+        depth = t2["water_depth_m"]
     return {
         "scene": {"name": f"ship_{fidelity}_t{tier}_{c.name}",
                   "description": f"B-063 Bow {c.bow}, {100 * c.concentration:g} % brash ice, {c.knots:g} knots "
                                  f"({c.speed_m_s:.3f} m/s), {fidelity} fidelity, tier {tier}"},
-        "domain": {"size_m": list(DOMAIN_M), "dx_m": f["dx_m"],
+        "domain": {**domain,
                    "faces": {k: "wall" for k in ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")}},
-        "fluid": {"nu_m2_s": 1.0e-6, "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81]},
-        "numerics": {"precision": "float64" if tier == 1 else "float32", "backend": "auto"},
+        "fluid": fluid,
+        "numerics": numerics,
         "run": {"end_time_s": round((end - start) / c.speed_m_s, 6)},
         "output": {"directory": "runs", "fields": [], "timeseries_every_steps": 1},
-        "free_surface": {"water_depth_m": WATER_DEPTH_M},
+        "free_surface": {"water_depth_m": depth},
         "ship": {"hull": "b063", "bow_angle_deg": c.bow_angle_deg, "speed_m_s": round(c.speed_m_s, 6),
                  "start_x_m": start, "tier": tier, "sphere_spacing_m": f["hull_spacing_m"],
                  "sphere_band_m": f["hull_band_m"]},
         "ice": {"concentration": c.concentration, "channel_length_m": f["channel_length_m"],
-                "channel_start_x_m": CHANNEL_START_X_M, "spheres_per_edge": f["spheres_per_edge"]},
+                "channel_start_x_m": channel_start, "spheres_per_edge": f["spheres_per_edge"]},
         "contact": {"stiffness_N_m": f["stiffness_N_m"], "dem_safety": f["dem_safety"],
                     "sample_interval_s": f["sample_interval_s"]},
     }

@@ -1,0 +1,243 @@
+"""Kernels of the moving-boundary coupling with a free surface (paper sections 2.2 and 2.4).
+
+With a :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` the coupling passes of
+:mod:`iceresist.coupling.kernels` change where the liquid ends (phi < 1/2: GAS, no populations) and gain
+the phase field (``phi[block, cell]``, ``h[block, k, cell]`` on the h lattice):
+
+1. ``classify_refill_fs`` (per cell of the active blocks): a covered cell becomes GHOST; a cell that keeps
+   its state keeps the flags the free surface gave it (liquid, NEAR_SURFACE or GAS); a cell a body
+   uncovered gets phi from its neighbours (w-weighted mean of the phi of the cells uncovered before and
+   now, extrapolated across the surface) and h at equilibrium, h_k = phi Gamma_k(u_wall) (eqs. 7-8 with
+   the interface term left out); it is liquid (general path) where phi >= 1/2 and then gets the f refill of
+   the single-phase rule from its liquid neighbours, else GAS with f = f^eq(rho0 = 1, u_wall);
+2. ``redistribute_fs`` (per cell of the blocks next to events): a liquid cell takes its share of the mass
+   excess of a newly covered liquid cell (and gives back that of a refilled liquid cell), as before; every
+   cell not covered takes its share w_q / sum w of the phi of a newly covered cell (and gives back that of a
+   refilled one), added to its rest population h_0: sum phi over the cells outside the bodies, the water
+   volume, is unchanged by the motion of the bodies;
+3. ``mirror`` (per body over its cell box): a covered cell within ``MIRROR_DEPTH`` of the surface gets the
+   phi at its mirror point across the surface, p = y - 2 s(y) grad s (s the signed distance), interpolated
+   trilinearly from the cells outside the bodies. The gradient stencil of the phase field reads it: the
+   normal derivative of phi at the surface vanishes (neutral wetting, a 90 degree contact angle, as at the
+   walls of the domain); the h of the outside cells bounce back from covered cells
+   (:mod:`iceresist.freesurface.phasefield`, ``solid``);
+4. the link pass (:mod:`iceresist.coupling.kernels` with ``free_surface=True``) bounces back only on links
+   to liquid cells, so the momentum exchange sums the gauge pressure and shear of the water over the wetted
+   surface; the reference pressure rho0 c_s^2 left out of eq. (17) is that of the gas (eq. 11), so the dry
+   part carries no force. Buoyancy is the integral of the hydrostatic pressure of the gravity body force.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iceresist.coupling.kernels import MIRROR_DEPTH, build_geometry_functions
+from iceresist.grid import flags as FL
+from iceresist.lattice import C, Q, W
+from iceresist.lbm.boundary import GHOST
+
+
+def build_surface_visits(target, real, hlat):
+    """``classify_refill_fs, redistribute_fs, mirror`` (module docstring) for the h lattice ``hlat``."""
+    lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
+    zero, half, one, three = real(0.0), real(0.5), real(1.0), real(3.0)
+    c45, c15, eps, depth = real(4.5), real(1.5), real(1e-12), real(MIRROR_DEPTH)
+    fluid, ghost, gas, near_surface = FL.FLUID, GHOST, FL.GAS, FL.NEAR_SURFACE
+    nq = Q
+    CXI, CYI, CZI = (np.ascontiguousarray(C[:, a]).astype(np.int64) for a in range(3))
+    CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
+    WR = W.astype(real)
+    nh = hlat.q
+    hc = np.asarray(hlat.c, dtype=np.float64)
+    HX, HY, HZ = (np.ascontiguousarray(hc[:, a]).astype(real) for a in range(3))
+    HW = np.array(hlat.w, dtype=real)
+    ics2, half_ics4, hcs2 = real(1.0 / hlat.cs2), real(0.5 / hlat.cs2 ** 2), real(hlat.cs2)
+    dev = target.device
+
+    @dev
+    def stable(b, c, flags0, owner, owner_prev):
+        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
+
+    @dev
+    def phase_of(b, c, h):
+        s = zero
+        for k in range(nh):
+            s += h[b, k, c]
+        return s
+
+    @dev
+    def classify_refill_fs(b, c, borigin, body, grid, block_map, flags0, flags, owner, owner_prev, f, block_evt,
+                           Fx, Fy, Fz, phi, h):
+        k = owner[b, c]
+        if k >= 0:
+            flags[b, c] = ghost
+            if owner_prev[b, c] < 0:
+                block_evt[b] = 1
+            return
+        fl = flags0[b, c]
+        if (fl & fluid) == 0:
+            flags[b, c] = fl
+            return
+        kp = owner_prev[b, c]
+        if kp < 0:
+            return
+        block_evt[b] = 1
+        gx = borigin[b, 0] * 8 + (c & 7)
+        gy = borigin[b, 1] * 8 + ((c >> 3) & 7)
+        gz = borigin[b, 2] * 8 + (c >> 6)
+        ux, uy, uz, rx, ry, rz = wall_velocity(kp, real(gx) + half, real(gy) + half, real(gz) + half, body, grid)
+        # phase field: phi from the cells outside the bodies, h at equilibrium
+        wsum = zero
+        psum = zero
+        for q in range(1, nq):
+            nb, nc = lookup(gx + CXI[q], gy + CYI[q], gz + CZI[q], grid, block_map)
+            if nb < 0:
+                continue
+            if stable(nb, nc, flags0, owner, owner_prev):
+                wsum += WR[q]
+                psum += WR[q] * phase_of(nb, nc, h)
+        p = phi[b, c]
+        if wsum > zero:
+            p = psum / wsum
+        phi[b, c] = p
+        uu = ux * ux + uy * uy + uz * uz
+        for m in range(nh):
+            cu = HX[m] * ux + HY[m] * uy + HZ[m] * uz
+            h[b, m, c] = HW[m] * p * (one + ics2 * cu + half_ics4 * (cu * cu - hcs2 * uu))
+        # flow: liquid with the single-phase refill, or gas at the reference density
+        for m in range(nq):
+            f[b, m, c] = zero
+        rho = one
+        inv = zero
+        if p >= half:
+            wsum = zero
+            rsum = zero
+            for q in range(1, nq):
+                nb, nc = lookup(gx + CXI[q], gy + CYI[q], gz + CZI[q], grid, block_map)
+                if nb < 0:
+                    continue
+                if not stable(nb, nc, flags0, owner, owner_prev) or (flags[nb, nc] & fluid) == 0:
+                    continue
+                rn = one
+                jx = zero
+                jy = zero
+                jz = zero
+                for m in range(nq):
+                    g = f[nb, m, nc]
+                    rn += g
+                    jx += CXR[m] * g
+                    jy += CYR[m] * g
+                    jz += CZR[m] * g
+                vx, vy, vz = jx / rn, jy / rn, jz / rn
+                vv = vx * vx + vy * vy + vz * vz
+                w = WR[q]
+                for m in range(nq):
+                    cu = CXR[m] * vx + CYR[m] * vy + CZR[m] * vz
+                    geq = WR[m] * ((rn - one) + rn * (three * cu + c45 * cu * cu - c15 * vv))
+                    f[b, m, c] += w * (f[nb, m, nc] - geq)
+                wsum += w
+                rsum += w * rn
+            if wsum > zero:
+                rho = rsum / wsum
+                inv = one / wsum
+            flags[b, c] = fl | near_surface
+        else:
+            flags[b, c] = gas
+        vx = ux + half * Fx           # stored populations carry u + g / 2 (force density rho g)
+        vy = uy + half * Fy
+        vz = uz + half * Fz
+        vv = vx * vx + vy * vy + vz * vz
+        for m in range(nq):
+            cu = CXR[m] * vx + CYR[m] * vy + CZR[m] * vz
+            f[b, m, c] = f[b, m, c] * inv + WR[m] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * vv))
+
+    @dev
+    def redistribute_fs(b, c, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h):
+        if not stable(b, c, flags0, owner, owner_prev):
+            return
+        liquid = (flags[b, c] & fluid) != 0
+        gx = borigin[b, 0] * 8 + (c & 7)
+        gy = borigin[b, 1] * 8 + ((c >> 3) & 7)
+        gz = borigin[b, 2] * 8 + (c >> 6)
+        accf = zero
+        acch = zero
+        for q in range(1, nq):
+            hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
+            yb, yc = lookup(hx, hy, hz, grid, block_map)
+            if yb < 0:
+                continue
+            if (flags0[yb, yc] & fluid) == 0:
+                continue
+            now = owner[yb, yc] >= 0
+            if now == (owner_prev[yb, yc] >= 0):
+                continue
+            # a newly covered cell was liquid if its phi (of the last step) was; a refilled one if flagged so
+            y_liquid = phi[yb, yc] >= half if now else (flags[yb, yc] & fluid) != 0
+            ph = phase_of(yb, yc, h)
+            excess = zero
+            if liquid and y_liquid:
+                for m in range(nq):
+                    excess += f[yb, m, yc]
+            if not now:
+                ph = -ph
+                excess = -excess
+            wh = zero
+            wf = zero
+            for m in range(1, nq):
+                zb, zc = lookup(hx + CXI[m], hy + CYI[m], hz + CZI[m], grid, block_map)
+                if zb >= 0:
+                    if stable(zb, zc, flags0, owner, owner_prev):
+                        wh += WR[m]
+                        if (flags[zb, zc] & fluid) != 0:
+                            wf += WR[m]
+            acch += ph * WR[q] / wh
+            if liquid and y_liquid:
+                accf += excess * WR[q] / wf
+        h[b, 0, c] += acch
+        if liquid:
+            f[b, 0, c] += accf
+
+    @dev
+    def mirror(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, phi):
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        if b < 0:
+            return
+        if owner[b, c] != k:
+            return
+        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
+        s = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+        if s < -depth:
+            return
+        nx = sdf_at(k, yx + half, yy, yz, body, bint, planes, grid) - sdf_at(k, yx - half, yy, yz, body, bint,
+                                                                             planes, grid)
+        ny = sdf_at(k, yx, yy + half, yz, body, bint, planes, grid) - sdf_at(k, yx, yy - half, yz, body, bint,
+                                                                             planes, grid)
+        nz = sdf_at(k, yx, yy, yz + half, body, bint, planes, grid) - sdf_at(k, yx, yy, yz - half, body, bint,
+                                                                             planes, grid)
+        nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nn < eps:
+            return
+        d = -(s + s) / nn
+        px, py, pz = yx + d * nx - half, yy + d * ny - half, yz + d * nz - half     # in cell-index coordinates
+        ix, iy, iz = int(math.floor(px)), int(math.floor(py)), int(math.floor(pz))
+        tx, ty, tz = px - real(ix), py - real(iy), pz - real(iz)
+        acc = zero
+        wsum = zero
+        for corner in range(8):
+            ax = corner & 1
+            ay = (corner >> 1) & 1
+            az = corner >> 2
+            nb, nc = lookup(ix + ax, iy + ay, iz + az, grid, block_map)
+            if nb < 0:
+                continue
+            if (flags0[nb, nc] & fluid) == 0 or owner[nb, nc] >= 0:
+                continue
+            w = (tx if ax else one - tx) * (ty if ay else one - ty) * (tz if az else one - tz)
+            acc += w * phi[nb, nc]
+            wsum += w
+        if wsum > real(1e-3):
+            phi[b, c] = acc / wsum
+
+    return classify_refill_fs, redistribute_fs, mirror

@@ -1,0 +1,302 @@
+"""Tier 2: the ship in a brash-ice channel with the coupled LBM-DEM, the paper's method (sections 2-4).
+
+Built on :class:`~iceresist.coupling.floating.FloatingBodies`: water under gravity in a closed tank (free-surface
+LBM with the phase field, eqs. 1-11), the hull as a kinematic body moving at the prescribed speed along +x
+(convex-hull signed distance for the fluid, the same DEM sphere clump as tier 1 for contacts), the ice cubes as
+dynamic bodies (box signed distance + DEM clump) moved by gravity, the fluid force of the momentum exchange
+(eqs. 16-21; buoyancy is the hydrostatic pressure of the LBM) and the DEM contacts, the tank walls as DEM planes.
+
+Units (the rule of :meth:`iceresist.scene.schema.Scene.units`, DESIGN.md section 7):
+
+* dx = ``domain.dx_m``;
+* dt = mach dx / max(U_ship, sqrt(g h)), ``numerics.mach`` the lattice velocity limit, h the water depth: the
+  ship and the shallow-water wave both stay at or below ``mach`` in lattice units. Gravity is then fixed by dt:
+  g_lattice = g dt^2 / dx (what :class:`FloatingBodies` takes; its hydrostatic density change over the depth,
+  3 g_lattice h/dx = 3 (sqrt(g h) dt/dx)^2 <= 3 mach^2, is the same limit seen from the pressure);
+* tau = 1/2 + 3 nu dt / dx^2 from ``fluid.nu_m2_s``. The paper runs the cumulant operator without a turbulence
+  model at the water's viscosity (tau - 1/2 ~ 1e-5 here); we do the same when ``fluid.nu_m2_s`` is the water's.
+  Coarse presets may raise ``fluid.nu_m2_s`` (an effective viscosity, a stability floor written in the scene,
+  see :mod:`iceresist.ship.presets`); ``tau_floor`` (constructor) is the other way to set a floor on tau.
+
+One model step is one record interval: ``contact.sample_interval_s`` rounded to whole LBM steps. The recorded
+ice force is the mean over the LBM steps of the interval (each the mean over its DEM sub-steps) of the DEM contact
+force of the ice on the hull (paper section 4.2; water resistance excluded); the fluid force on the hull
+(pressure and friction of the LBM, eq. 20) is recorded beside it as ``Fx_fluid_N`` etc.
+
+Frames as in tier 1 (:mod:`iceresist.tier1`): x along the tank, y across, z up from the tank bottom.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.ship.channel import channel_layout
+from iceresist.tier1 import hull_geometry, hull_shape, steady_window_m
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Tier2Units:
+    """Lattice scales of a tier-2 run: cell ``dx_m``, LBM step ``lbm_dt_s``, record interval ``dt_s``, ``tau``."""
+
+    dx_m: float
+    dt_s: float
+    lbm_dt_s: float
+    tau: float
+    g_lattice: float
+    nu_m2_s: float
+
+    def describe(self) -> dict:
+        return {"dx_m": self.dx_m, "dt_s": self.dt_s, "lbm_dt_s": self.lbm_dt_s, "tau": self.tau,
+                "g_lattice": self.g_lattice, "nu_m2_s": self.nu_m2_s, "lattice": True}
+
+
+def array_bytes(*objects) -> int:
+    """Bytes of the NumPy (or device) arrays held by the attributes of ``objects`` (directly, or in lists,
+    tuples and dicts of them), each array counted once."""
+    seen, total = set(), 0
+
+    def visit(v):
+        nonlocal total
+        if isinstance(v, (list, tuple)):
+            for x in v:
+                visit(x)
+        elif isinstance(v, dict):
+            for x in v.values():
+                visit(x)
+        elif not isinstance(v, type) and hasattr(v, "nbytes") and hasattr(v, "shape") and id(v) not in seen:
+            seen.add(id(v))
+            total += int(v.nbytes)
+
+    for obj in objects:
+        if obj is not None:
+            for v in vars(obj).values():
+                visit(v)
+    return total
+
+
+class Tier2Model:
+    """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
+
+    ``backend``, ``precision`` override the scene's ``[numerics]``; ``tau_floor`` raises tau to at least this
+    value (module docstring)."""
+
+    components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice")
+
+    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
+                 tau_floor: float | None = None):
+        from iceresist.coupling.floating import GRAVITY_M_S2, FloatingBodies
+        from iceresist.coupling.geometry import Box, ConvexPolyhedron
+        from iceresist.dem import ContactParameters, DEMSystem, box
+        from iceresist.model import check_block_shape, resolve_target
+        from iceresist.scene.schema import Contact
+
+        if scene.ship is None or scene.ice is None or scene.free_surface is None:
+            raise InputError(f"{scene.source_name}: a tier-2 ship scene needs [ship], [ice] and [free_surface]")
+        if scene.is_lattice:
+            raise InputError(f"{scene.source_name}: a ship scene is written in physical units ([scene] units)")
+        gvec = np.asarray(scene.fluid.gravity_m_s2, dtype=float)
+        if not np.allclose(gvec, (0.0, 0.0, -GRAVITY_M_S2)):
+            raise InputError(f"fluid.gravity_m_s2: tier 2 runs with gravity [0, 0, -{GRAVITY_M_S2}] "
+                             f"(got {list(gvec)})")
+        self.scene = scene
+        sh, ice = scene.ship, scene.ice
+        con = scene.contact or Contact()
+        self.contact = con
+        self.shape_cells = tuple(int(n) for n in scene.shape_cells())
+        check_block_shape(self.shape_cells)
+        lu = scene.units()
+        dx = lu.dx_m
+        self.domain_m = tuple(n * dx for n in self.shape_cells)
+        self.level_m = float(scene.free_surface.water_depth_m)
+        if self.level_m >= self.domain_m[2]:
+            raise InputError(f"free_surface.water_depth_m: {self.level_m} m fills the {self.domain_m[2]:.4g} m deep "
+                             f"domain")
+        self.rho_w = float(scene.rho_kg_m3)
+        self.geometry = hull_geometry(scene)
+        g = self.geometry
+        self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
+        width = ice.channel_width_m or self.domain_m[1]
+        jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
+        self.layout = channel_layout(width_m=width, length_m=ice.channel_length_m, cube_m=ice.size_m,
+                                     concentration=ice.concentration, count=ice.count,
+                                     start_x_m=ice.channel_start_x_m, centre_y_m=self.centre_y_m,
+                                     water_level_m=self.level_m, ice_density_kg_m3=ice.density_kg_m3,
+                                     water_density_kg_m3=self.rho_w, jitter_m=jitter, seed=ice.seed)
+        self.speed_m_s = float(sh.speed_m_s)
+        self.start_x_m = float(sh.start_x_m) if sh.start_x_m is not None else ice.channel_start_x_m - 0.05
+        self.window_m = steady_window_m(scene, g, self.layout)
+        self.backend = backend or scene.numerics.backend
+        self.precision = precision or scene.numerics.precision
+        self.target = resolve_target(self.backend)
+        dem_backend = "cuda" if self.target.is_cuda else "cpu"
+
+        # lattice units: dt from the Mach rule, gravity from dt, tau from the viscosity (or the floor)
+        lbm_dt = lu.dt_s
+        g_lat = GRAVITY_M_S2 * lbm_dt ** 2 / dx
+        tau = max(lu.tau, float(tau_floor)) if tau_floor is not None else lu.tau
+        nu = (tau - 0.5) * dx * dx / (3.0 * lbm_dt)
+
+        kt = con.tangential_stiffness_ratio * con.stiffness_N_m
+        dem = DEMSystem(backend=dem_backend, precision="float64", gravity_m_s2=tuple(gvec),
+                        ice_ice=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_ice),
+                        ice_ship=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_hull),
+                        safety=con.dem_safety)
+        Lx, Ly, _ = self.domain_m
+        for point, normal in (((0, 0, 0), (1, 0, 0)), ((Lx, 0, 0), (-1, 0, 0)), ((0, 0, 0), (0, 1, 0)),
+                              ((0, Ly, 0), (0, -1, 0)), ((0, 0, 0), (0, 0, 1))):
+            dem.add_wall(point, normal)
+        self.fb = FloatingBodies(self.shape_cells, depth_m=self.level_m, dx_m=dx, tau=tau, g_lattice=g_lat,
+                                 rho_kg_m3=self.rho_w, operator=scene.fluid.operator, precision=self.precision,
+                                 target=self.target, mobility=scene.free_surface.mobility_lattice,
+                                 width=scene.free_surface.interface_width_cells, dem=dem)
+        self.dem = dem
+        self.hull = hull_shape(g, sh.sphere_spacing_m, sh.sphere_band_m)
+        self.hull_body = self.fb.add_body(
+            ConvexPolyhedron.of_shape(g.vertices(), self.hull), self.hull,
+            position_m=(self.start_x_m, self.centre_y_m, self.level_m - g.draught_m),
+            velocity_m_s=(self.speed_m_s, 0.0, 0.0), kinematic=True, material="ship")
+        self.cube = box((ice.size_m,) * 3, ice.density_kg_m3, spheres_per_edge=ice.spheres_per_edge, name="ice")
+        cube_sdf = Box((ice.size_m,) * 3)
+        for c in self.layout.centres_m:
+            self.fb.add_body(cube_sdf, self.cube, position_m=c, material="ice")
+        self.fb.start()
+        self.lbm_dt_s = self.fb.dt_s
+        self.lbm_steps_per_record = max(1, int(math.ceil(con.sample_interval_s / self.lbm_dt_s - 1e-9)))
+        self.dt_s = self.lbm_steps_per_record * self.lbm_dt_s
+        self.units = Tier2Units(dx_m=dx, dt_s=self.dt_s, lbm_dt_s=self.lbm_dt_s, tau=tau, g_lattice=g_lat,
+                                nu_m2_s=nu)
+        self.cells = int(self.fb.forest.cells)
+        self.iteration = 0
+        self.lbm_steps = 0
+        self._force_mean = np.zeros(3)
+        self._force_last = np.zeros(3)
+        self._fluid_mean = np.zeros(3)
+        self.water_volume0_m3 = self.fb.water_volume_m3()
+        log.info("tier 2: %d cells %s, dx %.4g m, dt %.4g s (%d per record), tau %.6g, g_lattice %.3g, "
+                 "ship %.3g cells/step; %d ice cubes, %d hull spheres", self.cells, self.shape_cells, dx,
+                 self.lbm_dt_s, self.lbm_steps_per_record, tau, g_lat, self.speed_m_s * self.lbm_dt_s / dx,
+                 self.layout.count, self.hull.n_spheres)
+
+    # -- protocol ---------------------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return self.iteration * self.dt_s
+
+    @property
+    def x_bow_m(self) -> float:
+        """Stem position at the waterline (m); the hull moves rigidly at the prescribed speed."""
+        return self.start_x_m + self.speed_m_s * self.time_s
+
+    @property
+    def substeps_per_record(self) -> int:
+        return self.lbm_steps_per_record * max(1, self.dem.substeps_for(self.lbm_dt_s))
+
+    def step(self, n: int = 1):
+        """n record intervals of ``lbm_steps_per_record`` coupled steps; each leaves the mean ice (contact) force
+        and the mean fluid force on the hull over the interval."""
+        hb = self.hull_body
+        for _ in range(int(n)):
+            contact = np.zeros(3)
+            fluid = np.zeros(3)
+            subs = 0
+            for _ in range(self.lbm_steps_per_record):
+                self.fb.step(1)
+                k = self.dem.last_substeps
+                contact += self.dem.mean_contact_force_on(hb) * k
+                fluid += self.fb.fluid_force_N[hb]
+                subs += k
+            self.iteration += 1
+            self.lbm_steps += self.lbm_steps_per_record
+            self._force_mean = contact / max(subs, 1)
+            self._fluid_mean = fluid / self.lbm_steps_per_record
+        self._force_last = self.dem.ice_force_on(hb)
+
+    def fields(self) -> dict:
+        """Dense fields (physical units): rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge
+        c_s^2 (rho - 1) rho_w (dx/dt)^2, zero at the free surface), flags (1 liquid, 0 gas or solid), phi (phase
+        field, 1 water, 0 air). rho, u and pressure are 0 outside the liquid (where flags = 0), so that the NaN
+        check of the field writer sees only real blow-ups."""
+        phi, rho, u = self.fb.fields()
+        c = self.units.dx_m / self.units.lbm_dt_s
+        liquid = np.isfinite(rho)
+        return {"rho": np.where(liquid, rho * self.rho_w, 0.0),
+                "u": np.where(liquid[..., None], np.moveaxis(u, 0, -1) * c, 0.0),
+                "pressure": np.where(liquid, (rho - 1.0) / 3.0 * self.rho_w * c * c, 0.0),
+                "flags": liquid.astype(np.uint8), "phi": phi}
+
+    @staticmethod
+    def field_units(lattice: bool) -> dict:
+        return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits", "phi": "1"}
+
+    def surface_height_m(self) -> np.ndarray:
+        """Height of the free surface (phi = 1/2) in each column (nx, ny), metres from the tank bottom."""
+        return self.fb.fluid.surface_height() * self.units.dx_m
+
+    def is_finite(self) -> bool:
+        return bool(np.isfinite(self._force_mean).all() and np.isfinite(self._fluid_mean).all()
+                    and np.isfinite(self.dem.positions).all() and math.isfinite(self.fb.water_volume_m3()))
+
+    def diagnostics(self) -> dict:
+        """One record: mean ice (contact) force on the hull (N), the mean fluid force on it (N), stem position (m),
+        contacts, ice kinetic energy (J), water volume (m^3, outside the bodies)."""
+        f, w = self._force_mean, self._fluid_mean
+        return {"Fx_N": f[0], "Fy_N": f[1], "Fz_N": f[2], "Fx_last_N": self._force_last[0],
+                "Fx_fluid_N": w[0], "Fy_fluid_N": w[1], "Fz_fluid_N": w[2], "x_bow_m": self.x_bow_m,
+                "contacts": self.dem.contact_count(), "ice_kinetic_energy_J": self.dem.kinetic_energy(),
+                "water_volume_m3": self.fb.water_volume_m3()}
+
+    def ice_state(self) -> dict:
+        """Cube centres (n, 3) m, quaternions (n, 4) and velocities (n, 3) m/s now (hull excluded)."""
+        ice = np.arange(self.dem.n_bodies) != self.hull_body
+        return {"positions_m": self.dem.positions[ice], "quaternions": self.dem.quaternions[ice],
+                "velocities_m_s": self.dem.velocities[ice]}
+
+    def state(self) -> dict:
+        """What a checkpoint of a tier-2 run stores: the step count, the last forces and the ice state. The
+        populations and the phase field are not checkpointed, so :meth:`load_state` refuses to continue."""
+        return {"iteration": np.int64(self.iteration), "force_mean_N": self._force_mean.copy(),
+                "fluid_force_mean_N": self._fluid_mean.copy(), **self.ice_state()}
+
+    def load_state(self, state: dict):
+        raise InputError("a tier-2 run cannot be continued from a checkpoint (populations and phase field are not "
+                         "stored): run the scene again without --pickup")
+
+    def allocation(self) -> dict:
+        """Bytes held per component: LBM populations and fluid arrays, phase field (h, phi), DEM, coupling."""
+        fl = self.fb.fluid
+        return {"lbm": array_bytes(fl.fluid, fl), "phase_field": array_bytes(fl.phase),
+                "dem": array_bytes(self.dem), "coupling": array_bytes(self.fb.coupling)}
+
+    def allocated_bytes(self) -> int:
+        return int(sum(self.allocation().values()))
+
+    def describe(self) -> dict:
+        g, u = self.geometry, self.units
+        return {"components": list(self.components), "tier": 2, "backend": self.target.name,
+                "precision": self.precision, "cells": self.cells, "shape_cells": list(self.shape_cells),
+                "bodies": self.dem.n_bodies, "spheres": self.dem.n_spheres, "hull_spheres": self.hull.n_spheres,
+                "ice_cubes": self.layout.count, "channel_grid": [self.layout.n_across, self.layout.n_along],
+                "concentration": self.layout.concentration, "cube_m": self.layout.cube_m,
+                "channel_start_x_m": self.layout.start_x_m, "channel_length_m": self.layout.length_m,
+                "channel_width_m": self.layout.width_m, "centre_y_m": self.centre_y_m,
+                "water_level_m": self.level_m, "speed_m_s": self.speed_m_s, "start_x_m": self.start_x_m,
+                "steady_window_m": list(self.window_m),
+                "substep_s": self.lbm_dt_s / max(1, self.dem.substeps_for(self.lbm_dt_s)),
+                "substeps_per_record": self.substeps_per_record,
+                "record_interval_s": self.dt_s, "lbm_dt_s": self.lbm_dt_s,
+                "lbm_steps_per_record": self.lbm_steps_per_record, "critical_step_s": self.dem.critical_step_s(),
+                "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": u.g_lattice,
+                "nu_m2_s": u.nu_m2_s, "operator": self.scene.fluid.operator,
+                "ship_lattice_speed": self.speed_m_s * u.lbm_dt_s / u.dx_m,
+                "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
+                "hull": {"length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
+                         "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,
+                         "bow_rake_deg": g.bow_rake_deg, "stern_rake_deg": g.stern_rake_deg,
+                         "waterline_length_m": g.waterline_length_m, "freeboard_m": g.freeboard_m}}

@@ -1,0 +1,90 @@
+"""Reference case: a sphere settling in a closed box, terminal velocity against ten Cate et al. (2002).
+
+Experiment (ten Cate, Nieuwstad, Derksen and Van den Akker 2002, Phys. Fluids 14, 4012): a nylon sphere,
+d = 15 mm, rho_s = 1120 kg/m^3, released 120 mm above the bottom of a 100 x 100 x 160 mm box of silicone oil.
+Cases (rho_f kg/m^3, mu Pa s, terminal velocity m/s, Re): E1 970, 0.373, 0.038, 1.5; E2 965, 0.212, 0.060,
+4.1; E3 962, 0.113, 0.091, 11.6; E4 960, 0.058, 0.128, 31.9 (as ``tests/test_settling.py``). The headline
+quantity is the largest settling velocity of the run (the sphere reaches its terminal velocity well before
+the wall slows it).
+
+Full ladder (GPU): case E2 at d = 8, 12, 16 cells, cumulant, 1.2 s. Quick ladder (2-core x86 VM): case E1
+(Re 1.5) at d = 5, 6, 8 cells, BGK, 0.8 s; the box is the experiment's, rounded up to whole blocks.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from iceresist.backends import jit
+from iceresist.validate.result import CaseResult, relative_error
+
+NAME = "settling_sphere"
+REFERENCE = "ten Cate et al. (2002), Phys. Fluids 14, 4012: terminal velocity of a 15 mm sphere in silicone oil"
+
+CASES = {"E1": (970.0, 0.373, 0.038), "E2": (965.0, 0.212, 0.060), "E3": (962.0, 0.113, 0.091),
+         "E4": (960.0, 0.058, 0.128)}
+DIAMETER_M = 0.015
+RHO_SPHERE = 1120.0
+BOX_M = (0.1, 0.1, 0.16)
+RELEASE_HEIGHT_M = 0.12
+
+
+def ladder(quick: bool) -> list[dict]:
+    """Resolutions (cells per diameter) from coarse to fine."""
+    if quick:
+        return [{"label": f"{d} cells/diameter, E1", "resolution": d, "case": "E1", "operator": "bgk",
+                 "t_end_s": 0.8, "u_lattice": 0.04} for d in (5, 6, 8)]
+    return [{"label": f"{d} cells/diameter, E2", "resolution": d, "case": "E2", "operator": "cumulant",
+             "t_end_s": 1.2, "u_lattice": 0.04} for d in (8, 12, 16)]
+
+
+def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
+           backend: str = "cpu", precision: str = "float32"):
+    """Settling velocity history (t_s, w_m_s) of case ``case`` at ``d_cells`` cells per diameter, with the cell
+    count, the number of steps and the wall time of the stepping (first step, which compiles, excluded)."""
+    from iceresist.coupling import FluidStructureCoupling, LatticeUnits, Sphere
+    from iceresist.dem import DEMSystem, sphere
+    from iceresist.grid.forest import BlockForest, Face
+    from iceresist.lbm.solver import LBMSolver
+
+    rho_f, mu, u_ref = CASES[case]
+    d = DIAMETER_M
+    dx = d / d_cells
+    dt = u_lattice * dx / u_ref
+    shape = tuple(int(np.ceil(L / dx / 8) * 8) for L in BOX_M)
+    fo = BlockForest.uniform(shape, faces={k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+    tau = 3 * (mu / rho_f) * dt / dx ** 2 + 0.5
+    solver = LBMSolver(fo, tau=tau, operator=operator, precision=precision, target=jit.resolve_backend(backend))
+    solver.initialize()
+    dem = DEMSystem()
+    dem.add_body(sphere(d / 2, RHO_SPHERE), position_m=(BOX_M[0] / 2, BOX_M[1] / 2, RELEASE_HEIGHT_M + d / 2))
+    dem.add_wall((0, 0, 0), (0, 0, 1))
+    cp = FluidStructureCoupling(solver, dem, [Sphere(d / 2)], LatticeUnits(dx, dt, rho_f))
+    steps = int(t_end_s / dt)
+    t, w = [], []
+    wall = 0.0
+    for i in range(steps):
+        t0 = time.perf_counter()
+        cp.step(1)
+        if i > 0:
+            wall += time.perf_counter() - t0
+        t.append(dem.time_s)
+        w.append(-dem.velocities[0, 2])
+    return np.array(t), np.array(w), fo.cells, steps, wall
+
+
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+    """One rung: the largest settling velocity against the measured terminal velocity."""
+    case = params["case"]
+    t, w, cells, steps, wall = settle(case, params["resolution"], u_lattice=params["u_lattice"],
+                                      t_end_s=params["t_end_s"], operator=params["operator"], backend=backend,
+                                      precision=precision)
+    u_ref = CASES[case][2]
+    value = float(w.max())
+    return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]), cells=cells,
+                      steps=steps, wall_s=wall, quantity="terminal velocity (m/s)", value=value, reference=u_ref,
+                      error=relative_error(value, u_ref), backend=backend, precision=precision,
+                      extra={"experiment": case, "operator": params["operator"],
+                             "t_peak_s": float(t[int(np.argmax(w))])})

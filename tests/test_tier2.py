@@ -1,0 +1,167 @@
+"""Tier 2 (coupled LBM-DEM ship in ice) on the CI-sized case: through sweep.run_case to the HDF5 the report reads,
+no NaN, water volume kept, cubes pushed, the recorded ice force equal to a hand sum of the DEM sphere forces;
+and the allocation rule of issue 7 (a scene allocates only what it uses)."""
+
+import h5py
+import numpy as np
+import pytest
+
+from iceresist.model import build_model
+from iceresist.ship.presets import TIER2, case_scene
+from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, analyse_case, run_case
+
+CASE = "A-c68-v1.0"
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """One CI-sized tier-2 case (64 x 16 x 16 cells, 4 cubes, 13 records of 4 LBM steps) with a probe that sums
+    the DEM contact forces on the hull's spheres by hand at every DEM sub-step."""
+    out = tmp_path_factory.mktemp("tier2")
+    probe = {"rows": [], "volume": [], "vx": [], "subs": []}
+
+    def install(sim):
+        m = sim.model
+        if probe.get("model") is not None:
+            return
+        probe["model"] = m
+        dem, n_hull = m.dem, m.hull.n_spheres
+        inner = dem._substep
+        acc = {"sum": np.zeros(3), "n": 0}
+        probe["acc"] = acc
+
+        def substep(h):
+            inner(h)
+            acc["sum"] += dem._get("sforce")[:n_hull].astype(float).sum(axis=0)
+            acc["n"] += 1
+        dem._substep = substep
+
+    def record(sim):
+        m, acc = sim.model, probe["acc"]
+        if m.iteration > 0:
+            d = m.diagnostics()
+            last = m.dem._get("sforce")[:m.hull.n_spheres].astype(float).sum(axis=0)
+            probe["rows"].append((d["Fx_N"], acc["sum"][0] / acc["n"], d["Fx_last_N"], last[0], d["Fz_N"],
+                                  acc["sum"][2] / acc["n"]))
+            probe["subs"].append(acc["n"])
+        acc["sum"][:] = 0.0
+        acc["n"] = 0
+        probe["volume"].append(m.fb.water_volume_m3())
+        probe["vx"].append(m.ice_state()["velocities_m_s"][:, 0].copy())
+
+    path = run_case(CASE, "quick", 2, out, backend="cpu", overrides=TINY_TIER2_OVERRIDES,
+                    callbacks={"a_install": (install, 1), "b_record": (record, 1)})
+    return path, probe
+
+
+def test_tier2_case_file_is_what_the_report_reads(tiny_run):
+    path, probe = tiny_run
+    m = probe["model"]
+    with h5py.File(path, "r") as h5:
+        assert h5["meta"].attrs["finished"] and int(h5["meta"].attrs["tier"]) == 2
+        fx = h5["timeseries/Fx_N"][...]
+        ffl = h5["timeseries/Fx_fluid_N"][...]
+        assert len(fx) == 1 + m.iteration == 1 + 13
+        assert np.isfinite(fx).all() and np.isfinite(ffl).all()
+        assert h5["bodies/final_positions_m"].shape == (4, 3)
+    row = analyse_case(path)
+    assert row["tier"] == 2 and row["cubes"] == 4 and row["cells"] == 64 * 16 * 16
+    assert np.isfinite(row["mean_force_N"]) and row["mean_force_N"] > 0  # the hull meets the middle cube
+    assert row["R_sim_kN"] == pytest.approx(row["mean_force_N"] * 25 ** 3 / 1e3, rel=1e-12)
+    # units: dt from the Mach rule against sqrt(g h), gravity from dt (module docstring of iceresist.tier2)
+    u = m.units
+    assert u.lbm_dt_s == pytest.approx(0.1 * u.dx_m / np.sqrt(9.81 * 0.14), rel=1e-9)
+    assert u.g_lattice == pytest.approx(9.81 * u.lbm_dt_s ** 2 / u.dx_m, rel=1e-12)
+    assert u.tau == pytest.approx(0.5 + 3 * 1e-5 * u.lbm_dt_s / u.dx_m ** 2, rel=1e-12)
+
+
+def test_tier2_keeps_the_water_and_pushes_the_cubes(tiny_run):
+    _, probe = tiny_run
+    v = np.array(probe["volume"])
+    assert np.isfinite(v).all()
+    assert np.abs(v / v[0] - 1).max() < 5e-3
+    vx = np.array(probe["vx"])  # (records + 1, 4)
+    m = probe["model"]
+    ahead = np.argmin(np.abs(m.layout.centres_m[:, 1] - m.centre_y_m) + m.layout.centres_m[:, 0])
+    assert vx[0].max() == 0.0
+    assert vx[-1, ahead] > 0.05 * m.speed_m_s  # the cube in the hull's path is pushed forward
+    assert (vx[-1] > 0).all()                 # and the water ahead of the bow pushes the others
+
+
+def test_recorded_force_equals_a_hand_sum_of_the_dem_sphere_forces(tiny_run):
+    _, probe = tiny_run
+    rows = np.array(probe["rows"])
+    assert (np.array(probe["subs"]) >= 4).all()       # 4 LBM steps per record, >= 1 DEM sub-step each
+    fx, fx_hand, fx_last, fx_last_hand, fz, fz_hand = rows.T
+    assert np.abs(fx).max() > 0.1                        # contact happened
+    assert np.allclose(fx, fx_hand, rtol=1e-9, atol=1e-12)
+    assert np.allclose(fz, fz_hand, rtol=1e-9, atol=1e-12)
+    assert np.allclose(fx_last, fx_last_hand, rtol=1e-9, atol=1e-12)
+
+
+def test_tier2_allocates_lbm_phase_field_and_dem(tiny_run):
+    m = tiny_run[1]["model"]
+    a = m.allocation()
+    cells = 64 * 16 * 16
+    assert a["lbm"] >= 2 * 27 * 4 * cells             # two float32 population buffers
+    assert a["phase_field"] >= 2 * 15 * 4 * cells + 4 * cells  # h (D3Q15, two buffers) and phi
+    assert a["dem"] > 0 and a["coupling"] > 0
+    assert m.allocated_bytes() == sum(a.values())
+    assert m.describe()["allocation_bytes"] == a
+
+
+def test_scenes_allocate_only_what_they_use():
+    """Tier 1: no LBM arrays; a single-phase fluid scene: no phase field and no DEM."""
+    t1 = build_model(case_scene(CASE, "quick", 1, **TINY_OVERRIDES), backend="cpu")
+    assert t1.allocated_bytes() == 0 and t1.cells == 0
+    assert not any(hasattr(t1, k) for k in ("fb", "fluid", "solver", "forest", "phase"))
+    from iceresist.scene.schema import Scene
+
+    fluid = build_model(Scene.model_validate({
+        "domain": {"cells": [8, 8, 8], "dx_m": 0.01}, "fluid": {"nu_m2_s": 1e-4},
+        "numerics": {"u_max_m_s": 0.1}, "run": {"steps": 1}}), backend="cpu", precision="float32")
+    assert not any(hasattr(fluid, k) for k in ("phase", "fb", "dem", "coupling"))
+    assert not hasattr(fluid.solver, "phase")
+    assert fluid.allocated_bytes() == 2 * 27 * 4 * 512
+
+
+def test_paper_tier2_preset_is_the_papers_resolution():
+    s = case_scene(CASE, "paper", 2)
+    assert s.ship.tier == 2 and s.domain.dx_m == pytest.approx(0.00272, abs=1e-5)
+    assert s.shape_cells() == TIER2["paper"]["cells"]
+    assert s.free_surface.water_depth_m == 1.11 and s.fluid.nu_m2_s == 1e-6
+    q = case_scene(CASE, "quick", 2)
+    assert q.ice.size_m / q.domain.dx_m == pytest.approx(3.07, abs=0.01)
+    assert all(n % 8 == 0 for n in q.shape_cells())
+
+
+def test_tier2_scene_runs_through_iceresist_run_with_hydrostatic_fields(tmp_path):
+    """`iceresist run` of the CI-sized tier-2 scene: exit 0, finite fields; at t = 0 the pressure at the tank
+    bottom is the hydrostatic rho g h in pascals (away from the hull and the cubes)."""
+    from iceresist.cli import main
+    from iceresist.ship.presets import scene_data, to_toml
+
+    d = scene_data(CASE, "quick", 2)
+    for k, v in TINY_TIER2_OVERRIDES.items():
+        d.setdefault(k, {}).update(v)
+    d["ice"] = {k: v for k, v in d["ice"].items() if v is not None}
+    d["output"]["fields"] = ["rho", "u", "pressure", "flags"]
+    scene = tmp_path / "tiny_t2.toml"
+    scene.write_text(to_toml(d))
+    name = d["scene"]["name"]
+    for steps, out in ((0, "t0"), (2, "t2")):
+        rc = main(["run", str(scene), "--output", str(tmp_path / out), "--backend", "cpu", "--steps", str(steps),
+                   "--no-progress"])
+        assert rc == 0
+    from iceresist.io.hdf5 import RunFile
+
+    with RunFile(tmp_path / "t0" / f"{name}.h5", "r") as rf:
+        p = rf.read_field(rf.snapshot_iterations()[-1], "pressure")
+    assert p.shape == (64, 16, 16)
+    dx = TINY_TIER2_OVERRIDES["domain"]["dx_m"]
+    depth = TINY_TIER2_OVERRIDES["free_surface"]["water_depth_m"]
+    assert p[60, 1, 0] == pytest.approx(1000 * 9.81 * (depth - 0.5 * dx), rel=0.03)
+    with h5py.File(tmp_path / "t2" / f"{name}.h5", "r") as h5:
+        snap = h5["fields"][sorted(h5["fields"].keys())[-1]]
+        assert int(snap.attrs["iteration"]) == 2
+        assert all(np.isfinite(snap[k][...]).all() for k in ("rho", "u", "pressure"))

@@ -20,10 +20,10 @@ Passes of one coupling step, each a launch:
 2. ``classify_refill`` (per cell of the active blocks): flags = GHOST where covered, else the static flags;
    a cell a body uncovered gets equilibrium populations at the body's velocity there and the weighted
    mean density of its fluid neighbours, plus their mean non-equilibrium part (the refill);
-3. ``redistribute`` (per cell of the blocks next to a block with a covered or uncovered cell): a fluid cell next to a newly covered cell takes its
-   share w_q / sum w of that cell's mass excess rho - 1, and next to a refilled cell gives back its share of
-   that cell's excess, so that the sum of rho - 1 over the fluid is unchanged; the share goes into the rest
-   population. Gathering (each cell writes only itself) makes it race-free;
+3. ``redistribute`` (per cell of the blocks next to a block with a covered or uncovered cell): a fluid cell next
+   to a newly covered cell takes its share w_q / sum w of that cell's mass excess rho - 1, and next to a
+   refilled cell gives back its share of that cell's excess, so that the sum of rho - 1 over the fluid is
+   unchanged; the share goes into the rest population. Gathering (each cell writes only itself) makes it race-free;
 4. ``links`` (per body over its cell box): for every covered cell y and direction q with a fluid cell
    x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q by regula falsi on the
    signed distance, the interpolated bounce-back population of eq. (16) with the wall velocity

@@ -21,20 +21,39 @@ def test_measurements_file():
     assert z[0] == pytest.approx(1.217)
 
 
+def test_front_position_interpolates():
+    """Floor edge: phi 0.75 -> 0.25 between the cell centres 9.5 and 10.5 crosses 1/2 at x = 10; the nose one
+    layer up (phi = 1/2 at the centre 12.5) lies at 12.5."""
+    phi = np.zeros((20, 2, 4))
+    phi[:10, :, 0] = 1.0
+    phi[9, :, 0], phi[10, :, 0] = 0.75, 0.25
+    phi[:12, :, 1] = 1.0
+    phi[12, :, 1] = 0.5
+    assert db.front_position(phi) == pytest.approx(10.0)
+    assert db.front_position(phi, rows=2) == pytest.approx(12.5)
+
+
 def test_dam_break_front_coarse(one_thread):
-    """a = 8 cells, cumulant tau = 0.51, float32: Z within 5 % of the measurements for T <= 2 (measured 1.5, 3.8,
-    0.5 % at T = 0.83, 1.22, 2.00); water volume conserved."""
+    """a = 8 cells, cumulant tau = 0.51, M = 0.01, float32: the floor edge and the nose within 5 % of the
+    measurements for T <= 2 (measured -1.5, -3.8, -0.5 % and +1.9, +0.5, +2.3 % at T = 0.83, 1.22, 2.00);
+    water volume conserved. The requirement holds at this resolution only: a = 12 and 16 lead by up to
+    12 % (docs/VALIDATION.md)."""
     r = db.run(dict(cells_per_column=8, t_end=2.1))
     t = np.array(r.extra["T_ref"])
-    err = np.array(r.extra["error_at_ref"])[t <= 2.0]
+    keep = t <= 2.0
+    err = np.array(r.extra["error_at_ref"])[keep]
     assert np.all(err < 0.05)
+    nose = np.interp(t, r.extra["T"], r.extra["Z_nose"])
+    assert np.all(nose >= np.array(r.extra["Z_sim"]) - 1e-9)
+    assert np.all(np.abs(nose / np.array(r.extra["Z_ref"]) - 1.0)[keep] < 0.05)
     v0 = 2 * 8 * 8 * 8                                           # column a x 2a x 8 cells
     assert r.extra["volume"] == pytest.approx(v0, rel=0.02)
 
 
 @pytest.mark.slow
 def test_dam_break_front_finer(one_thread):
-    """a = 16 cells: Z within 5 % at T = 0.83 and 2.00, 6 % at T = 1.22 (docs/VALIDATION.md)."""
+    """a = 16 cells: the floor edge within 8 % for T <= 2 (measured +0.7, +6.1, -4.0 %): the 5 % requirement is
+    NOT met at T = 1.22; this guards the measured state (docs/VALIDATION.md)."""
     r = db.run(dict(cells_per_column=16, t_end=2.1))
     err = np.array(r.extra["error_at_ref"])[np.array(r.extra["T_ref"]) <= 2.0]
-    assert np.all(err < 0.07)
+    assert np.all(err < 0.08)

@@ -4,8 +4,8 @@ Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot) through :class:`iceresist.tier2.
 lattice cell dx in a fixed physical tank (the cells of every axis scaled together, whole 8x8x8 blocks), so the
 cubes, the hull's wetted shape and the free surface are resolved more finely; the DEM (hull sphere spacing, cube
 clumps, contact law) is the same on every rung. The record interval is fixed in seconds to a whole number of LBM
-steps on every rung (4, 6, 8 steps on the quick ladder, 2, 3, 4 on the full one), so each rung averages the contact force over the same
-time samples.
+steps on every rung (4, 6, 8 steps on the quick ladder, 2, 3, 4 on the full one), so each rung averages the
+contact force over the same time samples.
 
 * Quick ladder: the CI-sized tank of :data:`iceresist.sweep.TINY_TIER2_OVERRIDES` (0.875 x 0.219 x 0.219 m,
   0.48 m hull, 4 cubes, 0.06 s) at 64x16x16, 96x24x24 and 128x32x32 cells: 3, 4.5 and 6 cells per 41 mm cube.

@@ -1,0 +1,142 @@
+"""The ship in brash ice, tier 2 (coupled LBM-DEM with free surface): mean ice resistance against the cell size.
+
+Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot) through :class:`iceresist.tier2.Tier2Model`. The rung refines the
+lattice cell dx in a fixed physical tank (the cells of every axis scaled together, whole 8x8x8 blocks), so the
+cubes, the hull's wetted shape and the free surface are resolved more finely; the DEM (hull sphere spacing, cube
+clumps, contact law) is the same on every rung. The record interval is fixed in seconds to a whole number of LBM
+steps on every rung (4, 6, 8 steps on the quick ladder, 2, 3, 4 on the full one), so each rung averages the
+contact force over the same time samples.
+
+* Quick ladder: the CI-sized tank of :data:`iceresist.sweep.TINY_TIER2_OVERRIDES` (0.875 x 0.219 x 0.219 m,
+  0.48 m hull, 4 cubes, 0.06 s) at 64x16x16, 96x24x24 and 128x32x32 cells: 3, 4.5 and 6 cells per 41 mm cube.
+* Full ladder: the ``quick`` tier-2 preset of :mod:`iceresist.ship.presets` (68 % channel of 1.39 m, water
+  0.56 m deep) in a tank of whole multiples of eight cubes (5.248 x 1.312 x 0.656 m, against the preset's
+  5.13 x 1.39 x 0.64 m, so that every rung fills whole blocks) at 2, 3 and 4 cells per cube (256x64x32 to
+  512x128x64 cells): a GPU ladder.
+
+The headline quantity is the mean ice (DEM contact) force on the hull in the steady window
+(:func:`iceresist.post.ice_resistance_from_timeseries`, as in ``iceresist sweep``; water resistance excluded, as
+the paper's section 4.2), in N at model scale; the mean fluid force on the hull over the run is kept in ``extra``.
+There is no external reference: ``reference`` is NaN and :mod:`iceresist.validate.ladder` measures the error
+against the Richardson extrapolation of the three rungs (Roache 1998) where they converge monotonically, else
+against the finest rung. On the quick ladder the steady window holds 8 records of a contact force that comes in
+a few impacts, so its 95 % interval (``extra["ci95_N"]``, about 2 N) exceeds the mean (about 1.5 N): the
+differences between its rungs are sampling noise, not discretisation error, and the ladder measures the
+protocol and the cost per rung, not a converged order. The full ladder's window is about 0.8 m of travel.
+"""
+
+from __future__ import annotations
+
+import copy
+import tempfile
+import time
+
+import numpy as np
+
+from iceresist.validate.result import CaseResult
+
+NAME = "ship_tier2"
+REFERENCE = ("no measurement at these sizes: the Richardson extrapolation of the three finest rungs (observed "
+             "order from the three), else the finest rung, of the mean ice (contact) force on the hull in the "
+             "steady window (case A-c68-v1.0, tier 2 coupled LBM-DEM)")
+CASE = "A-c68-v1.0"
+CUBE_M = 0.041
+#: Quick ladder: the tank of TINY_TIER2_OVERRIDES (64 x 16 x 16 cells of 41/3 mm) and its cells per rung.
+QUICK_TANK_CELLS_AT_3 = (64, 16, 16)
+QUICK_CELLS = ((64, 16, 16), (96, 24, 24), (128, 32, 32))
+#: Full ladder: the tank in cubes (multiples of 8, so that 2, 3 and 4 cells per cube fill whole blocks).
+FULL_TANK_CUBES = (128, 32, 16)
+FULL_CELLS_PER_CUBE = (2, 3, 4)
+#: LBM steps per record on the coarsest rung, quick and full (the record interval in seconds is the same on every
+#: rung: 4.66 ms quick, 3.50 ms full, near the presets' 4 ms).
+STEPS_PER_RECORD_COARSEST = {True: 4, False: 2}
+
+
+def ladder(quick: bool) -> list[dict]:
+    """Three cell sizes in one tank: 3, 4.5, 6 cells per cube (quick), 2, 3, 4 cells per cube (full)."""
+    if quick:
+        dx0 = CUBE_M / 3.0
+        width_m = QUICK_TANK_CELLS_AT_3[1] * dx0
+        rungs = [(c, width_m / c[1]) for c in QUICK_CELLS]
+    else:
+        rungs = [(tuple(k * n for k in FULL_TANK_CUBES), CUBE_M / n) for n in FULL_CELLS_PER_CUBE]
+    out = []
+    for cells, dx in rungs:
+        n = CUBE_M / dx
+        out.append({"label": f"{n:g} cells/cube ({cells[0]}x{cells[1]}x{cells[2]})", "resolution": n,
+                    "cells": list(cells), "dx_m": dx, "tier": 2, "tiny": quick,
+                    "coarsest_dx_m": rungs[0][1], "coarsest_steps_per_record": STEPS_PER_RECORD_COARSEST[quick]})
+    return out
+
+
+def overrides(params: dict) -> dict:
+    """Scene overrides of one rung: the tank and cell size, and the record interval fixed in seconds."""
+    from iceresist.ship.presets import case_scene
+    from iceresist.sweep import TINY_TIER2_OVERRIDES
+
+    ov = copy.deepcopy(TINY_TIER2_OVERRIDES) if params.get("tiny", True) else {}
+    ov["domain"] = {"cells": [int(c) for c in params["cells"]], "dx_m": float(params["dx_m"])}
+    # the LBM step is proportional to dx (the Mach rule of iceresist.tier2): take the coarsest rung's step
+    coarse = copy.deepcopy(ov)
+    coarse["domain"] = {**ov["domain"], "dx_m": float(params["coarsest_dx_m"])}
+    lbm_dt_s = case_scene(CASE, "quick", 2, **coarse).units().dt_s
+    # a hair under a whole number of steps, so the ceiling in Tier2Model gives 4, 6, 8 ... steps exactly
+    steps = int(params["coarsest_steps_per_record"])
+    ov.setdefault("contact", {})["sample_interval_s"] = steps * lbm_dt_s * (1.0 - 1e-7)
+    return ov
+
+
+#: (backend, precision) pairs whose kernels this process has compiled (see :func:`warm_up`).
+_WARM: set = set()
+
+
+def warm_up(backend: str, precision: str) -> float:
+    """Compile the tier-2 kernels once per process with one record of the coarsest quick rung, so that the
+    ``wall_s`` of a rung is its stepping alone (the kernels are specialised on types, not on the grid size).
+    Returns the seconds spent (0 when already warm)."""
+    from iceresist.sweep import run_case
+
+    if (backend, precision) in _WARM:
+        return 0.0
+    ov = overrides(ladder(True)[0])
+    ov.setdefault("numerics", {})["precision"] = precision
+    ov["run"] = {"end_time_s": ov["contact"]["sample_interval_s"]}
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="iceresist-validate-warm-") as tmp:
+        run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
+    _WARM.add((backend, precision))
+    return time.perf_counter() - t0
+
+
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+    """One tier-2 run through :func:`iceresist.sweep.run_case` into a scratch folder (the LBM in ``precision``,
+    the DEM in float64), after :func:`warm_up` (its seconds in ``extra["compile_s"]``)."""
+    import h5py
+
+    from iceresist.sweep import analyse_case, run_case
+
+    compile_s = warm_up(backend, precision)
+    ov = overrides(params)
+    ov.setdefault("numerics", {})["precision"] = precision
+    with tempfile.TemporaryDirectory(prefix="iceresist-validate-") as tmp:
+        t0 = time.perf_counter()
+        path = run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
+        total = time.perf_counter() - t0
+        row = analyse_case(path)
+        with h5py.File(path, "r") as h5:
+            fluid_x = h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step
+            model = h5["meta"].attrs["model"]
+    import json
+
+    model = json.loads(model) if isinstance(model, (str, bytes)) else model
+    lbm_steps = int(row["steps"]) * int(model["lbm_steps_per_record"])
+    return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]),
+                      cells=int(row["cells"]), steps=lbm_steps, wall_s=float(row["wall_time_s"]),
+                      quantity="mean ice (contact) force on the hull in the steady window (N, model scale)",
+                      value=float(row["mean_force_N"]), reference=float("nan"), error=float("nan"),
+                      backend=backend, precision=precision,
+                      extra={"dem_precision": "float64", "ci95_N": float(row["ci95_N"]), "records": int(row["steps"]),
+                             "lbm_steps_per_record": int(model["lbm_steps_per_record"]), "total_s": total,
+                             "compile_s": compile_s,
+                             "dx_m": float(row["resolution_m"]), "R_sim_kN": float(row["R_sim_kN"]),
+                             "mean_fluid_Fx_N": float(np.mean(fluid_x)) if len(fluid_x) else float("nan")})

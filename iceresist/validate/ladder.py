@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 
 #: The reference cases of ``iceresist validate`` in report order (issue: error against run time).
 KNOWN_CASES = ("poiseuille", "taylor_green", "sphere_drag", "standing_wave", "dam_break", "floating_cube",
-               "settling_sphere", "ship_tier1")
+               "settling_sphere", "ship_tier1", "ship_tier2")
 #: Error levels of the cheapest-run table.
 THRESHOLDS = (0.10, 0.05, 0.01)
 TABLE_NAME = "ladder.csv"

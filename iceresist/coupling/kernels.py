@@ -163,11 +163,54 @@ def build_accumulate(target):
     return accumulate
 
 
+def build_refill_functions(target, real):
+    """Device functions the single-phase and the free-surface refill share.
+
+    * ``stable(b, c, flags0, owner, owner_prev)``: the cell is fluid in the forest and no body covered it in this
+      or the previous step, so its populations can be read;
+    * ``add_nonequilibrium(f, b, c, nb, nc, w)``: f[b, :, c] += w (f_n - f^eq(rho_n, u_n)) of the neighbour
+      (nb, nc), populations in the f - w form; returns rho_n (the refill of the module docstring).
+    """
+    zero, one, three = real(0.0), real(1.0), real(3.0)
+    c45, c15 = real(4.5), real(1.5)
+    fluid, nq = FL.FLUID, Q
+    CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
+    WR = W.astype(real)
+    dev = target.device
+
+    @dev
+    def stable(b, c, flags0, owner, owner_prev):
+        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
+
+    @dev
+    def add_nonequilibrium(f, b, c, nb, nc, w):
+        rho = one
+        jx = zero
+        jy = zero
+        jz = zero
+        for p in range(nq):
+            g = f[nb, p, nc]
+            rho += g
+            jx += CXR[p] * g
+            jy += CYR[p] * g
+            jz += CZR[p] * g
+        vx, vy, vz = jx / rho, jy / rho, jz / rho
+        uu = vx * vx + vy * vy + vz * vz
+        for p in range(nq):
+            cu = CXR[p] * vx + CYR[p] * vy + CZR[p] * vz
+            geq = WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
+            f[b, p, c] += w * (f[nb, p, nc] - geq)
+        return rho
+
+    return stable, add_nonequilibrium
+
+
 def build_visits(target, real, free_surface: bool = False):
     """The per-cell functions of the passes (see the module docstring); ``free_surface``: links only to liquid
     cells (``flags`` has the FLUID bit, :mod:`iceresist.freesurface`)."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
     accumulate = build_accumulate(target)
+    stable, add_nonequilibrium = build_refill_functions(target, real)
     zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
     c45, c15, qmin, nan = real(4.5), real(1.5), real(Q_MIN), real(np.nan)
     fluid, ghost, niter, nq = FL.FLUID, GHOST, ROOT_ITERATIONS, Q
@@ -259,10 +302,6 @@ def build_visits(target, real, free_surface: bool = False):
             accumulate(nlinks, k, 0, 1)
 
     @dev
-    def stable(b, c, flags0, owner, owner_prev):
-        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
-
-    @dev
     def classify_refill(b, c, borigin, body, grid, block_map, flags0, flags, owner, owner_prev, f, block_evt,
                         Fx, Fy, Fz):
         k = owner[b, c]
@@ -291,23 +330,8 @@ def build_visits(target, real, free_surface: bool = False):
                 continue
             if not stable(nb, nc, flags0, owner, owner_prev):
                 continue
-            rho = one
-            jx = zero
-            jy = zero
-            jz = zero
-            for p in range(nq):
-                g = f[nb, p, nc]
-                rho += g
-                jx += CXR[p] * g
-                jy += CYR[p] * g
-                jz += CZR[p] * g
-            vx, vy, vz = jx / rho, jy / rho, jz / rho
-            uu = vx * vx + vy * vy + vz * vz
             w = WR[q]
-            for p in range(nq):
-                cu = CXR[p] * vx + CYR[p] * vy + CZR[p] * vz
-                geq = WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
-                f[b, p, c] += w * (f[nb, p, nc] - geq)
+            rho = add_nonequilibrium(f, b, c, nb, nc, w)
             wsum += w
             rsum += w * rho
         rho = one

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from iceresist.coupling.kernels import MIRROR_DEPTH, build_geometry_functions
+from iceresist.coupling.kernels import MIRROR_DEPTH, build_geometry_functions, build_refill_functions
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
 from iceresist.lbm.boundary import GHOST
@@ -42,6 +42,7 @@ from iceresist.lbm.boundary import GHOST
 def build_surface_visits(target, real, hlat):
     """``classify_refill_fs, redistribute_fs, mirror`` (module docstring) for the h lattice ``hlat``."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
+    stable, add_nonequilibrium = build_refill_functions(target, real)
     zero, half, one, three = real(0.0), real(0.5), real(1.0), real(3.0)
     c45, c15, eps, depth = real(4.5), real(1.5), real(1e-12), real(MIRROR_DEPTH)
     fluid, ghost, gas, near_surface = FL.FLUID, GHOST, FL.GAS, FL.NEAR_SURFACE
@@ -55,10 +56,6 @@ def build_surface_visits(target, real, hlat):
     HW = np.array(hlat.w, dtype=real)
     ics2, half_ics4, hcs2 = real(1.0 / hlat.cs2), real(0.5 / hlat.cs2 ** 2), real(hlat.cs2)
     dev = target.device
-
-    @dev
-    def stable(b, c, flags0, owner, owner_prev):
-        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
 
     @dev
     def phase_of(b, c, h):
@@ -120,23 +117,8 @@ def build_surface_visits(target, real, hlat):
                     continue
                 if not stable(nb, nc, flags0, owner, owner_prev) or (flags[nb, nc] & fluid) == 0:
                     continue
-                rn = one
-                jx = zero
-                jy = zero
-                jz = zero
-                for m in range(nq):
-                    g = f[nb, m, nc]
-                    rn += g
-                    jx += CXR[m] * g
-                    jy += CYR[m] * g
-                    jz += CZR[m] * g
-                vx, vy, vz = jx / rn, jy / rn, jz / rn
-                vv = vx * vx + vy * vy + vz * vz
                 w = WR[q]
-                for m in range(nq):
-                    cu = CXR[m] * vx + CYR[m] * vy + CZR[m] * vz
-                    geq = WR[m] * ((rn - one) + rn * (three * cu + c45 * cu * cu - c15 * vv))
-                    f[b, m, c] += w * (f[nb, m, nc] - geq)
+                rn = add_nonequilibrium(f, b, c, nb, nc, w)
                 wsum += w
                 rsum += w * rn
             if wsum > zero:

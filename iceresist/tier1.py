@@ -62,6 +62,20 @@ def hull_shape(geometry: HullGeometry, spacing_m: float, band_m: float, density_
     return dataclasses.replace(shape, sphere_offsets_m=shape.sphere_offsets_m[keep])
 
 
+def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float, rho_w_kg_m3: float) -> ChannelLayout:
+    """The scene's ice channel (``[ice]``) across ``width_m``, centred on ``centre_y_m``, floating at ``level_m``,
+    after the pre-run ice limits (:func:`iceresist.limits.check_scene_ice`); shared by tiers 1 and 2."""
+    from iceresist.limits import check_scene_ice
+
+    ice = scene.ice
+    check_scene_ice(scene, width_m)
+    jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
+    return channel_layout(width_m=width_m, length_m=ice.channel_length_m, cube_m=ice.size_m,
+                          concentration=ice.concentration, count=ice.count, start_x_m=ice.channel_start_x_m,
+                          centre_y_m=centre_y_m, water_level_m=level_m, ice_density_kg_m3=ice.density_kg_m3,
+                          water_density_kg_m3=rho_w_kg_m3, jitter_m=jitter, seed=ice.seed)
+
+
 def steady_window_m(scene, geometry: HullGeometry, layout: ChannelLayout) -> tuple[float, float]:
     """Stem positions (x0, x1) of the steady window (``ship.steady_window_m`` or the default of the schema)."""
     if scene.ship.steady_window_m is not None:
@@ -97,15 +111,9 @@ class Tier1Model:
         g = self.geometry
         self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
         width = ice.channel_width_m or self.domain_m[1]
-        from iceresist.limits import check_scene_ice, check_tier1
+        from iceresist.limits import check_tier1
 
-        check_scene_ice(scene, width)
-        jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
-        self.layout = channel_layout(width_m=width, length_m=ice.channel_length_m, cube_m=ice.size_m,
-                                     concentration=ice.concentration, count=ice.count,
-                                     start_x_m=ice.channel_start_x_m, centre_y_m=self.centre_y_m,
-                                     water_level_m=self.level_m, ice_density_kg_m3=ice.density_kg_m3,
-                                     water_density_kg_m3=self.rho_w, jitter_m=jitter, seed=ice.seed)
+        self.layout = ice_layout(scene, width, self.centre_y_m, self.level_m, self.rho_w)
         self.speed_m_s = float(sh.speed_m_s)
         self.start_x_m = float(sh.start_x_m) if sh.start_x_m is not None else ice.channel_start_x_m - 0.05
         self.window_m = steady_window_m(scene, g, self.layout)

@@ -35,8 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceresist.errors import InputError
-from iceresist.ship.channel import channel_layout
-from iceresist.tier1 import hull_geometry, hull_shape, steady_window_m
+from iceresist.tier1 import hull_geometry, hull_shape, ice_layout, steady_window_m
 
 log = logging.getLogger(__name__)
 
@@ -123,12 +122,7 @@ class Tier2Model:
         g = self.geometry
         self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
         width = ice.channel_width_m or self.domain_m[1]
-        jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
-        self.layout = channel_layout(width_m=width, length_m=ice.channel_length_m, cube_m=ice.size_m,
-                                     concentration=ice.concentration, count=ice.count,
-                                     start_x_m=ice.channel_start_x_m, centre_y_m=self.centre_y_m,
-                                     water_level_m=self.level_m, ice_density_kg_m3=ice.density_kg_m3,
-                                     water_density_kg_m3=self.rho_w, jitter_m=jitter, seed=ice.seed)
+        self.layout = ice_layout(scene, width, self.centre_y_m, self.level_m, self.rho_w)
         self.speed_m_s = float(sh.speed_m_s)
         self.start_x_m = float(sh.start_x_m) if sh.start_x_m is not None else ice.channel_start_x_m - 0.05
         self.window_m = steady_window_m(scene, g, self.layout)

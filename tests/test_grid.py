@@ -122,5 +122,5 @@ def test_input_errors_name_the_field(kwargs, words):
 
 
 def test_face_kind_is_checked():
-    with pytest.raises(InputError, match="face kind 'slip'"):
-        Face("slip")
+    with pytest.raises(InputError, match="face kind 'free_slip' is not one of .*slip"):
+        Face("free_slip")

@@ -34,7 +34,7 @@ from iceresist.lattice import C, Q, index_of
 BLOCK = 8
 CELLS = BLOCK ** 3
 FACE_NAMES = ("x-", "x+", "y-", "y+", "z-", "z+")
-FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet")
+FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet", "slip")
 
 #: Lattice index q of the block offset with key k = (ox+1) + 3*(oy+1) + 9*(oz+1).
 Q_OF_KEY = np.array([index_of(ox, oy, oz) for oz in (-1, 0, 1) for oy in (-1, 0, 1) for ox in (-1, 0, 1)],

@@ -17,6 +17,14 @@ outside the last fluid cell):
   The anti-bounce-back fixes the density at the face to rho_w and lets the
   velocity through; the velocity in the quadratic term is the cell's own, which
   is first-order in the half-cell offset but exact for a uniform outflow.
+* free-slip wall (specular reflection; Succi 2001, section 12.4; Krueger et al. 2017, section 5.3.3):
+  the population leaves the cell beside x along the face and is mirrored at the face, so that its
+  tangential velocity is kept and its normal one reversed: f_q(x) = f*_q'(x - c_t), with c_q' = c_q
+  with its normal component negated and c_t the tangential part of c_q. The reflection maps the
+  populations that leave through the face one to one onto those that enter, so mass is kept exactly,
+  and no tangential momentum goes into the wall (zero shear stress at the half-way face). It reads
+  another cell's population, so the fused kernel applies it (``iceresist.lbm.stream``); where the
+  cell x - c_t is not fluid (an edge of two faces, a solid) the link falls back to bounce-back.
 """
 
 from __future__ import annotations
@@ -38,12 +46,12 @@ def build_link_boundary(target, real, device=None):
     ``device``: the decorator to compile with (default ``target.device``).
     """
     zero, one, two, six, c45, c15 = (real(v) for v in (0.0, 1.0, 2.0, 6.0, 4.5, 1.5))
-    bc_wall, bc_outlet = FL.BC_WALL, FL.BC_OUTLET
+    bc_wall, bc_outlet, bc_slip = FL.BC_WALL, FL.BC_OUTLET, FL.BC_SLIP
 
     @(device or target.device)
     def link_boundary(fopp, row, bc_kind, bc_u, bc_rho, cx, cy, cz, w, ulx, uly, ulz):
         kind = bc_kind[row]
-        if kind == bc_wall:
+        if kind == bc_wall or kind == bc_slip:   # slip: a link normal to the face, reflected straight back
             return fopp
         if kind == bc_outlet:
             rho_w = bc_rho[row]

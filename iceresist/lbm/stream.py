@@ -32,7 +32,7 @@ import numpy as np
 
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
-from iceresist.lattice import C, OPP, Q, W
+from iceresist.lattice import C, OPP, Q, W, index_of
 from iceresist.lbm.boundary import GHOST, build_link_boundary
 from iceresist.lbm.codegen import F_NAMES, compile_source, term
 
@@ -50,9 +50,14 @@ POOL_ARGS = FS_ARGS + ("fslot",)
 
 def _source_lines(q: int):
     """Source expressions (block key, cell index) of the cell x - c_q."""
+    return _offset_lines(C[q])
+
+
+def _offset_lines(cvec):
+    """Source expressions (block key, cell index) of the cell x - c for an integer vector c."""
     parts_key, parts_cell = ["13"], []
     for axis, (l, scale_key, scale_cell) in enumerate((("lx", 1, 1), ("ly", 3, 8), ("lz", 9, 64))):
-        c = int(C[q, axis])
+        c = int(cvec[axis])
         if c == 0:
             parts_cell.append(f"{l}" if scale_cell == 1 else f"{scale_cell} * {l}")
             continue
@@ -135,18 +140,20 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
         s += "            if flags[nb, sc] & PULLED:\n"
         s += f"                f{q} = src[nb, {q}, sc]\n"
         if free_surface:
-            cu = "".join(term(C[q, a], f"ul{'xyz'[a]}") for a in range(3))
-            s += "            elif flags[nb, sc] & GAS:\n"
-            s += f"                cu = zero{cu}\n"
-            s += "                t = two * phi[nb, sc] - one\n"
-            s += "                t = min(max(t, -tclip), tclip)\n"
-            s += "                d3g = g3 * half * (s_c + half_width * atanh(t))\n"
-            s += (f"                f{q} = -fopp + two_w{q} * (d3g + (one + d3g) * (c45 * cu * cu - c15 * uu_l))\n")
+            s += _gas_source_lines(q, "            ")
         s += "            else:\n"
         s += f"                f{q} = fopp\n"
         s += "        else:\n"
-        s += (f"            f{q} = link_boundary(fopp, link_bc[b, k], bc_kind, bc_u, bc_rho, "
-              f"r{cx + 1}, r{cy + 1}, r{cz + 1}, w{q}, ulx, uly, ulz)\n")
+        s += "            row = link_bc[b, k]\n"
+        call = (f"link_boundary(fopp, row, bc_kind, bc_u, bc_rho, "
+                f"r{cx + 1}, r{cy + 1}, r{cz + 1}, w{q}, ulx, uly, ulz)\n")
+        if sum(1 for v in (cx, cy, cz) if v) > 1:
+            s += "            if bc_kind[row] == BC_SLIP:\n"
+            s += _slip_lines(q, free_surface)
+            s += "            else:\n"
+            s += f"                f{q} = " + call
+        else:   # a link normal to the face: the specular reflection is the bounce-back of link_boundary
+            s += f"            f{q} = " + call
     if free_surface:
         s += f"    rho_c = one + {' + '.join(F_NAMES)}\n"
         s += f"    out = collide(({', '.join(F_NAMES)}), omega, rho_c * Fx, rho_c * Fy, rho_c * Fz)\n"
@@ -162,8 +169,50 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
     return s
 
 
+def _slip_lines(q: int, free_surface: bool) -> str:
+    """Source of the free-slip rule for population ``q`` (``iceresist.lbm.boundary``, specular reflection).
+
+    The face the link leaves through is that of the boundary row (rows 1-6 are x-, x+, y-, y+, z-, z+,
+    so its axis is (row - 1) >> 1). The population comes from the cell x - c_t beside x (c_t: c_q without
+    its normal component) in the mirrored direction q' (c_q with the normal component negated). Where
+    x - c_t is not a fluid cell the link falls back to bounce-back; where it is a gas cell (free surface)
+    eq. (11) applies as for a pull from that gas cell.
+    """
+    c = [int(v) for v in C[q]]
+    axes = [a for a in range(3) if c[a]]          # two or three: the face's axis is one of them
+    s = f"                f{q} = fopp\n"
+    for i, a in enumerate(axes):
+        tangential = [0 if j == a else c[j] for j in range(3)]
+        mirrored = [-c[j] if j == a else c[j] for j in range(3)]
+        key, cell = _offset_lines(tangential)
+        test = "else:" if i == len(axes) - 1 else f"{'if' if i == 0 else 'elif'} (row - 1) >> 1 == {a}:"
+        s += f"                {test}\n"
+        s += f"                    nb = nbr_key[b, {key}]\n"
+        s += f"                    sc = {cell}\n"
+        s += f"                    qm = {index_of(*mirrored)}\n"
+    s += "                if nb >= 0:\n"
+    s += "                    if flags[nb, sc] & PULLED:\n"
+    s += f"                        f{q} = src[nb, qm, sc]\n"
+    if free_surface:
+        s += _gas_source_lines(q, "                    ")
+    return s
+
+
+def _gas_source_lines(q: int, indent: str) -> str:
+    """``elif`` branch of a pull of population ``q`` from the gas cell (nb, sc): eq. (11) with the sub-cell
+    hydrostatic link density (:func:`stream_collide_source`)."""
+    cu = "".join(term(C[q, a], f"ul{'xyz'[a]}") for a in range(3))
+    lines = ["elif flags[nb, sc] & GAS:",
+             f"    cu = zero{cu}",
+             "    t = two * phi[nb, sc] - one",
+             "    t = min(max(t, -tclip), tclip)",
+             "    d3g = g3 * half * (s_c + half_width * atanh(t))",
+             f"    f{q} = -fopp + two_w{q} * (d3g + (one + d3g) * (c45 * cu * cu - c15 * uu_l))"]
+    return "".join(indent + ln + "\n" for ln in lines)
+
+
 def _namespace(target, real, collide):
-    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "NEAR_OUTLET": FL.NEAR_OUTLET, "GAS": FL.GAS,
+    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "BC_SLIP": FL.BC_SLIP, "NEAR_OUTLET": FL.NEAR_OUTLET, "GAS": FL.GAS,
           "NEED_U": FL.NEAR_OUTLET | FL.NEAR_SURFACE, "c45": real(4.5), "c15": real(1.5),
           "izero": np.int64(0), "zero": real(0.0),
           "one": real(1.0), "half": real(0.5), "two": real(2.0), "three": real(3.0), "tclip": real(TANH_CLIP),

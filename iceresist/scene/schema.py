@@ -26,7 +26,7 @@ log = logging.getLogger(__name__)
 
 Vec3 = tuple[float, float, float]
 PositiveFloat = Annotated[float, Field(gt=0)]
-FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet")
+FACE_KINDS = ("periodic", "wall", "moving_wall", "velocity_inlet", "pressure_outlet", "slip")
 FACE_NAMES = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
 FIELD_NAMES = ("rho", "u", "pressure", "flags", "phi", "surface")
 
@@ -53,7 +53,8 @@ class SceneInfo(_Section):
 class Face(_Section):
     """One domain face: its boundary condition."""
 
-    kind: Literal[FACE_KINDS] = Field("wall", description="Boundary condition: " + ", ".join(FACE_KINDS) + ".")
+    kind: Literal[FACE_KINDS] = Field("wall", description="Boundary condition: " + ", ".join(FACE_KINDS) + " "
+                                      "(`wall`: no-slip; `slip`: free-slip, specular reflection).")
     velocity_m_s: Vec3 = Field((0.0, 0.0, 0.0),
                                description="Wall or inlet velocity (m/s); only for `moving_wall` and `velocity_inlet`.")
     density_kg_m3: float | None = Field(None, gt=0,

@@ -48,6 +48,40 @@ from iceresist.grid.forest import BLOCK
 log = logging.getLogger(__name__)
 
 
+#: Cells of a body's cell box per launch row. A body whose box holds more (the hull: 0.7 M cells at the quick
+#: tier-2 resolution, 78 M at the paper's) is split into slabs along z, each launched as a body row of its own
+#: (:func:`tile_bodies`), so that it spreads over every CPU thread and CUDA thread block instead of one.
+TILE_CELLS = 32768
+
+
+def tile_bodies(body, bint, tile_cells: int = TILE_CELLS):
+    """Split large cell boxes into slabs along z: ``(body_t, bint_t, tile_body)``.
+
+    Each slab is a row of ``body_t``/``bint_t``: a copy of its body's row whose cell box (``bint[:, 3:9]``) is
+    a z-range of the body's. The slabs of a body partition its box, so every cell is visited once and the
+    kernels, which index everything by the row (shape, state, owner, force row), run unchanged: the owner of a
+    covered cell is its slab's row and the force rows of a body's slabs add up to the body's force.
+    ``tile_body[row]`` is the body of a row; None where no body is split (rows are bodies).
+
+    The CPU launcher hands each thread a contiguous range of rows (numba's static prange schedule), so the rows
+    are ordered by (slab number + 1/2) / slabs of their body: a body's slabs spread evenly over the range and
+    every thread gets its share of the large body.
+    """
+    ext = (bint[:, 6:9].astype(np.int64) - bint[:, 3:6] + 1)
+    nz = ext[:, 2]
+    m = np.maximum(np.minimum(-(-ext.prod(axis=1) // int(tile_cells)), nz), 1)
+    if (m == 1).all():
+        return body, bint, None
+    tile_body = np.repeat(np.arange(len(m)), m)
+    j = np.arange(len(tile_body)) - np.repeat(np.cumsum(m) - m, m)          # slab number within its body
+    mt, nzt, lo = m[tile_body], nz[tile_body], bint[tile_body, 5].astype(np.int64)
+    bint_t = bint[tile_body].copy()
+    bint_t[:, 5] = lo + (j * nzt) // mt
+    bint_t[:, 8] = lo + ((j + 1) * nzt) // mt - 1
+    order = np.argsort((j + 0.5) / mt, kind="stable")
+    return np.ascontiguousarray(body[tile_body[order]]), bint_t[order], tile_body[order]
+
+
 @dataclass(frozen=True)
 class LatticeUnits:
     """Cell size ``dx_m``, time step ``dt_s``, fluid density ``rho_kg_m3``, and the world position of the
@@ -143,6 +177,8 @@ class FluidStructureCoupling:
             self._minus_one = dev(owner.copy())
         self._k = coupling_launchers(self.target, self.real,
                                      None if self.surface is None else self.surface.phase.lat)
+        self.tile_cells = TILE_CELLS
+        self._tile_body = None
         self._placed = self.surface is None
         self._prev_boxes = None
         self._force_prev = None
@@ -237,6 +273,8 @@ class FluidStructureCoupling:
         body_h, bint_h = self._body_arrays()
         active_h = self._active(bint_h)
         self.active_blocks = len(active_h)
+        body_h, bint_h, self._tile_body = tile_bodies(body_h, bint_h, self.tile_cells)
+        rows = len(bint_h)
         body, bint, active = self._dev(body_h), self._dev(bint_h), self._dev(active_h)
         d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]
         if self.target.is_cuda:
@@ -244,7 +282,7 @@ class FluidStructureCoupling:
         else:
             d["owner"].fill(-1)
         f, flags = self.solver.state, self.solver.flags
-        k["mark"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
+        k["mark"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
         if not self._placed:        # first step with a free surface: the bodies are placed, not moved in
             d["owner_prev"] = self._dev(self._host(d["owner"]).copy())
             self._placed = True
@@ -267,18 +305,26 @@ class FluidStructureCoupling:
         else:
             k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"],
                               flags, d["owner"], d["owner_prev"], f, phase.phi, phase.h)
-            k["mirror"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"],
+            k["mirror"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"],
                         phase.phi)
         if self.debug:
             k["poison"](na, active, d["flags0"], d["owner"], d["owner_prev"], f)
-        bforce = self._dev(np.zeros((self.n, 3)))
-        btorque = self._dev(np.zeros((self.n, 3)))
-        nlinks = self._dev(np.zeros((self.n, 1), dtype=np.int64))
-        k["links"](self.n, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
+        bforce = self._dev(np.zeros((rows, 3)))
+        btorque = self._dev(np.zeros((rows, 3)))
+        nlinks = self._dev(np.zeros((rows, 1), dtype=np.int64))
+        k["links"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
                    bforce, btorque, nlinks, flags)
-        self.force_lattice = self._host(bforce).copy()
-        self.torque_lattice = self._host(btorque).copy()
-        self.links = self._host(nlinks)[:, 0].copy()
+        self.force_lattice = self._per_body(self._host(bforce))
+        self.torque_lattice = self._per_body(self._host(btorque))
+        self.links = self._per_body(self._host(nlinks))[:, 0]
+
+    def _per_body(self, rows: np.ndarray) -> np.ndarray:
+        """Sums over the launch rows of each body (:func:`tile_bodies`), as a new array."""
+        if self._tile_body is None:
+            return rows.copy()
+        out = np.zeros((self.n, rows.shape[1]), dtype=rows.dtype)
+        np.add.at(out, self._tile_body, rows)
+        return out
 
     def step(self, n: int = 1):
         """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21)."""
@@ -304,7 +350,10 @@ class FluidStructureCoupling:
     # ------------------------------------------------------------------ diagnostics
     def owners(self) -> np.ndarray:
         """The body covering each cell (nblocks, 512), -1 for none (host copy)."""
-        return self._host(self._d["owner"]).copy()
+        owner = self._host(self._d["owner"]).copy()
+        if self._tile_body is not None:
+            owner = np.where(owner >= 0, self._tile_body[np.maximum(owner, 0)], -1).astype(owner.dtype)
+        return owner
 
     def fluid_mask(self) -> np.ndarray:
         """Cells that are fluid now (nblocks, 512): static fluid and not covered by a body (with a free surface:

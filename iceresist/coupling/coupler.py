@@ -54,30 +54,37 @@ log = logging.getLogger(__name__)
 TILE_CELLS = 32768
 
 
-def tile_bodies(body, bint, tile_cells: int = TILE_CELLS):
-    """Split large cell boxes into slabs along z: ``(body_t, bint_t, tile_body)``.
+def slab_counts(bint, tile_cells: int = TILE_CELLS) -> np.ndarray:
+    """Slabs per body: its cell box (``bint[:, 3:9]``) over ``tile_cells``, rounded up, at most one per z-plane."""
+    ext = (bint[:, 6:9].astype(np.int64) - bint[:, 3:6] + 1)
+    return np.maximum(np.minimum(-(-ext.prod(axis=1) // int(tile_cells)), ext[:, 2]), 1)
+
+
+def tile_bodies(body, bint, slabs):
+    """Split each body's cell box into ``slabs[k]`` slabs along z: ``(body_t, bint_t, tile_body)``.
 
     Each slab is a row of ``body_t``/``bint_t``: a copy of its body's row whose cell box (``bint[:, 3:9]``) is
     a z-range of the body's. The slabs of a body partition its box, so every cell is visited once and the
     kernels, which index everything by the row (shape, state, owner, force row), run unchanged: the owner of a
     covered cell is its slab's row and the force rows of a body's slabs add up to the body's force.
-    ``tile_body[row]`` is the body of a row; None where no body is split (rows are bodies).
+    ``tile_body[row]`` is the body of a row; None where no body is split (rows are bodies). The rows depend on
+    ``slabs`` alone, so a coupling that keeps ``slabs`` keeps the body of every row from step to step (the refill
+    reads the velocity of the body that uncovered a cell from the row that covered it a step earlier).
 
     The CPU launcher hands each thread a contiguous range of rows (numba's static prange schedule), so the rows
     are ordered by (slab number + 1/2) / slabs of their body: a body's slabs spread evenly over the range and
     every thread gets its share of the large body.
     """
-    ext = (bint[:, 6:9].astype(np.int64) - bint[:, 3:6] + 1)
-    nz = ext[:, 2]
-    m = np.maximum(np.minimum(-(-ext.prod(axis=1) // int(tile_cells)), nz), 1)
+    m = np.asarray(slabs, dtype=np.int64)
     if (m == 1).all():
         return body, bint, None
     tile_body = np.repeat(np.arange(len(m)), m)
     j = np.arange(len(tile_body)) - np.repeat(np.cumsum(m) - m, m)          # slab number within its body
-    mt, nzt, lo = m[tile_body], nz[tile_body], bint[tile_body, 5].astype(np.int64)
+    nz = (bint[:, 8].astype(np.int64) - bint[:, 5] + 1)[tile_body]
+    mt, lo = m[tile_body], bint[tile_body, 5].astype(np.int64)
     bint_t = bint[tile_body].copy()
-    bint_t[:, 5] = lo + (j * nzt) // mt
-    bint_t[:, 8] = lo + ((j + 1) * nzt) // mt - 1
+    bint_t[:, 5] = lo + (j * nz) // mt                   # a slab is empty (z1 < z0) where the box has fewer planes
+    bint_t[:, 8] = lo + ((j + 1) * nz) // mt - 1
     order = np.argsort((j + 0.5) / mt, kind="stable")
     return np.ascontiguousarray(body[tile_body[order]]), bint_t[order], tile_body[order]
 
@@ -177,7 +184,8 @@ class FluidStructureCoupling:
             self._minus_one = dev(owner.copy())
         self._k = coupling_launchers(self.target, self.real,
                                      None if self.surface is None else self.surface.phase.lat)
-        self.tile_cells = TILE_CELLS
+        self._tile_cells = TILE_CELLS
+        self._slabs = None
         self._tile_body = None
         self._placed = self.surface is None
         self._prev_boxes = None
@@ -191,6 +199,17 @@ class FluidStructureCoupling:
         self.event_blocks = 0
         self.iteration = 0
         log.info("coupling: %d bodies on %d blocks, buoyancy %s", self.n, fo.nblocks, self.buoyancy)
+
+    @property
+    def tile_cells(self) -> int:
+        """Cells of a body's cell box per launch row (:func:`tile_bodies`). The slabs of each body are counted
+        from its box at the first step after this is set and then kept."""
+        return self._tile_cells
+
+    @tile_cells.setter
+    def tile_cells(self, value: int):
+        self._tile_cells = int(value)
+        self._slabs = None
 
     # ------------------------------------------------------------------ device helpers
     def _dev(self, a):
@@ -273,7 +292,9 @@ class FluidStructureCoupling:
         body_h, bint_h = self._body_arrays()
         active_h = self._active(bint_h)
         self.active_blocks = len(active_h)
-        body_h, bint_h, self._tile_body = tile_bodies(body_h, bint_h, self.tile_cells)
+        if self._slabs is None:
+            self._slabs = slab_counts(bint_h, self._tile_cells)
+        body_h, bint_h, self._tile_body = tile_bodies(body_h, bint_h, self._slabs)
         rows = len(bint_h)
         body, bint, active = self._dev(body_h), self._dev(bint_h), self._dev(active_h)
         d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]

@@ -336,31 +336,15 @@ class FreeSurfaceModel:
     def state(self) -> dict:
         """Everything a bit-for-bit restart needs, in storage precision: the population rows and their
         blocks, h, phi, the cell flags, the iteration and the initial water volume."""
-        fs = self.fluid
-        blocks, f = fs.fluid.rows()
-        return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(fs.fluid.pool.capacity),
-                "h": fs._host(fs.phase.h), "phi": fs._host(fs.phase.phi),
-                "flags": np.asarray(fs._host(fs.fluid.flags)), "volume0_cells": np.float64(self.volume0_cells),
+        return {**self.fluid.state(), "volume0_cells": np.float64(self.volume0_cells),
                 "iteration": np.int64(self.iteration), "precision": self.precision}
 
     def load_state(self, state: dict):
-        fs = self.fluid
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
-        if "h" not in state or "f_blocks" not in state:
-            raise InputError("checkpoint holds no free-surface state: it belongs to another scene")
-        h = np.asarray(state["h"])
-        if h.shape != tuple(fs.phase.h.shape):
-            raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs {tuple(fs.phase.h.shape)}: "
-                             f"it belongs to another scene (or another free_surface.h_lattice)")
-        fs.fluid.set_rows(np.asarray(state["f_blocks"]), np.asarray(state["f"]).astype(fs.real),
-                          int(state["f_rows"]))
-        _copy_into(fs.phase.h, h.astype(fs.real))
-        _copy_into(fs.phase.phi, np.asarray(state["phi"]).astype(fs.real))
-        _copy_into(fs.fluid.flags, np.asarray(state["flags"]).astype(np.uint8))
+        self.fluid.load_state(state)
         self.volume0_cells = float(state["volume0_cells"])
-        fs.iteration = fs.fluid.iteration = int(state["iteration"])
 
     def describe(self) -> dict:
         fs = self.scene.free_surface
@@ -378,18 +362,6 @@ class FreeSurfaceModel:
         """Bytes of the state arrays this model holds: the population pool, the phase field (h, phi) and the
         velocity, flag and work arrays (:meth:`FreeSurfaceFluid.allocated_bytes`)."""
         return int(sum(self.fluid.allocated_bytes().values()))
-
-
-def _copy_into(dst, host: np.ndarray):
-    """Overwrite a target array (NumPy or CUDA device array) with ``host``."""
-    host = np.ascontiguousarray(host)
-    if tuple(dst.shape) != host.shape:
-        raise InputError(f"checkpoint array of shape {host.shape} does not fit {tuple(dst.shape)}: "
-                         f"it belongs to another scene")
-    if hasattr(dst, "copy_to_device"):
-        dst.copy_to_device(host)
-    else:
-        dst[...] = host
 
 
 def build_model(scene: Scene, *, backend: str | None = None, precision: str | None = None):

@@ -253,14 +253,31 @@ class Tier2Model:
                 "velocities_m_s": self.dem.velocities[ice]}
 
     def state(self) -> dict:
-        """What a checkpoint of a tier-2 run stores: the step count, the last forces and the ice state. The
-        populations and the phase field are not checkpointed, so :meth:`load_state` refuses to continue."""
-        return {"iteration": np.int64(self.iteration), "force_mean_N": self._force_mean.copy(),
-                "fluid_force_mean_N": self._fluid_mean.copy(), **self.ice_state()}
+        """Everything a bit-for-bit restart needs: the record count and the last forces, the fluid (population
+        rows, h, phi, flags), the coupling (cell owners, previous forces), the DEM with its contact history, and
+        the ice bodies alone under ``positions_m`` etc. (for readers of the checkpoint)."""
+        return {"iteration": np.int64(self.iteration), "lbm_steps": np.int64(self.lbm_steps),
+                "force_mean_N": self._force_mean.copy(), "force_last_N": self._force_last.copy(),
+                "fluid_force_mean_N": self._fluid_mean.copy(), "precision": self.precision,
+                "fluid": self.fb.fluid.state(), "coupling": self.fb.coupling.state(), "dem": self.dem.state(),
+                **self.ice_state()}
 
     def load_state(self, state: dict):
-        raise InputError("a tier-2 run cannot be continued from a checkpoint (populations and phase field are not "
-                         "stored): run the scene again without --pickup")
+        """Continue from :meth:`state` of a model built from the same scene (same backend precision)."""
+        if "fluid" not in state or "coupling" not in state or "dem" not in state:
+            raise InputError("the checkpoint holds no tier-2 flow state (it was written before tier-2 checkpoints "
+                             "kept the populations and the phase field): run the scene again without --pickup")
+        if str(state.get("precision", self.precision)) != self.precision:
+            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
+                             f"restart with --precision {state.get('precision')}")
+        self.fb.fluid.load_state(state["fluid"])
+        self.fb.coupling.load_state(state["coupling"])
+        self.dem.load_state(state["dem"])
+        self.iteration = int(state["iteration"])
+        self.lbm_steps = int(state["lbm_steps"])
+        self._force_mean = np.asarray(state["force_mean_N"], dtype=float).copy()
+        self._force_last = np.asarray(state["force_last_N"], dtype=float).copy()
+        self._fluid_mean = np.asarray(state["fluid_force_mean_N"], dtype=float).copy()
 
     def allocation(self) -> dict:
         """Bytes held per component: LBM populations and fluid arrays, phase field (h, phi), DEM, coupling."""

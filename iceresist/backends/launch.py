@@ -18,6 +18,23 @@ import numba
 from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
 
 
+def copy_into(dst, host):
+    """Overwrite a target array (NumPy or CUDA device array) with the host array ``host`` of the same shape
+    (a checkpoint being loaded); a shape that does not fit is refused with a message naming both."""
+    import numpy as np
+
+    from iceresist.errors import InputError
+
+    host = np.ascontiguousarray(host)
+    if tuple(dst.shape) != host.shape:
+        raise InputError(f"checkpoint array of shape {host.shape} does not fit {tuple(dst.shape)}: "
+                         f"it belongs to another scene")
+    if hasattr(dst, "copy_to_device"):
+        dst.copy_to_device(host)
+    else:
+        dst[...] = host
+
+
 class CellLauncher:
     """Callable ``launcher(nblocks, *args)`` running ``cell(b, c, *args)`` for every cell of every block."""
 

@@ -368,6 +368,45 @@ class FluidStructureCoupling:
             self.dem.step(u.dt_s)
             self.iteration += 1
 
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> dict:
+        """What a bit-for-bit restart of the coupling needs between two steps: the covering rows of every cell
+        now and a step earlier, the slabs per body (so the rows mean the same bodies), the cell boxes of the last
+        step (the active blocks), F_s and M_s of the last step (eqs. 20-21) and the step count."""
+        n = self.n
+        return {"owner": self._host(self._d["owner"]).copy(), "owner_prev": self._host(self._d["owner_prev"]).copy(),
+                "slabs": np.zeros(0, np.int64) if self._slabs is None else np.asarray(self._slabs, np.int64),
+                "prev_boxes": np.zeros((0, 6), np.int64) if self._prev_boxes is None else self._prev_boxes.copy(),
+                "force_prev": np.zeros((0, 6)) if self._force_prev is None else self._force_prev.copy(),
+                "force_lattice": self.force_lattice.reshape(n, 3).copy(),
+                "torque_lattice": self.torque_lattice.reshape(n, 3).copy(),
+                "fluid_force_N": self.fluid_force_N.copy(), "fluid_torque_N_m": self.fluid_torque_N_m.copy(),
+                "placed": np.int8(self._placed), "iteration": np.int64(self.iteration)}
+
+    def load_state(self, state: dict):
+        """Continue from :meth:`state` of a coupling built the same way (same forest, bodies, tile size)."""
+        from iceresist.backends.launch import copy_into
+
+        missing = [k for k in ("owner", "owner_prev", "slabs", "prev_boxes", "force_prev") if k not in state]
+        if missing:
+            raise InputError(f"coupling state lacks {', '.join(missing)}: it was not written by "
+                             "FluidStructureCoupling.state()")
+        copy_into(self._d["owner"], np.asarray(state["owner"], dtype=np.int32))
+        copy_into(self._d["owner_prev"], np.asarray(state["owner_prev"], dtype=np.int32))
+        slabs = np.asarray(state["slabs"], dtype=np.int64)
+        if slabs.size not in (0, self.n):
+            raise InputError(f"coupling state has slabs for {slabs.size} bodies, this scene has {self.n}: "
+                             "it belongs to another scene")
+        self._slabs = slabs if slabs.size else None
+        boxes, fprev = np.asarray(state["prev_boxes"], np.int64), np.asarray(state["force_prev"], float)
+        self._prev_boxes = boxes if boxes.size else None
+        self._force_prev = fprev if fprev.size else None
+        for key in ("force_lattice", "torque_lattice", "fluid_force_N", "fluid_torque_N_m"):
+            if key in state:
+                setattr(self, key, np.asarray(state[key], dtype=float).copy())
+        self._placed = bool(state["placed"])
+        self.iteration = int(state["iteration"])
+
     # ------------------------------------------------------------------ diagnostics
     def owners(self) -> np.ndarray:
         """The body covering each cell (nblocks, 512), -1 for none (host copy)."""

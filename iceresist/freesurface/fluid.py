@@ -31,7 +31,7 @@ import numpy as np
 
 from iceresist import lattice as L
 from iceresist.backends import jit
-from iceresist.backends.launch import CellLauncher
+from iceresist.backends.launch import CellLauncher, copy_into
 from iceresist.errors import InputError
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
 from iceresist.freesurface.layout import build_neighbour
@@ -246,6 +246,30 @@ class FreeSurfaceFluid:
     def phi(self) -> np.ndarray:
         """Dense phi (nx, ny, nz), float64."""
         return self.forest.to_dense(self.phase.phi_host().astype(np.float64))
+
+    def state(self) -> dict:
+        """Everything a bit-for-bit restart of the fluid needs, in storage precision: the population rows and
+        their blocks, h, phi, the cell flags (GHOST marks of bodies included) and the iteration."""
+        blocks, f = self.fluid.rows()
+        return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(self.fluid.pool.capacity),
+                "h": self._host(self.phase.h), "phi": self._host(self.phase.phi),
+                "flags": np.asarray(self._host(self.fluid.flags)), "iteration": np.int64(self.iteration)}
+
+    def load_state(self, state: dict):
+        """Continue from :meth:`state` of a fluid built the same way (same forest, h lattice, precision)."""
+        if "h" not in state or "f_blocks" not in state:
+            raise InputError("checkpoint holds no free-surface state: it belongs to another scene")
+        h = np.asarray(state["h"])
+        if h.shape != tuple(self.phase.h.shape):
+            raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs "
+                             f"{tuple(self.phase.h.shape)}: it belongs to another scene (or another "
+                             f"free_surface.h_lattice)")
+        self.fluid.set_rows(np.asarray(state["f_blocks"]), np.asarray(state["f"]).astype(self.real),
+                            int(state["f_rows"]))
+        copy_into(self.phase.h, h.astype(self.real))
+        copy_into(self.phase.phi, np.asarray(state["phi"]).astype(self.real))
+        copy_into(self.fluid.flags, np.asarray(state["flags"]).astype(np.uint8))
+        self.iteration = self.fluid.iteration = int(state["iteration"])
 
     def volume(self) -> float:
         """Water volume sum phi (cells^3, the quantity eqs. 4-10 conserve), float64."""

@@ -172,11 +172,13 @@ def _toml_value(v) -> str:
 
 
 def to_toml(data: dict) -> str:
-    """TOML text of a scene dict (sections of scalars, lists and inline tables)."""
+    """TOML text of a scene dict (sections of scalars, lists and inline tables). TOML has no null: a key whose
+    value is None is left out, which gives it its default (None for every optional scene key)."""
     lines = []
     for section, values in data.items():
         lines.append(f"[{section}]")
         for k, v in values.items():
-            lines.append(f"{k} = {_toml_value(v)}")
+            if v is not None:
+                lines.append(f"{k} = {_toml_value(v)}")
         lines.append("")
     return "\n".join(lines)

@@ -1,7 +1,9 @@
-"""Fixed sphere in uniform flow: drag coefficient against Schiller-Naumann (the set-up of tests/test_sphere_drag.py).
+"""Fixed sphere in uniform flow: drag coefficient against Schiller-Naumann (the kind of set-up of
+tests/test_sphere_drag.py, in smaller boxes: that test uses a 12 x 8 x 8 d box with the sphere 4 d behind the inlet).
 
 Velocity inlet at x-, pressure outlet at x+, periodic sides; the sphere (a kinematic DEM body at rest, coupled
-by interpolated bounce-back and momentum exchange, paper eqs. 16-19) sits 3 diameters behind the inlet.
+by interpolated bounce-back and momentum exchange, paper eqs. 16-19) sits 3 diameters behind the inlet. The quick
+box (8 x 4 x 4 d) repeats the sphere every 4 d sideways, which is most of its 18-24 % error (docs/VALIDATION.md).
 Re = U d / nu = 10, U = 0.1 (lattice). The run lasts 16 d / U and C_d is the mean over its last quarter.
 """
 

@@ -13,7 +13,14 @@ from tests.test_tier1_pickup import run_cli, scene_file
 CASE = "A-c68-v1.0"
 
 
-def test_tier2_pickup_continues_bit_for_bit(tmp_path):
+@pytest.mark.parametrize("tile_cells", [None, 256])
+def test_tier2_pickup_continues_bit_for_bit(tmp_path, monkeypatch, tile_cells):
+    """``tile_cells`` 256: the hull (a cell box of about 2 000 cells here) is launched in slabs, so the slab counts
+    and the slab rows that own the covered cells cross the restart too."""
+    if tile_cells is not None:
+        from iceresist.coupling import coupler
+
+        monkeypatch.setattr(coupler, "TILE_CELLS", tile_cells)
     path, name = scene_file(tmp_path, 2, TINY_TIER2_OVERRIDES, checkpoint_every=4)
     assert run_cli(path, "--output", tmp_path / "split", "--steps", "8") == 0
     assert run_cli(path, "--output", tmp_path / "split", "--steps", "13", "--pickup") == 0
@@ -23,6 +30,13 @@ def test_tier2_pickup_continues_bit_for_bit(tmp_path):
         assert a.meta["iteration"] == 13
     np.testing.assert_array_equal(ta["iteration"], np.arange(14))
     assert np.abs(tb["Fx_fluid_N"][9:]).max() > 0            # the hull moves the water after the restart
+    if tile_cells is not None:
+        from iceresist.model import build_model
+        from iceresist.scene.load import load_scene
+
+        model = build_model(load_scene(path), backend="cpu")
+        model.step(1)
+        assert model.fb.coupling._tile_body is not None and len(model.fb.coupling._tile_body) > model.dem.n_bodies
     for key in ("Fx_N", "Fz_N", "Fx_fluid_N", "Fz_fluid_N", "x_bow_m", "contacts", "ice_kinetic_energy_J",
                 "water_volume_m3"):
         np.testing.assert_array_equal(ta[key], tb[key], err_msg=key)

@@ -14,17 +14,15 @@ Launchers are generated with named arguments (numba's CUDA kernels take no
 from __future__ import annotations
 
 import numba
+import numpy as np
 
 from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
+from iceresist.errors import InputError
 
 
 def copy_into(dst, host):
     """Overwrite a target array (NumPy or CUDA device array) with the host array ``host`` of the same shape
     (a checkpoint being loaded); a shape that does not fit is refused with a message naming both."""
-    import numpy as np
-
-    from iceresist.errors import InputError
-
     host = np.ascontiguousarray(host)
     if tuple(dst.shape) != host.shape:
         raise InputError(f"checkpoint array of shape {host.shape} does not fit {tuple(dst.shape)}: "

@@ -39,6 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from iceresist.backends.launch import copy_into
 from iceresist.coupling.geometry import pack
 from iceresist.coupling.kernels import coupling_launchers
 from iceresist.errors import InputError, StabilityError
@@ -385,8 +386,6 @@ class FluidStructureCoupling:
 
     def load_state(self, state: dict):
         """Continue from :meth:`state` of a coupling built the same way (same forest, bodies, tile size)."""
-        from iceresist.backends.launch import copy_into
-
         missing = [k for k in ("owner", "owner_prev", "slabs", "prev_boxes", "force_prev") if k not in state]
         if missing:
             raise InputError(f"coupling state lacks {', '.join(missing)}: it was not written by "

@@ -149,7 +149,8 @@ class Tier2Model:
         self.fb = FloatingBodies(self.shape_cells, depth_m=self.level_m, dx_m=dx, tau=tau, g_lattice=g_lat,
                                  rho_kg_m3=self.rho_w, operator=scene.fluid.operator, precision=self.precision,
                                  target=self.target, mobility=scene.free_surface.mobility_lattice,
-                                 width=scene.free_surface.interface_width_cells, dem=dem)
+                                 width=scene.free_surface.interface_width_cells, dem=dem,
+                                 contact_film=con.fluid_film)
         self.dem = dem
         self.hull = hull_shape(g, sh.sphere_spacing_m, sh.sphere_band_m)
         self.hull_body = self.fb.add_body(

@@ -133,11 +133,12 @@ class FluidStructureCoupling:
     ``geometries``: one shape of :mod:`iceresist.coupling.geometry` per DEM body, in body order.
     ``units``: :class:`LatticeUnits`. ``buoyancy``: add -rho_f V g to each body (default: when the LBM
     has no body force). ``debug``: fill newly covered cells with NaN, so a population the coupling failed
-    to provide shows up in :meth:`check_populations`.
+    to provide shows up in :meth:`check_populations`. ``contact_film``: bodies touching another body or a wall
+    feel the fluid pressure on the touching face (the film closure of :mod:`iceresist.coupling.kernels`).
     """
 
     def __init__(self, solver, dem, geometries, units: LatticeUnits, buoyancy: bool | None = None,
-                 debug: bool = False):
+                 debug: bool = False, contact_film: bool = True):
         self.surface = solver if hasattr(solver, "phase") else None
         if self.surface is not None:
             solver = self.surface.fluid
@@ -185,6 +186,9 @@ class FluidStructureCoupling:
             self._minus_one = dev(owner.copy())
         self._k = coupling_launchers(self.target, self.real,
                                      None if self.surface is None else self.surface.phase.lat)
+        self.contact_film = bool(contact_film)
+        g_lat, level = (0.0, 0.0) if self.surface is None else (self.surface.g, self.surface.depth)
+        self._d["film"] = dev(np.array([1.0 if self.contact_film else 0.0, g_lat, level], dtype=self.real))
         self._tile_cells = TILE_CELLS
         self._slabs = None
         self._tile_body = None
@@ -225,7 +229,7 @@ class FluidStructureCoupling:
 
     # ------------------------------------------------------------------ body state
     def _body_arrays(self):
-        """``body`` (n, 21) and ``bint`` (n, 9) in lattice units from the DEM state."""
+        """``body`` (n, 21) and ``bint`` (n, 10) in lattice units from the DEM state."""
         u = self.units
         pos = (self.dem.positions - np.asarray(u.origin_m)) / u.dx_m
         R = quaternion_matrices(self.dem.quaternions)
@@ -242,9 +246,10 @@ class FluidStructureCoupling:
         per = self._periodic
         lo = np.where(per, lo, np.maximum(lo, 0))
         hi = np.where(per, np.minimum(hi, lo + n - 1), np.minimum(hi, n - 1))
-        bint = np.empty((self.n, 9), dtype=np.int32)
+        bint = np.empty((self.n, 10), dtype=np.int32)
         bint[:, 0], bint[:, 1], bint[:, 2] = self._kinds, self._first, self._count
         bint[:, 3:6], bint[:, 6:9] = lo, hi
+        bint[:, 9] = np.arange(self.n)
         return body.astype(self.real), bint
 
     def _active(self, bint):
@@ -335,7 +340,7 @@ class FluidStructureCoupling:
         btorque = self._dev(np.zeros((rows, 3)))
         nlinks = self._dev(np.zeros((rows, 1), dtype=np.int64))
         k["links"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
-                   bforce, btorque, nlinks, flags)
+                   bforce, btorque, nlinks, flags, d["film"])
         self.force_lattice = self._per_body(self._host(bforce))
         self.torque_lattice = self._per_body(self._host(btorque))
         self.links = self._per_body(self._host(nlinks))[:, 0]

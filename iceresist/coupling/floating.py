@@ -55,12 +55,14 @@ class FloatingBodies:
     ``rho_kg_m3``: water density; ``operator`` ("bgk" or "cumulant"), ``precision``, ``target`` as in
     :class:`~iceresist.lbm.solver.LBMSolver`; ``mobility``, ``width``: the phase field (eqs. 9-10);
     ``dem``: a :class:`~iceresist.dem.DEMSystem` with contact parameters and walls of your own (its gravity
-    must be (0, 0, -9.81)), default one with the tank floor as a wall.
+    must be (0, 0, -9.81)), default one with the tank floor as a wall; ``contact_film``: the fluid pressure on
+    faces in contact (:class:`~iceresist.coupling.FluidStructureCoupling`).
     """
 
     def __init__(self, shape_cells, *, depth_m: float, dx_m: float, tau: float = 0.55, g_lattice: float = 1e-3,
                  rho_kg_m3: float = 1000.0, operator: str = "bgk", precision: str = "float64", target=jit.cpu,
-                 mobility: float = 0.05, width: float = 3.0, dem: DEMSystem | None = None):
+                 mobility: float = 0.05, width: float = 3.0, dem: DEMSystem | None = None,
+                 contact_film: bool = True):
         shape = tuple(int(v) for v in shape_cells)
         if len(shape) != 3 or any(v <= 0 or v % 8 for v in shape):
             raise InputError(f"shape_cells must be three positive multiples of 8, got {shape_cells!r}")
@@ -78,6 +80,7 @@ class FloatingBodies:
             dem = DEMSystem(gravity_m_s2=(0.0, 0.0, -GRAVITY_M_S2))
             dem.add_wall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
         self.dem = dem
+        self.contact_film = bool(contact_film)
         self.geometries: list = []
         self.coupling: FluidStructureCoupling | None = None
 
@@ -104,7 +107,8 @@ class FloatingBodies:
         if not self.geometries:
             raise InputError("FloatingBodies needs at least one body before start()")
         self.fluid.initialize()
-        self.coupling = FluidStructureCoupling(self.fluid, self.dem, self.geometries, self.units)
+        self.coupling = FluidStructureCoupling(self.fluid, self.dem, self.geometries, self.units,
+                                               contact_film=self.contact_film)
         self.coupling.update_boundaries()
         log.info("floating bodies: %d bodies, %d cells, dx %.4g m, dt %.4g s, nu %.3g m^2/s", len(self.geometries),
                  self.forest.cells, self.dx_m, self.dt_s, self.viscosity_m2_s)

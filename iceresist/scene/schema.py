@@ -319,6 +319,9 @@ class Contact(_Section):
     friction_ice_ice: float = Field(0.3, ge=0, description="Coulomb friction coefficient, ice on ice.")
     friction_ice_hull: float = Field(0.1, ge=0, description="Coulomb friction coefficient, ice on hull.")
     dem_safety: float = Field(0.2, gt=0, le=1, description="DEM sub-step as a fraction of the critical 2 sqrt(m/k).")
+    fluid_film: bool = Field(True, description="Tier 2: a face in contact with another body or a wall keeps the "
+                             "water pressure around it (a film of water; without it a submerged floe is pressed "
+                             "onto the hull by the missing pressure).")
     sample_interval_s: float = Field(0.005, gt=0, description="Tier 1: interval of the recorded ice force (s); "
                                                               "each record is the mean over its DEM sub-steps.")
 

@@ -26,6 +26,7 @@ def add_arguments(parser):
     parser.add_argument("--operator", default="bgk", choices=("bgk", "cumulant"))
     parser.add_argument("--large", default=None,
                         help="edges LX,LY,LZ (cells) of one large moving box added to the cubes (default: none)")
+    parser.add_argument("--no-film", action="store_true", help="without the contact film (its cost: compare)")
     parser.add_argument("--tile-cells", type=int, action="append",
                         help="cells of a body's box per launch row, 0 = never split (repeatable; default: the "
                              "coupler's TILE_CELLS)")
@@ -43,7 +44,7 @@ def _large_edges(text):
     return edges
 
 
-def _case(nbodies, edge, pitch, precision, operator, target, large=None):
+def _case(nbodies, edge, pitch, precision, operator, target, large=None, film=True):
     from iceresist.coupling import Box, FluidStructureCoupling, LatticeUnits
     from iceresist.dem import DEMSystem, box
     from iceresist.grid.forest import BlockForest
@@ -69,7 +70,8 @@ def _case(nbodies, edge, pitch, precision, operator, target, large=None):
         dem.add_body(box(large, 900.0), position_m=np.array(shape) / 2 + 0.3, velocity_m_s=(0.02, 0.0, 0.0),
                      kinematic=True)
         geometries.append(Box(large))
-    cp = FluidStructureCoupling(solver, dem, geometries, LatticeUnits(dx_m=1.0, dt_s=1.0, rho_kg_m3=1.0))
+    cp = FluidStructureCoupling(solver, dem, geometries, LatticeUnits(dx_m=1.0, dt_s=1.0, rho_kg_m3=1.0),
+                                contact_film=film)
     return fo, solver, dem, cp
 
 
@@ -83,7 +85,8 @@ def run(args) -> list[dict]:
     for precision, nb, tile in ((p, n, t) for p in args.precision or ["float32"] for n in args.bodies or [100, 1000]
                                 for t in args.tile_cells or [TILE_CELLS]):
         t0 = time.perf_counter()
-        fo, solver, dem, cp = _case(nb, args.edge, args.pitch, precision, args.operator, target, large)
+        fo, solver, dem, cp = _case(nb, args.edge, args.pitch, precision, args.operator, target, large,
+                                    film=not args.no_film)
         cp.tile_cells = tile if tile > 0 else 2 ** 62
         cp.step(2)
         compile_s = time.perf_counter() - t0
@@ -109,6 +112,7 @@ def run(args) -> list[dict]:
                      "lbm_s_per_step": tl / args.steps, "dem_s_per_step": td / args.steps,
                      "ns_per_link": 1e9 * tc / max(links, 1), "coupling_share": tc / total,
                      "compile_seconds": compile_s, "large_box_cells": None if large is None else list(large),
-                     "tile_cells": tile, "launch_rows": nb + (large is not None) if cp._tile_body is None
+                     "tile_cells": tile, "contact_film": not args.no_film,
+                     "launch_rows": nb + (large is not None) if cp._tile_body is None
                      else len(cp._tile_body)})
     return rows

@@ -77,6 +77,9 @@ MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner",
 #: Covered cells deeper than this (lattice units of signed distance) keep their phi: the gradient stencil of a
 #: cell outside reaches only covered cells within sqrt(3) of the surface.
 MIRROR_DEPTH = 2.0
+#: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
+#: the links pass skips the contact-film test there.
+FILM_DEPTH = 2.0
 
 
 def build_geometry_functions(target, real):
@@ -223,7 +226,7 @@ def build_visits(target, real, free_surface: bool = False):
     accumulate = build_accumulate(target)
     stable, add_nonequilibrium = build_refill_functions(target, real)
     zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
-    c45, c15, qmin, nan = real(4.5), real(1.5), real(Q_MIN), real(np.nan)
+    c45, c15, qmin, nan, fdepth = real(4.5), real(1.5), real(Q_MIN), real(np.nan), real(FILM_DEPTH)
     fluid, ghost, niter, nq = FL.FLUID, GHOST, ROOT_ITERATIONS, Q
     CXI, CYI, CZI = (np.ascontiguousarray(C[:, a]).astype(np.int64) for a in range(3))
     CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
@@ -263,22 +266,19 @@ def build_visits(target, real, free_surface: bool = False):
         return not fs or (flags[xb, xc] & fluid) != 0
 
     @dev
-    def touches(k, hx, hy, hz, bint, grid, block_map, flags0, owner):
-        """Cell (hx, hy, hz) is a wall (outside a closed face, a static solid) or covered by another body than
-        that of row k."""
-        if (hx < 0 or hx >= grid[0]) and grid[3] == 0:
-            return True
-        if (hy < 0 or hy >= grid[1]) and grid[4] == 0:
-            return True
-        if (hz < 0 or hz >= grid[2]) and grid[5] == 0:
-            return True
-        xb, xc = lookup(hx, hy, hz, grid, block_map)
-        if xb < 0:
-            return False
-        if (flags0[xb, xc] & fluid) == 0:
-            return True
-        o = owner[xb, xc]
-        return o >= 0 and bint[o, 9] != bint[k, 9]
+    def touches(k, hx, hy, hz, xb, xc, bint, grid, flags0, owner):
+        """Cell (hx, hy, hz), found at (xb, xc) by ``lookup``, is a wall (outside a closed face, a static solid)
+        or covered by another body than that of row k."""
+        if xb >= 0:
+            o = owner[xb, xc]
+            if o == k:
+                return False
+            if (flags0[xb, xc] & fluid) == 0:
+                return True
+            return o >= 0 and bint[o, 9] != bint[k, 9]
+        # no block there: a wall only beyond a closed face
+        return (((hx < 0 or hx >= grid[0]) and grid[3] == 0) or ((hy < 0 or hy >= grid[1]) and grid[4] == 0)
+                or ((hz < 0 or hz >= grid[2]) and grid[5] == 0))
 
     @dev
     def film_density(gx, gy, gz, grid, block_map, flags0, owner, f, flags, film):
@@ -311,14 +311,16 @@ def build_visits(target, real, free_surface: bool = False):
             return
         yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
         s_in = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+        # a cell deeper than sqrt(3) inside its body has no neighbour outside it, so it touches nothing
+        near = film[0] != zero and s_in > -fdepth
         nfilm = 0
         for q in range(1, nq):
-            if film[0] != zero:
-                if touches(k, gx + CXI[q], gy + CYI[q], gz + CZI[q], bint, grid, block_map, flags0, owner):
-                    nfilm += 1
-                    continue
-            xb, xc = lookup(gx + CXI[q], gy + CYI[q], gz + CZI[q], grid, block_map)
+            hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
+            xb, xc = lookup(hx, hy, hz, grid, block_map)
             if not liquid(xb, xc, flags0, owner, flags):
+                if near:
+                    if touches(k, hx, hy, hz, xb, xc, bint, grid, flags0, owner):
+                        nfilm += 1
                 continue
             cx, cy, cz = CXR[q], CYR[q], CZR[q]
             px, py, pz = yx + cx, yy + cy, yz + cz
@@ -345,12 +347,7 @@ def build_visits(target, real, free_surface: bool = False):
             mom = six * WR[q] * (cx * ux + cy * uy + cz * uz)
             if qd <= half:
                 x2b, x2c = lookup(gx + 2 * CXI[q], gy + 2 * CYI[q], gz + 2 * CZI[q], grid, block_map)
-                far = False
-                if x2b >= 0:
-                    far = (flags0[x2b, x2c] & fluid) != 0 and owner[x2b, x2c] < 0
-                    if fs:
-                        far = far and (flags[x2b, x2c] & fluid) != 0
-                if far:
+                if liquid(x2b, x2c, flags0, owner, flags):
                     fnew = two * qd * gopp + (one - two * qd) * f[x2b, o, x2c] + mom
                 else:
                     fnew = gopp + mom
@@ -372,7 +369,9 @@ def build_visits(target, real, free_surface: bool = False):
         if gauge == zero:
             return
         for q in range(1, nq):
-            if not touches(k, gx + CXI[q], gy + CYI[q], gz + CZI[q], bint, grid, block_map, flags0, owner):
+            hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
+            xb, xc = lookup(hx, hy, hz, grid, block_map)
+            if not touches(k, hx, hy, hz, xb, xc, bint, grid, flags0, owner):
                 continue
             cx, cy, cz = CXR[q], CYR[q], CZR[q]
             ux, uy, uz, rx, ry, rz = wall_velocity(k, yx + half * cx, yy + half * cy, yz + half * cz, body, grid)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.post.trends import trends_table
 
 log = logging.getLogger(__name__)
 
@@ -142,6 +143,8 @@ TABLE2_COLUMNS = {"case": "case", "mean_force_N": "model mean [N]", "ci95_N": "Â
                   "R_sim_kN": "full scale [kN]", "R_sim_ci95_kN": "Â± 95 % CI [kN]",
                   "R_CH_FSICR_kN": "FSICR R_CH [kN]", "ratio_sim_FSICR": "sim/FSICR",
                   "ice_free_width_m": "ice-free width [m]", "floes_under_hull": "floes under hull"}
+TREND_COLUMNS = {"trend": "trend of the paper", "values": "mean ice force +- 95 % (model scale)",
+                 "verdict": "on this sweep"}
 RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "cubes", "spheres": "DEM spheres",
                "resolution_m": "resolution [m]", "cells": "cells", "steps": "records",
                "dem_substeps": "DEM sub-steps", "simulated_s": "simulated [s]", "wall_time_s": "wall time [s]",
@@ -169,6 +172,7 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
             "bows": fig_bows(plt, table), "topviews": fig_topviews(plt, cases)}
     images = {k: _png64(f) for k, f in figs.items()}
     r_sim, r_fs = bow_ratios(table)
+    trends = trends_table(table)
     from iceresist.ship.presets import __doc__ as presets_doc
 
     note = ""
@@ -180,13 +184,16 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
         title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),
         tier=info.get("tier"), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS), runs=_html_table(table, RUN_COLUMNS),
-        bow_ratio_sim=f"{r_sim:.3g}", bow_ratio_fsicr=f"{r_fs:.3g}", images=images, preset_note=note)
+        bow_ratio_sim=f"{r_sim:.3g}", bow_ratio_fsicr=f"{r_fs:.3g}", images=images, preset_note=note,
+        trends=_html_table(trends, TREND_COLUMNS))
     html_path, pdf_path = d / "report.html", d / "report.pdf"
     html_path.write_text(html, encoding="utf-8")
     with PdfPages(pdf_path) as pdf:
         pdf.savefig(_pdf_table_page(plt, table, TABLE2_COLUMNS,
                                     f"Full-scale ice resistance beside FSICR (lambda = {SCALE:g}); "
                                     f"Bow B/A: sim {r_sim:.3g}, FSICR {r_fs:.3g}"))
+        pdf.savefig(_pdf_table_page(plt, trends, TREND_COLUMNS, "The paper's trends on this sweep "
+                                    "(mean +- 95 % interval, model scale)"))
         for f in figs.values():
             pdf.savefig(f)
         pdf.savefig(_pdf_table_page(plt, table, RUN_COLUMNS, "Runs"))

@@ -97,6 +97,7 @@ def test_report_is_self_contained(tiny_sweep):
     text = html.read_text()
     assert text.count("data:image/png;base64,") == 4
     assert "src=\"http" not in text and "A-c68-v1.0" in text and "FSICR" in text
+    assert "Bow B above Bow A" in text and "rises with ship speed" in text and "not run (" in text
     assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 10_000
 
 

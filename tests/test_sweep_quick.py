@@ -1,19 +1,30 @@
-"""The quick tier-1 sweep of all six cases reproduces the paper's trends (minutes: marked slow)."""
+"""The quick sweeps of all six cases reproduce the paper's trends (minutes for tier 1, hours for tier 2 on a
+2-core CPU: marked slow)."""
 
 import pytest
 
+from iceresist.post.trends import ORDER_OF_MAGNITUDE, fsicr_order, paper_trends
 from iceresist.sweep import run_sweep
+
+
+def assert_paper_trends(t, fsicr_factor=3.0):
+    # rises with concentration (Bow A, 1 knot) and with speed (Bow A, 68 %); the steeper Bow B above Bow A
+    for check in paper_trends(t):
+        assert check.holds, f"{check.name}: {check.values()}"
+    # full scale of the order of FSICR R_CH (within fsicr_factor either way)
+    ok, lo, hi = fsicr_order(t, fsicr_factor)
+    assert ok, f"simulated / FSICR from {lo:.2f} to {hi:.2f}"
 
 
 @pytest.mark.slow
 def test_quick_sweep_trends(tmp_path):
-    t = run_sweep("quick", 1, tmp_path, None, backend="cpu").set_index("case")
-    R = t.mean_force_N
-    # rises with concentration (Bow A, 1 knot) and with speed (Bow A, 68 %)
-    assert R["A-c50-v1.0"] < R["A-c68-v1.0"] < R["A-c88-v1.0"]
-    assert R["A-c68-v1.0"] < R["A-c68-v1.5"] < R["A-c68-v2.0"]
-    # the steeper bow B above bow A
-    assert R["B-c68-v1.0"] > R["A-c68-v1.0"]
-    # full scale of the order of FSICR R_CH (within a factor of 3 either way)
-    ratio = t.ratio_sim_FSICR
-    assert ((ratio > 1 / 3) & (ratio < 3)).all()
+    assert_paper_trends(run_sweep("quick", 1, tmp_path, None, backend="cpu"))
+
+
+@pytest.mark.slow
+def test_quick_tier2_sweep_trends(tmp_path):
+    """About 4 h on the 2-core VM (six cases of 20-50 min on 2 threads); minutes on a GPU.
+
+    The FSICR bound is the issue's "same order" (a factor of ten): at 3 cells per cube edge the quick tier 2
+    gives 0.29-0.55 x FSICR (docs/SHIP.md), below the 3 x bound that tier 1 meets (the paper: 0.64, 0.93)."""
+    assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

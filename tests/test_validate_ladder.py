@@ -185,11 +185,9 @@ def test_case_ladders_follow_the_protocol(name):
 
 
 # -- the quick ladders of the cheap cases -------------------------------------------------------------------
-@pytest.mark.parametrize("case", ["poiseuille", "taylor_green"])
-def test_quick_ladder_error_falls_as_resolution_rises(case, tmp_path):
-    """Poiseuille (measured 4.27e-3, 1.06e-3, 2.24e-4: order 2.1) and Taylor-Green (order about 2): the error
-    falls at every rung, with an observed order near 2. One thread: grids of 1-64 blocks gain nothing from
-    more, and on a loaded machine the thread barrier of every step costs more than the step."""
+def quick_ladder(case, tmp_path):
+    """(table with errors, errors from coarse to fine) of a quick ladder run on one thread: grids of 1-64 blocks
+    gain nothing from more, and on a loaded machine the thread barrier of every step costs more than the step."""
     import numba
 
     threads = numba.get_num_threads()
@@ -198,7 +196,14 @@ def test_quick_ladder_error_falls_as_resolution_rises(case, tmp_path):
         table = L.with_errors(L.run_ladders(tmp_path, cases=case, progress=False))
     finally:
         numba.set_num_threads(threads)
-    e = table.sort_values("resolution").error.to_numpy()
+    return table, table.sort_values("resolution").error.to_numpy()
+
+
+@pytest.mark.parametrize("case", ["poiseuille", "taylor_green"])
+def test_quick_ladder_error_falls_as_resolution_rises(case, tmp_path):
+    """Poiseuille (measured 4.27e-3, 1.06e-3, 2.24e-4: order 2.1) and Taylor-Green (order about 2): the error
+    falls at every rung, with an observed order near 2."""
+    table, e = quick_ladder(case, tmp_path)
     assert len(e) >= 3 and np.all(np.diff(e) < 0), e
     p = L.observed_order(table.resolution, table.error)
     assert 1.5 < p < 3.0, (p, e)
@@ -208,15 +213,7 @@ def test_standing_wave_quick_ladder_error_falls(tmp_path):
     """Period against linear theory at 16 / 24 / 32 cells per wavelength, a = lambda / 32: measured 1.55, 0.72,
     0.06 % (float32, 1.5 periods). With a = lambda / 64 the surface moved by less than a cell and the error rose
     (1.0, 2.1, 2.3 %)."""
-    import numba
-
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        table = L.with_errors(L.run_ladders(tmp_path, cases="standing_wave", progress=False))
-    finally:
-        numba.set_num_threads(threads)
-    e = table.sort_values("resolution").error.to_numpy()
+    _, e = quick_ladder("standing_wave", tmp_path)
     assert len(e) >= 3 and np.all(np.diff(e) < 0), e
     assert e[-1] < 0.005 and e[0] < 0.03, e
 
@@ -225,15 +222,7 @@ def test_settling_sphere_quick_ladder_error_falls(tmp_path):
     """ten Cate E1 at 5 / 6 / 8 cells per diameter in the experiment's box to the nearest cell: measured -6.9,
     -5.7, -3.1 % (BGK, float32, 2.0 s). With the box rounded up to whole blocks (120 / 100 / 105 mm wide) the
     wall effect changed between rungs and the error did not fall (-5.0, -7.2, -4.2 % at 0.8 s)."""
-    import numba
-
-    threads = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        table = L.with_errors(L.run_ladders(tmp_path, cases="settling_sphere", progress=False))
-    finally:
-        numba.set_num_threads(threads)
-    e = table.sort_values("resolution").error.to_numpy()
+    _, e = quick_ladder("settling_sphere", tmp_path)
     assert len(e) >= 3 and np.all(np.diff(e) < 0), e
     assert e[-1] < 0.045 and e[0] < 0.09, e
 

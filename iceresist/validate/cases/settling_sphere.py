@@ -100,3 +100,34 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> Ca
                       error=relative_error(value, u_ref), backend=backend, precision=precision,
                       extra={"experiment": case, "operator": params["operator"],
                              "t_peak_s": float(t[int(np.argmax(w))])})
+
+
+def velocity_figure(curves: dict, path, case: str = "E1"):
+    """Settling velocity against time, one line per ``{label: (t_s, w_m_s)}``, with the measured terminal
+    velocity of ``case``; written to ``path`` (PNG)."""
+    from reports.common import pyplot
+
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.0, 3.4))
+    for label, (t, w) in curves.items():
+        ax.plot(t, w, lw=1.0, label=label)
+    u_ref = CASES[case][2]
+    ax.axhline(u_ref, color="k", ls="--", lw=0.8, label=f"ten Cate et al. (2002) {case}: {u_ref} m/s")
+    ax.axhspan(0.95 * u_ref, 1.05 * u_ref, color="0.85", zorder=0, label="+- 5 %")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("settling velocity [m/s]")
+    ax.set_title(f"Sphere settling in the experiment's box, case {case}", fontsize=9)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+if __name__ == "__main__":   # python -m iceresist.validate.cases.settling_sphere OUT.png [d ...]: the figure of VALIDATION.md
+    import sys
+
+    ds = [float(a) for a in sys.argv[2:]] or [5.0, 6.0, 8.0]
+    curves = {}
+    for d in ds:
+        t, w, *_ = settle("E1", d, u_lattice=0.04, t_end_s=3.0, operator="bgk")
+        curves[f"{d:g} cells per diameter"] = (t, w)
+    velocity_figure(curves, sys.argv[1])

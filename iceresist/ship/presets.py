@@ -29,8 +29,7 @@ Tier 2 (coupled LBM-DEM, :mod:`iceresist.tier2`) changes the tank where the flow
   the channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending 0.34 m after the
   channel. Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic density
   changes by 3 x 0.2^2 = 12 % over the depth, against 3 % at the default 0.1) and a viscosity of 1e-5 m^2/s
-  (tau - 1/2 = 1.9e-4; ten times water) as a stability floor at this resolution, raised where the ship's cell
-  Reynolds number U dx / nu would pass 1 100 (at 2 knots to 1.25e-5 m^2/s: at 1e-5 that case went to NaN). It trades away, beyond the
+  (tau - 1/2 = 1.9e-4; ten times water) as a stability floor at this resolution. It trades away, beyond the
   tier-1 quick trades: resolved cubes (3 cells per edge: their wake, the water between them and their
   buoyancy distribution are coarse), the flow under the keel (a shallow-water tank, more blockage and squat),
   the true viscosity, and compressibility (12 % density change). About 2400 LBM steps per case: hours on
@@ -88,19 +87,8 @@ TIER2 = {
     "paper": {"cells": (4104, 512, 512), "dx_m": 1.39 / 512, "water_depth_m": WATER_DEPTH_M,
               "channel_start_x_m": CHANNEL_START_X_M, "mach": 0.1, "nu_m2_s": 1.0e-6},
     "quick": {"cells": (384, 104, 48), "dx_m": 1.39 / 104, "water_depth_m": 0.56, "channel_start_x_m": 3.4,
-              "mach": 0.2, "nu_m2_s": 1.0e-5, "cell_reynolds_max": 1100.0},
+              "mach": 0.2, "nu_m2_s": 1.0e-5},
 }
-
-
-def tier2_viscosity_m2_s(fidelity: str, speed_m_s: float) -> float:
-    """The tier-2 viscosity of a preset: its ``nu_m2_s``, raised where the ship's cell Reynolds number
-    U dx / nu would pass the preset's ``cell_reynolds_max`` (the quick tank: 1 100, about the largest that ran;
-    at 2 knots and 1e-5 m^2/s, 1 370, the cumulant run went to NaN 0.34 s in)."""
-    t2 = TIER2[fidelity]
-    re_max = t2.get("cell_reynolds_max")
-    if re_max is None:
-        return t2["nu_m2_s"]
-    return max(t2["nu_m2_s"], speed_m_s * t2["dx_m"] / re_max)
 
 
 def case_names() -> list[str]:
@@ -132,8 +120,7 @@ def scene_data(case: str, fidelity: str, tier: int = 1) -> dict:
         depth = WATER_DEPTH_M
     else:
         domain = {"cells": list(t2["cells"]), "dx_m": t2["dx_m"]}
-        fluid = {"nu_m2_s": tier2_viscosity_m2_s(fidelity, c.speed_m_s), "rho_kg_m3": 1000.0,
-                 "gravity_m_s2": [0.0, 0.0, -9.81],
+        fluid = {"nu_m2_s": t2["nu_m2_s"], "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81],
                  "operator": "cumulant"}
         numerics = {"precision": "float32", "backend": "auto", "mach": t2["mach"]}
         depth = t2["water_depth_m"]

@@ -26,5 +26,6 @@ def test_quick_tier2_sweep_trends(tmp_path):
     """About 4 h on the 2-core VM (six cases of 20-50 min on 2 threads); minutes on a GPU.
 
     The FSICR bound is the issue's "same order" (a factor of ten): at 3 cells per cube edge the quick tier 2
-    gives 0.29-0.55 x FSICR (docs/SHIP.md), below the 3 x bound that tier 1 meets (the paper: 0.64, 0.93)."""
+    gives 0.12-1.00 x FSICR (docs/SHIP.md), below the 3 x bound that tier 1 meets (the paper: 0.64, 0.93).
+    As of 2026-11-23 this test fails: the 2-knot case goes to NaN and the watchdog stops it (docs/SHIP.md)."""
     assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

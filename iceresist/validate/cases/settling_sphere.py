@@ -66,7 +66,7 @@ def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float
         return (x >= n[0]) | (y >= n[1]) | (z >= n[2])
 
     fo = BlockForest.uniform(shape, faces={k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")},
-                             solid=None if list(shape) == n else outside_box)
+                             solid=outside_box)
     tau = 3 * (mu / rho_f) * dt / dx ** 2 + 0.5
     solver = LBMSolver(fo, tau=tau, operator=operator, precision=precision, target=jit.resolve_backend(backend))
     solver.initialize()

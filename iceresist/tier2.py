@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.ship.tank import tank_flow
 from iceresist.tier1 import hull_geometry, hull_shape, ice_layout, steady_window_m
 
 log = logging.getLogger(__name__)
@@ -126,6 +127,12 @@ class Tier2Model:
         self.speed_m_s = float(sh.speed_m_s)
         self.start_x_m = float(sh.start_x_m) if sh.start_x_m is not None else ice.channel_start_x_m - 0.05
         self.window_m = steady_window_m(scene, g, self.layout)
+        self.tank = tank_flow(g.midship_area_m2, self.domain_m[1], self.level_m, float(sh.speed_m_s))
+        if not self.tank.subcritical:
+            log.warning("tier 2: %.3g m/s is above the limiting speed of this tank (depth Froude number %.3g, "
+                        "Schijf's limit %.3g at blockage %.2f): the ship pushes a bore ahead and the flow past "
+                        "it never settles; a deeper or wider tank (free_surface.water_depth_m, domain) lowers the "
+                        "blockage", sh.speed_m_s, self.tank.depth_froude, self.tank.limit_froude, self.tank.blockage)
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
@@ -238,6 +245,40 @@ class Tier2Model:
         return bool(np.isfinite(self._force_mean).all() and np.isfinite(self._fluid_mean).all()
                     and np.isfinite(self.dem.positions).all() and math.isfinite(self.fb.water_volume_m3()))
 
+    #: Records between watchdog checks (:mod:`iceresist.watchdog`): a record is several LBM steps, and a blow-up
+    #: grows from one cell to NaN within a few of them.
+    watchdog_interval = 1
+
+    def watchdog_probe(self) -> dict:
+        """What the run watchdog checks, with the cell where it happens (:mod:`iceresist.watchdog`): finite
+        populations and phase field on the liquid cells, the fastest liquid cell (lattice speed), the lattice
+        density band, the fluid kinetic energy (lattice units; reference: all cells moving at the ship's lattice
+        speed), and the fastest ice body against 10 x max(ship speed, sqrt(g a)) (as tier 1)."""
+        from iceresist.watchdog import fluid_probe
+
+        fl = self.fb.fluid
+        rho, u = fl.macroscopic()
+        liquid = fl.liquid()
+        phi = fl.phi()
+        bad_phi = ~np.isfinite(phi)
+        if bad_phi.any():
+            return {"finite": (False, [int(v) for v in np.argwhere(bad_phi)[0]])}
+        u_ship = self.speed_m_s * self.units.lbm_dt_s / self.units.dx_m
+        probe = fluid_probe(rho, u, liquid, 0.5 * self.cells * u_ship ** 2)
+        if not probe["finite"][0]:
+            return probe
+        ice = np.arange(self.dem.n_bodies) != self.hull_body
+        pos, vel = self.dem.positions[ice], self.dem.velocities[ice]
+        bad = ~(np.isfinite(pos).all(axis=1) & np.isfinite(vel).all(axis=1))
+        if bad.any():
+            return {"finite": (False, {"body": int(np.flatnonzero(ice)[np.flatnonzero(bad)[0]])})}
+        speed = np.sqrt((vel ** 2).sum(axis=1))
+        if speed.size:
+            b = int(np.argmax(speed))
+            probe["max_body_speed_m_s"] = (float(speed[b]), {"body": int(np.flatnonzero(ice)[b])})
+            probe["max_body_speed_limit_m_s"] = 10.0 * max(self.speed_m_s, math.sqrt(9.81 * self.layout.cube_m))
+        return probe
+
     def diagnostics(self) -> dict:
         """One record: mean ice (contact) force on the hull (N), the mean fluid force on it (N), stem position (m),
         contacts, ice kinetic energy (J), water volume (m^3, outside the bodies)."""
@@ -306,7 +347,7 @@ class Tier2Model:
                 "lbm_steps_per_record": self.lbm_steps_per_record, "critical_step_s": self.dem.critical_step_s(),
                 "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": u.g_lattice,
                 "nu_m2_s": u.nu_m2_s, "operator": self.scene.fluid.operator,
-                "ship_lattice_speed": self.speed_m_s * u.lbm_dt_s / u.dx_m,
+                "ship_lattice_speed": self.speed_m_s * u.lbm_dt_s / u.dx_m, "tank": self.tank.describe(),
                 "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
                 "hull": {"length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
                          "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,

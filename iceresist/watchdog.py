@@ -179,7 +179,11 @@ class Watchdog:
 
 
 def default_interval(model) -> int:
-    """Check interval of a model when the scene leaves ``run.watchdog_every_steps`` out."""
+    """Check interval of a model when the scene leaves ``run.watchdog_every_steps`` out: the model's own
+    ``watchdog_interval`` where it has one, else by kind (fluid or DEM)."""
+    own = getattr(model, "watchdog_interval", None)
+    if own is not None:
+        return int(own)
     return DEFAULT_INTERVAL_FLUID if getattr(model, "cells", 0) else DEFAULT_INTERVAL_DEM
 
 

@@ -110,6 +110,38 @@ def test_tier2_allocates_lbm_phase_field_and_dem(tiny_run):
     assert m.describe()["allocation_bytes"] == a
 
 
+def test_tier2_watchdog_probe_reads_the_flow_and_names_the_cell_of_a_nan(tiny_run):
+    """The probe of a healthy run: the fastest liquid cell moves at least at the hull's lattice speed (the water
+    beside the hull is dragged with it) and below the watchdog's limit, the density within the band; a NaN put
+    into one liquid cell's populations is reported as non-finite at that cell, [i, j, k] of the dense grid."""
+    from iceresist import watchdog
+    from iceresist.grid.forest import CELLS
+
+    m = tiny_run[1]["model"]
+    p = m.watchdog_probe()
+    u_ship = m.speed_m_s * m.units.lbm_dt_s / m.units.dx_m
+    assert p["finite"] == (True, None)
+    assert u_ship <= p["max_lattice_speed"][0] < watchdog.LATTICE_SPEED_LIMIT
+    assert 0.9 < p["density_min"][0] <= 1.0 <= p["density_max"][0] < 1.1
+    assert watchdog.Watchdog().inspect(m) is None
+    assert watchdog.default_interval(m) == 1
+    fresh = build_model(case_scene(CASE, "quick", 2, **TINY_TIER2_OVERRIDES), backend="cpu")
+    fresh.step(1)
+    fl = fresh.fb.fluid
+    liquid = fl.liquid()
+    cell = [int(v) for v in np.argwhere(liquid)[len(np.argwhere(liquid)) // 2]]
+    blocks, f = fl.fluid.rows()
+    ids = np.full((fl.forest.nblocks, CELLS), -1, dtype=np.int64)
+    ids[blocks] = np.arange(len(blocks))[:, None] * CELLS + np.arange(CELLS)
+    dense = np.nan_to_num(fl.forest.to_dense(ids.astype(np.float64)), nan=-1).astype(np.int64)
+    row, k = divmod(int(dense[tuple(cell)]), CELLS)
+    f = f.copy()
+    f[row, 5, k] = np.nan
+    fl.fluid.set_rows(blocks, f)
+    report = watchdog.Watchdog().inspect(fresh)
+    assert report is not None and report.quantity == "finite" and report.where == cell
+
+
 def test_scenes_allocate_only_what_they_use():
     """Tier 1: no LBM arrays; a single-phase fluid scene: no phase field and no DEM."""
     t1 = build_model(case_scene(CASE, "quick", 1, **TINY_OVERRIDES), backend="cpu")

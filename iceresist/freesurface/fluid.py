@@ -288,6 +288,11 @@ class FreeSurfaceFluid:
         u[:, ~liquid] = np.nan
         return self.forest.to_dense(rho), self.forest.to_dense(u)
 
+    def liquid(self) -> np.ndarray:
+        """Dense mask (nx, ny, nz) of the liquid cells (flag FLUID), whatever their populations hold."""
+        mask = ((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64)
+        return np.nan_to_num(self.forest.to_dense(mask), nan=0.0) > 0.5
+
     def surface_height(self) -> np.ndarray:
         """Height z where phi crosses 1/2 in each column (nx, ny), cells, by linear interpolation (the
         top-most crossing)."""

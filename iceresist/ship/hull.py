@@ -93,6 +93,11 @@ class HullGeometry:
         return self.draught_m + self.freeboard_m
 
     @property
+    def midship_area_m2(self) -> float:
+        """Immersed midship section B T (m^2): the hull is wall-sided with a flat bottom."""
+        return self.beam_m * self.draught_m
+
+    @property
     def bottom_parallel_length_m(self) -> float:
         return self.parallel_length_m - self.draught_m * (_cot(self.bow_rake_deg) + _cot(self.stern_rake_deg))
 

@@ -24,17 +24,21 @@ Tier 2 (coupled LBM-DEM, :mod:`iceresist.tier2`) changes the tank where the flow
   paper's AMR grid has 1.6e8), the water's viscosity (cumulant operator without a turbulence model, as the
   paper), lattice velocity limit 0.1. A job for GPUs, not for a CPU.
 * ``quick`` tier 2: 3 cells per 41 mm cube (dx = 1.39 m / 104 = 13.4 mm), a shorter and shallower tank
-  (5.13 x 1.39 x 0.64 m, 384 x 104 x 48 = 1.92e6 cells): water 0.56 m deep (0.12 m under the keel instead of
-  0.67 m), 0.08 m of air above it (the hull's deck reaches out of the top of the domain, where no fluid is),
+  (5.13 x 1.39 x 1.07 m, 384 x 104 x 80 = 3.19e6 cells): water 0.9 m deep (0.46 m under the keel instead of
+  0.67 m), 0.17 m of air above it (the hull's deck reaches out of the top of the domain, where no fluid is),
   the channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending 0.34 m after the
-  channel. Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic density
+  channel. The depth is set by the tank's blockage (:mod:`iceresist.ship.tank`): the hull fills m = 0.25 of
+  the section, and Schijf's limiting speed is then a depth Froude number of 0.42, against 0.35 at 2 knots (the
+  paper's tank: 0.47 and 0.31). A 0.56 m deep tank (m = 0.40, limit 0.28) put 1.5 and 2 knots above the limit:
+  the ship pushed a bore ahead, the bow wave reached the top of the domain and the 2-knot case went to NaN.
+  Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic density
   changes by 3 x 0.2^2 = 12 % over the depth, against 3 % at the default 0.1) and a viscosity of 1e-5 m^2/s
-  (tau - 1/2 = 1.9e-4; ten times water) as a stability floor at this resolution. It trades away, beyond the
+  (tau - 1/2 = 1.5e-4; ten times water) as a stability floor at this resolution. It trades away, beyond the
   tier-1 quick trades: resolved cubes (3 cells per edge: their wake, the water between them and their
-  buoyancy distribution are coarse), the flow under the keel (a shallow-water tank, more blockage and squat),
-  the true viscosity, and compressibility (12 % density change). About 2400 LBM steps per case: hours on
-  a 2-core x86 VM (docs/PERFORMANCE.md "Tier 2 ship"); ``TINY_TIER2_OVERRIDES`` of :mod:`iceresist.sweep` is
-  the CI-sized version.
+  buoyancy distribution are coarse), the flow under the keel (a shallower tank, more blockage and squat),
+  the true viscosity, and compressibility (12 % density change). 1 550 (2 knots) to 3 100 (1 knot) LBM steps
+  per case: hours on a 2-core x86 VM (docs/PERFORMANCE.md "Tier 2 ship"); ``TINY_TIER2_OVERRIDES`` of
+  :mod:`iceresist.sweep` is the CI-sized version.
 """
 
 from __future__ import annotations
@@ -86,7 +90,7 @@ FIDELITIES = {
 TIER2 = {
     "paper": {"cells": (4104, 512, 512), "dx_m": 1.39 / 512, "water_depth_m": WATER_DEPTH_M,
               "channel_start_x_m": CHANNEL_START_X_M, "mach": 0.1, "nu_m2_s": 1.0e-6},
-    "quick": {"cells": (384, 104, 48), "dx_m": 1.39 / 104, "water_depth_m": 0.56, "channel_start_x_m": 3.4,
+    "quick": {"cells": (384, 104, 80), "dx_m": 1.39 / 104, "water_depth_m": 0.9, "channel_start_x_m": 3.4,
               "mach": 0.2, "nu_m2_s": 1.0e-5},
 }
 

@@ -144,8 +144,17 @@ from its checkpoint to the (new) stop criterion.
   multiple of 8 (`size_m / dx_m` is rounded to whole cells first).
 * **Optional sections** (`[free_surface]`, `[ship]`, `[ice]`, `[contact]`,
   `[[bodies]]`): a scene that leaves them out allocates nothing for them.
-  This version of `iceresist run` runs fluid-only scenes and refuses the
-  others with a message; their keys are already fixed here.
+  `iceresist run` runs fluid-only scenes, free-surface scenes
+  (`[free_surface]` alone) and ship scenes (`[ship]` with `[ice]`:
+  `ship.tier = 1` is the DEM with water models, `ship.tier = 2` the coupled
+  LBM-DEM, which also needs `[free_surface]`); any other combination is
+  refused with a message.
+* **Tank blockage (tier 2).** The hull's midship section fills a part m of
+  the tank's wet section (width x `free_surface.water_depth_m`). Above
+  Schijf's limiting speed (depth Froude number 0.47 at the paper's m = 0.20,
+  0.28 at m = 0.40) no steady flow past the hull exists: the ship pushes a
+  bore ahead. The run warns then; make the tank deeper or wider
+  (docs/SHIP.md, "The tank's limiting speed").
 
 ## Result file
 
@@ -163,7 +172,7 @@ Read a field back in the engine's `[x, y, z]` order with
 """
 
 FULL_EXAMPLE = """# Paper case (Watanabe, Hu and Aoki 2023, section 3): the keys of a ship in a brash-ice channel.
-# `iceresist run` runs [free_surface] alone; it refuses [ship]/[ice] at tier 2 until the coupled engine is built.
+# `iceresist run` runs it at ship.tier 1 (DEM with water models); ship.tier = 2 runs the coupled LBM-DEM on this grid.
 [scene]
 name = "b063_bow_a_c68_1kn"
 description = "B-063 Bow A, 68 % brash ice, 1 knot, model scale 1:25"

@@ -173,8 +173,8 @@ class RunSettings(_Section):
     wall_time_limit_s: float | None = Field(None, gt=0, description="Stop (with output written) after this wall time.")
     watchdog_every_steps: int | None = Field(None, ge=1, description="Check for NaN, runaway speed, density out of "
                                              "band and kinetic-energy growth every N steps, and stop the run with a "
-                                             "diagnostic. Default: 100 (fluid), 1 (tier-1 DEM, one step = one "
-                                             "record).")
+                                             "diagnostic. Default: 100 (fluid), 1 (ship scenes, tiers 1 and 2: one "
+                                             "step = one record).")
 
     @model_validator(mode="after")
     def _a_stop(self):

@@ -260,6 +260,8 @@ def analyse_case(path) -> dict:
         "spheres": int(model["spheres"]), "steps": int(meta["steps"]), "dem_substeps": int(meta["dem_substeps"]),
         "simulated_s": float(meta["time_s"]), "wall_time_s": float(meta["wall_time_s"]),
         "backend": model["backend"], "file": f"cases/{Path(path).name}",
+        # tier 2: the ship's depth Froude number over Schijf's limit of the tank (iceresist.ship.tank)
+        "tank_froude_fraction": float(model.get("tank", {}).get("fraction_of_limit", float("nan"))),
     }
 
 

@@ -148,7 +148,7 @@ TREND_COLUMNS = {"trend": "trend of the paper", "values": "mean ice force +- 95 
 RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "cubes", "spheres": "DEM spheres",
                "resolution_m": "resolution [m]", "cells": "cells", "steps": "records",
                "dem_substeps": "DEM sub-steps", "simulated_s": "simulated [s]", "wall_time_s": "wall time [s]",
-               "backend": "backend", "ci_method": "CI method"}
+               "backend": "backend", "tank_froude_fraction": "F_h / F_L", "ci_method": "CI method"}
 
 
 def write_report(sweep_dir) -> tuple[Path, Path]:
@@ -183,7 +183,8 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     html = env.get_template("report.html.j2").render(
         title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),
         tier=info.get("tier"), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS), runs=_html_table(table, RUN_COLUMNS),
+        scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS),
+        runs=_html_table(table, RUN_COLUMNS, na_rep="–"),
         bow_ratio_sim=f"{r_sim:.3g}", bow_ratio_fsicr=f"{r_fs:.3g}", images=images, preset_note=note,
         trends=_html_table(trends, TREND_COLUMNS))
     html_path, pdf_path = d / "report.html", d / "report.pdf"
@@ -196,7 +197,7 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
                                     "(mean +- 95 % interval, model scale)"))
         for f in figs.values():
             pdf.savefig(f)
-        pdf.savefig(_pdf_table_page(plt, table, RUN_COLUMNS, "Runs"))
+        pdf.savefig(_pdf_table_page(plt, table, RUN_COLUMNS, "Runs", na_rep="–"))
     figs["topviews"].savefig(d / "topviews.png")
     plt.close("all")
     log.info("report: %s, %s", html_path, pdf_path)

@@ -68,6 +68,10 @@ def test_tier2_case_file_is_what_the_report_reads(tiny_run):
     assert row["tier"] == 2 and row["cubes"] == 4 and row["cells"] == 64 * 16 * 16
     assert np.isfinite(row["mean_force_N"]) and row["mean_force_N"] > 0  # the hull meets the middle cube
     assert row["R_sim_kN"] == pytest.approx(row["mean_force_N"] * 25 ** 3 / 1e3, rel=1e-12)
+    # the tank check of the report by hand: midship 0.08 x 0.06 m in 16 cells of 41/3 mm x 0.14 m of water
+    m_block = 0.08 * 0.06 / (16 * 0.041 / 3 * 0.14)
+    f_limit = (2 * np.sin(np.arcsin(1 - m_block) / 3)) ** 1.5
+    assert row["tank_froude_fraction"] == pytest.approx(0.514 / np.sqrt(9.81 * 0.14) / f_limit, rel=1e-9)
     # units: dt from the Mach rule against sqrt(g h), gravity from dt (module docstring of iceresist.tier2)
     u = m.units
     assert u.lbm_dt_s == pytest.approx(0.1 * u.dx_m / np.sqrt(9.81 * 0.14), rel=1e-9)

@@ -23,7 +23,7 @@ def test_quick_sweep_trends(tmp_path):
 
 @pytest.mark.slow
 def test_quick_tier2_sweep_trends(tmp_path):
-    """About 7 h on the 2-core VM (six cases of 55-100 min on 2 threads in the 0.9 m tank); minutes on a GPU.
+    """About 9 h on the 2-core VM (six cases of 55-100 min on 2 threads in the 0.9 m tank); minutes on a GPU.
 
     The FSICR bound is the issue's "same order" (a factor of ten): at 3 cells per cube edge the quick tier 2
     gave 0.12-1.00 x FSICR in the first (0.56 m) tank and 0.80 x at 2 knots in the 0.9 m one (docs/SHIP.md),

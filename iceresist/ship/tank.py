@@ -49,7 +49,7 @@ def schijf_limit_froude(blockage: float) -> float:
 
 @dataclass(frozen=True)
 class TankFlow:
-    """The hull at ``speed_m_s`` in a tank: blockage m, depth Froude number F_h, Schijf's limit F_L."""
+    """A hull moving in a tank: blockage m, depth Froude number F_h, Schijf's limit F_L."""
 
     blockage: float
     depth_froude: float

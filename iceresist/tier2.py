@@ -37,6 +37,7 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.ship.tank import tank_flow
 from iceresist.tier1 import hull_geometry, hull_shape, ice_layout, steady_window_m
+from iceresist.units import GRAVITY_M_S2
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +92,7 @@ class Tier2Model:
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
                  tau_floor: float | None = None):
-        from iceresist.coupling.floating import GRAVITY_M_S2, FloatingBodies
+        from iceresist.coupling.floating import FloatingBodies
         from iceresist.coupling.geometry import Box, ConvexPolyhedron
         from iceresist.dem import ContactParameters, DEMSystem, box
         from iceresist.model import check_block_shape, resolve_target

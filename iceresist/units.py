@@ -30,6 +30,8 @@ from iceresist.errors import StabilityError
 
 log = logging.getLogger(__name__)
 
+#: Standard gravity (m/s^2), the one value every module uses.
+GRAVITY_M_S2 = 9.81
 #: Lattice sound speed squared.
 CS2 = 1.0 / 3.0
 #: Default lattice velocity limit |u| dt/dx.
@@ -118,7 +120,7 @@ class Units:
     # -- construction ---------------------------------------------------------------------------------
     @classmethod
     def from_physical(cls, dx_m: float, nu_m2_s: float, u_max_m_s: float, *, mach_lattice: float = MACH_LATTICE,
-                      depth_m: float | None = None, g_m_s2: float = 9.81, rho0_kg_m3: float = 1000.0,
+                      depth_m: float | None = None, g_m_s2: float = GRAVITY_M_S2, rho0_kg_m3: float = 1000.0,
                       dt_s: float | None = None, min_tau_excess: float = MIN_TAU_EXCESS) -> "Units":
         """Units from SI inputs: ``dt = mach_lattice dx / max(u_max, sqrt(g depth))`` unless ``dt_s`` is given.
 
@@ -253,7 +255,7 @@ class Units:
         return m_lat * (self.rho0_kg_m3 * self.dx_m ** 3)
 
 
-def reference_speed_m_s(u_max_m_s: float, *, depth_m: float | None = None, g_m_s2: float = 9.81) -> float:
+def reference_speed_m_s(u_max_m_s: float, *, depth_m: float | None = None, g_m_s2: float = GRAVITY_M_S2) -> float:
     """The speed that sets the time step: ``max(|u_max|, sqrt(g h))`` (the second only where a depth is given)."""
     u = abs(float(u_max_m_s))
     if depth_m is not None:

@@ -41,10 +41,9 @@ from iceresist.dem import DEMSystem
 from iceresist.errors import InputError
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.grid.forest import BlockForest, Face
+from iceresist.units import GRAVITY_M_S2
 
 log = logging.getLogger(__name__)
-
-GRAVITY_M_S2 = 9.81
 
 
 class FloatingBodies:

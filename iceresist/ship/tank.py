@@ -22,8 +22,7 @@ import math
 from dataclasses import dataclass
 
 from iceresist.errors import InputError
-
-GRAVITY_M_S2 = 9.81
+from iceresist.units import GRAVITY_M_S2
 
 
 def blockage_ratio(midship_area_m2: float, width_m: float, depth_m: float) -> float:

@@ -146,8 +146,12 @@ class FloatingBodies:
         return float(h[free].mean()) * self.dx_m
 
     def fields(self):
-        """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it)."""
+        """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it and in
+        the cells a body covers: their populations are not water's, whatever the free surface's flags say)."""
         rho, u = self.fluid.macroscopic()
+        covered = self.forest.to_dense(self.coupling.owners()) >= 0
+        rho[covered] = np.nan
+        u[:, covered] = np.nan
         return self.fluid.phi(), rho, u
 
     def record(self) -> dict:

@@ -288,6 +288,13 @@ class FreeSurfaceFluid:
         u[:, ~liquid] = np.nan
         return self.forest.to_dense(rho), self.forest.to_dense(u)
 
+    def velocity(self) -> np.ndarray:
+        """Velocity (3, nx, ny, nz) of the last step, lattice units, float64, NaN in gas and solid: the field the
+        step computed for the phase field (j / rho + g / 2, as :meth:`macroscopic`), read without the populations."""
+        u = self._host(self._u).astype(np.float64).transpose(1, 0, 2)
+        u[:, (self._host(self.fluid.flags) & FL.FLUID) == 0] = np.nan
+        return self.forest.to_dense(u)
+
     def liquid(self) -> np.ndarray:
         """Dense mask (nx, ny, nz) of the liquid cells (flag FLUID), whatever their populations hold."""
         mask = ((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64)

@@ -174,7 +174,8 @@ class RunSettings(_Section):
     watchdog_every_steps: int | None = Field(None, ge=1, description="Check for NaN, runaway speed, density out of "
                                              "band and kinetic-energy growth every N steps, and stop the run with a "
                                              "diagnostic. Default: 100 (fluid), 1 (ship scenes, tiers 1 and 2: one "
-                                             "step = one record).")
+                                             "step = one record; tier 2 reads the density band and the kinetic "
+                                             "energy at every tenth check).")
 
     @model_validator(mode="after")
     def _a_stop(self):

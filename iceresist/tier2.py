@@ -251,13 +251,6 @@ class Tier2Model:
     #: grows from one cell to NaN within a few of them.
     watchdog_interval = 1
 
-    def wet_cells(self) -> np.ndarray:
-        """Dense mask (nx, ny, nz) of the liquid cells not covered by a body. After a step the free surface's
-        flags call a covered cell liquid where phi >= 1/2 (the coupling marks it again before the next
-        stream-collide), and its populations are not water's, so the watchdog must not read them."""
-        fb = self.fb
-        return np.nan_to_num(fb.forest.to_dense(fb.coupling.fluid_mask().astype(np.float64)), nan=0.0) > 0.5
-
     #: Every this many probes (the first included) the watchdog reads the populations: density band and kinetic
     #: energy. The probes between read the velocity the step already holds; the full probe of a 3.2e6-cell quick
     #: case takes about a third of a record's time on a 2-core CPU (docs/PERFORMANCE.md, "The watchdog probe").
@@ -265,7 +258,7 @@ class Tier2Model:
 
     def watchdog_probe(self, full: bool | None = None) -> dict:
         """What the run watchdog checks, with the cell where it happens (:mod:`iceresist.watchdog`): finite phase
-        field, finite velocity on the wet cells (:meth:`wet_cells`), the fastest wet cell (lattice speed), the
+        field, finite velocity on the wet cells (``fb.wet_cells``), the fastest wet cell (lattice speed), the
         fastest ice body against 10 x max(ship speed, sqrt(g a)) (as tier 1); and on a ``full`` probe (default:
         every :attr:`full_probe_every`-th, the first included) finite populations, the lattice density band and
         the fluid kinetic energy of the wet cells (lattice units; reference: all cells moving at the ship's
@@ -276,7 +269,7 @@ class Tier2Model:
             full = self._probes % self.full_probe_every == 0
         self._probes += 1
         fl = self.fb.fluid
-        liquid = self.wet_cells()
+        liquid = self.fb.wet_cells()
         phi = fl.phi()
         bad_phi = ~np.isfinite(phi)
         if bad_phi.any():

@@ -129,7 +129,7 @@ def test_tier2_watchdog_probe_reads_the_flow_and_names_the_cell_of_a_nan(tiny_ru
     assert p["finite"] == (True, None)
     assert 0.9 * u_ship < p["max_lattice_speed"][0] < min(1.1 * u_ship, watchdog.LATTICE_SPEED_LIMIT)
     assert 0.9 < p["density_min"][0] <= 1.0 <= p["density_max"][0] < 1.1
-    wet, liquid = m.wet_cells(), m.fb.fluid.liquid()
+    wet, liquid = m.fb.wet_cells(), m.fb.fluid.liquid()
     covered = m.fb.forest.to_dense(m.fb.coupling.owners()) >= 0
     assert (liquid & covered).sum() > 100 and not (wet & covered).any()
     for q in ("max_lattice_speed", "density_min", "density_max"):

@@ -149,10 +149,16 @@ class FloatingBodies:
         """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it and in
         the cells a body covers: their populations are not water's, whatever the free surface's flags say)."""
         rho, u = self.fluid.macroscopic()
-        covered = self.forest.to_dense(self.coupling.owners()) >= 0
-        rho[covered] = np.nan
-        u[:, covered] = np.nan
+        dry = ~self.wet_cells()
+        rho[dry] = np.nan
+        u[:, dry] = np.nan
         return self.fluid.phi(), rho, u
+
+    def wet_cells(self) -> np.ndarray:
+        """Dense mask (nx, ny, nz) of the liquid cells no body covers (:meth:`FluidStructureCoupling.fluid_mask`).
+        After a step the free surface's flags call a covered cell liquid where phi >= 1/2 (the coupling marks it
+        again before the next stream-collide), and its populations are not water's."""
+        return np.nan_to_num(self.forest.to_dense(self.coupling.fluid_mask().astype(np.float64)), nan=0.0) > 0.5
 
     def record(self) -> dict:
         """One row of a time series: time, body positions and velocities, fluid forces, water volume."""

@@ -7,9 +7,12 @@ Layout of a sweep folder::
     DIR/sweep.csv             one row per finished case (pandas), rebuilt from the case files
 
 A case is written to ``<case>.partial.h5`` and renamed when it has finished, so a killed sweep leaves no
-half-finished result under the final name; started again, the sweep skips every finished case, runs the
-others from their start and rebuilds the table from the files, so it ends with the table an uninterrupted
-sweep gives (tier-1 runs are deterministic on a fixed backend and thread count).
+half-finished result under the final name. A running case also writes its whole state to
+``<case>.checkpoint.h5`` every ``CHECKPOINT_WALL_S`` of wall time (deleted when the case finishes). Started
+again, the sweep skips every finished case, continues an unfinished one from its checkpoint (when the
+partial file holds the same scene; otherwise it runs the case from its start) and rebuilds the table from the
+files, so it ends with the table an uninterrupted sweep gives (the runs are deterministic on a fixed backend
+and thread count, and a continued run is the straight run bit for bit).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import pandas as pd
 
 from iceresist.errors import InputError
 from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
+from iceresist.simulation import Checkpointer
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +38,9 @@ SCALE = 25.0
 #: Scene overrides of the CI-sized sweep (a 0.3 m channel crossed in 0.75 s): the machinery, not the physics.
 TINY_OVERRIDES = {"ice": {"channel_length_m": 0.3}, "run": {"end_time_s": 0.75}, "contact": {"sample_interval_s": 0.002},
                   "ship": {"steady_window_m": [4.1, 4.3], "sphere_band_m": 0.03, "sphere_spacing_m": 0.05}}
+
+#: Wall-clock seconds between the checkpoints of a running case (a tier-2 quick case runs for hours here).
+CHECKPOINT_WALL_S = 600.0
 
 #: Batches used where the window is too short for the automatic choice (the table says so).
 FALLBACK_BATCHES = 5
@@ -55,6 +62,39 @@ TINY_TIER2_OVERRIDES = {
 
 def case_path(out_dir, case: str) -> Path:
     return Path(out_dir) / "cases" / f"{case}.h5"
+
+
+def checkpoint_path(out_dir, case: str) -> Path:
+    return Path(out_dir) / "cases" / f"{case}.checkpoint.h5"
+
+
+def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
+    """The meta of ``partial`` when a killed run of the same scene can continue from ``checkpoint``, else None."""
+    if not (partial.is_file() and checkpoint.is_file()):
+        return None
+    from iceresist.io.hdf5 import RunFile
+
+    try:
+        with RunFile(partial, "r") as rf:
+            meta = rf.meta
+    except (OSError, KeyError):
+        return None
+    return meta if meta.get("scene_toml") == scene_text else None
+
+
+class CaseCheckpointer(Checkpointer):
+    """The checkpointer of a sweep case. Each time it writes, it notes in the partial case file the record it
+    reached and the wall time spent up to it (earlier legs included), so a continued case reports the wall
+    time of the work it kept."""
+
+    def __init__(self, path, schedule, runfile, wall_before_s: float, t0: float):
+        super().__init__(path, schedule, write_final=False)
+        self.runfile, self.wall_before_s, self.t0 = runfile, wall_before_s, t0
+
+    def write(self, sim):
+        super().write(sim)
+        self.runfile.write_meta(checkpoint_iteration=int(sim.model.iteration),
+                                checkpoint_wall_s=self.wall_before_s + time.perf_counter() - self.t0)
 
 
 def is_finished(path: Path) -> bool:
@@ -81,35 +121,49 @@ def resolve_cases(cases) -> list[str]:
 
 
 def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "auto", progress: bool = False,
-             overrides: dict | None = None, callbacks: dict | None = None) -> Path:
-    """Run one case to ``DIR/cases/<case>.h5`` (via a partial file renamed at the end)."""
+             overrides: dict | None = None, callbacks: dict | None = None, checkpoint_schedule=None) -> Path:
+    """Run one case to ``DIR/cases/<case>.h5`` (via a partial file renamed at the end), continuing a killed run
+    of it from its checkpoint. ``checkpoint_schedule``: when to checkpoint (default every ``CHECKPOINT_WALL_S``
+    of wall time)."""
     from iceresist.io.hdf5 import RunFile
     from iceresist.io.meta import run_meta
-    from iceresist.simulation import Callback, IterationInterval, Simulation, TimeSeriesWriter
+    from iceresist.simulation import Callback, IterationInterval, Simulation, TimeSeriesWriter, WallTimeInterval
     from iceresist.tier1 import Tier1Model
     from iceresist.tier2 import Tier2Model
 
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
+    t_build = time.perf_counter()
     scene = case_scene(case, fidelity, tier, **(overrides or {}))
     final = case_path(out_dir, case)
     partial = final.with_name(f"{case}.partial.h5")
+    chk = checkpoint_path(out_dir, case)
     final.parent.mkdir(parents=True, exist_ok=True)
-    t_build = time.perf_counter()
+    earlier = _resumable(partial, chk, scene.source_text)
+    if earlier is None and chk.exists():
+        chk.unlink()  # the checkpoint of another scene, or of a partial file that is gone
     model = (Tier1Model if tier == 1 else Tier2Model)(scene, backend=backend)
     build_s = time.perf_counter() - t_build
-    with RunFile(partial, "w", write_xdmf=False) as rf:
-        desc = model.describe()
-        rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"], precision=model.precision,
-                                 cells=model.cells),
-                      scene_name=scene.scene.name, case=case, fidelity=fidelity, tier=tier,
-                      bow=get_case(case).bow, concentration_nominal=get_case(case).concentration,
-                      knots=get_case(case).knots, model=desc, finished=False)
-        g = rf.h5.require_group("bodies")
-        g["initial_positions_m"] = model.ice_state()["positions_m"]
-        g["hull_vertices_m"] = model.geometry.vertices()
+    wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0)) if earlier is not None else 0.0
+    legs = int(earlier.get("legs", 1)) + 1 if earlier is not None else 1
+    with RunFile(partial, "a" if earlier is not None else "w", write_xdmf=False) as rf:
+        if earlier is None:
+            desc = model.describe()
+            rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"],
+                                     precision=model.precision, cells=model.cells),
+                          scene_name=scene.scene.name, case=case, fidelity=fidelity, tier=tier,
+                          bow=get_case(case).bow, concentration_nominal=get_case(case).concentration,
+                          knots=get_case(case).knots, model=desc, finished=False)
+            g = rf.h5.require_group("bodies")
+            g["initial_positions_m"] = model.ice_state()["positions_m"]
+            g["hull_vertices_m"] = model.geometry.vertices()
+        else:
+            g = rf.h5["bodies"]
+        rf.write_meta(legs=legs)
         sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
+        sim.output_writers["checkpointer"] = CaseCheckpointer(
+            chk, checkpoint_schedule or WallTimeInterval(CHECKPOINT_WALL_S), rf, wall_before_s, t_build)
         from iceresist import watchdog
 
         dog = watchdog.install(sim, runfile=rf, json_path=partial.with_suffix(".watchdog.json"))
@@ -117,7 +171,10 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
             sim.callbacks[name] = Callback(func, IterationInterval(every))
         log.info("case %s (%s, tier %d): %d cubes, %d spheres, %.3g s simulated", case, fidelity, tier,
                  model.layout.count, model.dem.n_spheres, scene.run.end_time_s)
-        sim.run()
+        if earlier is not None:
+            log.info("case %s: continuing from its checkpoint at record %d (leg %d)", case,
+                     int(earlier.get("checkpoint_iteration", -1)), legs)
+        sim.run(pickup=chk if earlier is not None else False)
         if dog.report is not None:
             raise InputError(f"case {case}: stopped by the watchdog: {dog.report.message} "
                              f"(diagnostic in {partial.with_suffix('.watchdog.json').name})")
@@ -126,21 +183,25 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         st = model.ice_state()
         g["final_positions_m"] = st["positions_m"]
         g["final_quaternions"] = st["quaternions"]
-        rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=sim.steps_done,
-                      dem_substeps=int(model.dem.substeps_taken), wall_time_s=sim.wall_time_s + build_s,
-                      build_time_s=build_s, step_time_s=sim.step_time_s,
-                      lbm_steps=int(getattr(model, "lbm_steps", 0)),
-                      mlups=(model.cells * getattr(model, "lbm_steps", 0) / sim.step_time_s / 1e6
-                             if sim.step_time_s > 0 else 0.0),
+        lbm_steps = int(getattr(model, "lbm_steps", 0))
+        lbm_leg = lbm_steps * sim.steps_done / max(model.iteration, 1)  # a fixed number per record
+        rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
+                      dem_substeps=int(model.dem.substeps_taken),
+                      wall_time_s=wall_before_s + sim.wall_time_s + build_s,
+                      build_time_s=build_s, step_time_s=sim.step_time_s, lbm_steps=lbm_steps,
+                      mlups=model.cells * lbm_leg / sim.step_time_s / 1e6 if sim.step_time_s > 0 else 0.0,
                       final_x_bow_m=model.x_bow_m, stop_reason=sim.stop_reason,
                       finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     partial.replace(final)
+    chk.unlink(missing_ok=True)
     return final
 
 
 def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "auto", progress: bool = False,
-              overrides: dict | None = None, callbacks: dict | None = None) -> pd.DataFrame:
-    """Run every case not yet finished in ``out_dir`` and write ``sweep.csv``; returns the table."""
+              overrides: dict | None = None, callbacks: dict | None = None,
+              checkpoint_schedule=None) -> pd.DataFrame:
+    """Run every case not yet finished in ``out_dir`` (an interrupted one continues from its checkpoint) and
+    write ``sweep.csv``; returns the table."""
     if fidelity not in FIDELITIES:
         raise InputError(f"--preset: unknown preset {fidelity!r}; use one of {', '.join(FIDELITIES)}")
     if tier not in (1, 2):
@@ -162,7 +223,7 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
             log.info("case %s: finished earlier, skipped", case)
             continue
         run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
-                 callbacks=callbacks)
+                 callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
     table = sweep_table(out)
     return table
 

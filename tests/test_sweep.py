@@ -6,7 +6,8 @@ import pandas as pd
 import pytest
 
 from iceresist.errors import InputError
-from iceresist.sweep import TINY_OVERRIDES, analyse_case, case_path, run_sweep, sweep_table
+from iceresist.simulation import IterationInterval
+from iceresist.sweep import TINY_OVERRIDES, analyse_case, case_path, checkpoint_path, run_case, run_sweep, sweep_table
 
 CASES = ["A-c68-v1.0", "B-c68-v1.0"]
 VARYING = ["wall_time_s"]
@@ -48,24 +49,54 @@ def test_post_processing_equals_hand_calculation(tiny_sweep):
 
 
 def test_interrupted_sweep_resumes_to_the_same_table(tiny_sweep, tmp_path):
+    """Killed at record 50 of the second case with checkpoints every 20 records: started again, the sweep skips
+    the first case, continues the second from record 40 (dropping the records 41-49 the killed leg wrote) and
+    ends with the uninterrupted table bit for bit."""
     _, reference = tiny_sweep
-    calls = {"n": 0}
 
     def kill(sim):
-        calls["n"] += 1
         if sim.model.scene.scene.name.endswith(CASES[1]) and sim.model.iteration >= 50:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
         run_sweep("quick", 1, tmp_path, CASES, backend="cpu", overrides=TINY_OVERRIDES,
-                  callbacks={"kill": (kill, 10)})
+                  callbacks={"kill": (kill, 10)}, checkpoint_schedule=IterationInterval(20))
     assert case_path(tmp_path, CASES[0]).is_file()
+    assert not checkpoint_path(tmp_path, CASES[0]).exists()  # a finished case keeps no checkpoint
     assert not case_path(tmp_path, CASES[1]).is_file()
-    assert case_path(tmp_path, CASES[1]).with_name(f"{CASES[1]}.partial.h5").is_file()
+    partial = case_path(tmp_path, CASES[1]).with_name(f"{CASES[1]}.partial.h5")
+    with h5py.File(partial, "r") as h5:
+        assert h5["timeseries/iteration"][-1] == 49  # the kill comes before the writers of record 50
+        assert h5["meta"].attrs["checkpoint_iteration"] == 40
+    assert checkpoint_path(tmp_path, CASES[1]).is_file()
     mtime = case_path(tmp_path, CASES[0]).stat().st_mtime_ns
     resumed = run_sweep("quick", 1, tmp_path, CASES, backend="cpu", overrides=TINY_OVERRIDES)
     assert case_path(tmp_path, CASES[0]).stat().st_mtime_ns == mtime  # the finished case was skipped
+    with h5py.File(case_path(tmp_path, CASES[1]), "r") as h5:
+        assert h5["meta"].attrs["legs"] == 2
+        np.testing.assert_array_equal(h5["timeseries/iteration"][:], np.arange(len(h5["timeseries/iteration"])))
+    assert not checkpoint_path(tmp_path, CASES[1]).exists()
     pd.testing.assert_frame_equal(resumed.drop(columns=VARYING), reference.drop(columns=VARYING), check_exact=True)
+
+
+def test_checkpoint_of_another_scene_is_not_continued(tmp_path):
+    """A partial case whose scene has changed since (here: the channel length) runs again from its start."""
+    case = CASES[0]
+
+    def kill(sim):
+        if sim.model.iteration >= 30:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_case(case, "quick", 1, tmp_path, backend="cpu", overrides=TINY_OVERRIDES,
+                 callbacks={"kill": (kill, 10)}, checkpoint_schedule=IterationInterval(20))
+    assert checkpoint_path(tmp_path, case).is_file()
+    other = {**TINY_OVERRIDES, "run": {"end_time_s": 0.1}}
+    path = run_case(case, "quick", 1, tmp_path, backend="cpu", overrides=other)
+    with h5py.File(path, "r") as h5:
+        assert h5["meta"].attrs["legs"] == 1
+        assert h5["meta"].attrs["time_s"] == pytest.approx(0.1, abs=0.003)
+    assert not checkpoint_path(tmp_path, case).exists()
 
 
 def test_refusals(tmp_path):

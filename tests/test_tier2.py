@@ -103,6 +103,33 @@ def test_recorded_force_equals_a_hand_sum_of_the_dem_sphere_forces(tiny_run):
     assert np.allclose(fx_last, fx_last_hand, rtol=1e-9, atol=1e-12)
 
 
+def test_tier2_case_killed_and_continued_is_the_straight_run(tiny_run, tmp_path):
+    """A sweep case killed at record 9 continues from its checkpoint of record 8 (populations, phase field, cell
+    owners and DEM contact history) to the straight run's records and final ice bit for bit."""
+    from iceresist.simulation import IterationInterval
+    from iceresist.sweep import checkpoint_path
+
+    straight, _ = tiny_run
+
+    def kill(sim):
+        if sim.model.iteration >= 9:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_case(CASE, "quick", 2, tmp_path, backend="cpu", overrides=TINY_TIER2_OVERRIDES,
+                 callbacks={"kill": (kill, 1)}, checkpoint_schedule=IterationInterval(4))
+    assert checkpoint_path(tmp_path, CASE).is_file()
+    path = run_case(CASE, "quick", 2, tmp_path, backend="cpu", overrides=TINY_TIER2_OVERRIDES)
+    with h5py.File(path, "r") as a, h5py.File(straight, "r") as b:
+        assert a["meta"].attrs["legs"] == 2 and a["meta"].attrs["iteration"] == b["meta"].attrs["iteration"]
+        assert a["meta"].attrs["lbm_steps"] == b["meta"].attrs["lbm_steps"]
+        assert sorted(a["timeseries"]) == sorted(b["timeseries"])
+        for key in b["timeseries"]:
+            np.testing.assert_array_equal(a["timeseries"][key][:], b["timeseries"][key][:], err_msg=key)
+        np.testing.assert_array_equal(a["bodies/final_positions_m"][:], b["bodies/final_positions_m"][:])
+    assert not checkpoint_path(tmp_path, CASE).exists()
+
+
 def test_tier2_allocates_lbm_phase_field_and_dem(tiny_run):
     m = tiny_run[1]["model"]
     a = m.allocation()

@@ -145,7 +145,8 @@ def test_tier2_watchdog_probe_reads_the_flow_and_names_the_cell_of_a_nan(tiny_ru
     """The probe of a healthy run reads the water, not the cells a body covers: the fastest wet cell moves at
     0.9-1.1 x the hull's lattice speed (measured 0.93-1.0 x on this case: the water at the hull is dragged with
     it), below the watchdog's limit, with the density within the band; the cells inside the hull and the
-    floes, which the free surface's flags call liquid after a step, hold no water and are left out. A NaN put
+    floes hold no water: the free surface keeps them GHOST through its reflag (it used to call about 470 of
+    them liquid after a step here) and the probe and the fields leave them out. A NaN put
     into one liquid cell's populations is reported as non-finite at that cell, [i, j, k] of the dense grid."""
     from iceresist import watchdog
     from iceresist.grid.forest import CELLS
@@ -158,7 +159,7 @@ def test_tier2_watchdog_probe_reads_the_flow_and_names_the_cell_of_a_nan(tiny_ru
     assert 0.9 < p["density_min"][0] <= 1.0 <= p["density_max"][0] < 1.1
     wet, liquid = m.fb.wet_cells(), m.fb.fluid.liquid()
     covered = m.fb.forest.to_dense(m.fb.coupling.owners()) >= 0
-    assert (liquid & covered).sum() > 100 and not (wet & covered).any()
+    assert covered.sum() > 1000 and not (liquid & covered).any() and not (wet & covered).any()
     for q in ("max_lattice_speed", "density_min", "density_max"):
         assert wet[tuple(p[q][1])], q
     assert np.isnan(m.fb.fields()[1][covered]).all()

@@ -147,7 +147,7 @@ class FloatingBodies:
 
     def fields(self):
         """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it and in
-        the cells a body covers: their populations are not water's, whatever the free surface's flags say)."""
+        the cells a body covers: their populations are not water's)."""
         rho, u = self.fluid.macroscopic()
         dry = ~self.wet_cells()
         rho[dry] = np.nan
@@ -155,9 +155,8 @@ class FloatingBodies:
         return self.fluid.phi(), rho, u
 
     def wet_cells(self) -> np.ndarray:
-        """Dense mask (nx, ny, nz) of the liquid cells no body covers (:meth:`FluidStructureCoupling.fluid_mask`).
-        After a step the free surface's flags call a covered cell liquid where phi >= 1/2 (the coupling marks it
-        again before the next stream-collide), and its populations are not water's."""
+        """Dense mask (nx, ny, nz) of the liquid cells no body covers (:meth:`FluidStructureCoupling.fluid_mask`:
+        the flags, which keep a covered cell GHOST, and the cell owners)."""
         return np.nan_to_num(self.forest.to_dense(self.coupling.fluid_mask().astype(np.float64)), nan=0.0) > 0.5
 
     def record(self) -> dict:

@@ -13,7 +13,8 @@ One time step (:meth:`FreeSurfaceFluid.step`):
 4. move the population rows to follow the water (:mod:`iceresist.freesurface.pool`: blocks wholly
    in the gas and not next to the water hold no f);
 5. reflag from the new phi: GAS where phi < 1/2 (the FLUID bit cleared), NEAR_SURFACE
-   on liquid cells with a gas neighbour, the wall flags of the forest kept. A cell
+   on liquid cells with a gas neighbour, the wall flags of the forest kept; a cell a moving body covers
+   (GHOST, set by :mod:`iceresist.coupling`) stays GHOST until the coupling uncovers it. A cell
    turning from gas to liquid has no populations: it gets the equilibrium (eq. 12) at
    the extended velocity and the hydrostatic density 1 + 3 g s below the surface,
    s = (W / 2) artanh(2 phi - 1), the same rule step 1 applies at the link midpoints.
@@ -52,7 +53,7 @@ def build_surface_cells(target, real):
       populations f - w (pool row ``fslot[b]``) with the half-force shift of the force rho g removed;
       0 elsewhere;
     * ``reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width)``: the flags of step 5 (module
-      docstring); a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
+      docstring), GHOST cells left as they are; a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
       rho = 1 + 3 g s, s = (W / 2) artanh(2 phi - 1) its depth below the phi = 1/2 surface (the rule
       of the link density in :func:`iceresist.lbm.stream.stream_collide_source`).
     """
@@ -61,7 +62,8 @@ def build_surface_cells(target, real):
     w = L.W.astype(real)
     zero, one, half, two, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 2.0, 3.0, 4.5, 1.5))
     tclip = real(TANH_CLIP)
-    fluid, gas, near_surface = np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE)
+    fluid, gas, near_surface, ghost = (np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE),
+                                       np.uint8(FL.GHOST))
     int64 = np.int64
     dev = target.device
 
@@ -91,6 +93,8 @@ def build_surface_cells(target, real):
     @dev
     def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width):
         b = int64(b)
+        if flags[b, c] & ghost:
+            return  # covered by a body: the coupling owns the cell (it is not water whatever phi says)
         bf = base[b, c]
         if (bf & fluid) == 0:
             flags[b, c] = bf
@@ -296,7 +300,7 @@ class FreeSurfaceFluid:
         return self.forest.to_dense(u)
 
     def liquid(self) -> np.ndarray:
-        """Dense mask (nx, ny, nz) of the liquid cells (flag FLUID), whatever their populations hold."""
+        """Dense mask (nx, ny, nz) of the liquid cells (flag FLUID; a cell a body covers is GHOST, not liquid)."""
         mask = ((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64)
         return np.nan_to_num(self.forest.to_dense(mask), nan=0.0) > 0.5
 

@@ -35,6 +35,10 @@ from iceresist.io.meta import mlups
 
 log = logging.getLogger(__name__)
 
+#: Wall-clock seconds between progress lines in the log of a run that shows no progress bar (a batch run, its
+#: output going to a file): a tier-2 case runs for hours.
+PROGRESS_LOG_S = 300.0
+
 
 # -- schedules ------------------------------------------------------------------------------------------
 class IterationInterval:
@@ -341,7 +345,8 @@ class Simulation:
                 w.pickup(self)
             w.last_iteration = self.model.iteration
 
-    def _progress_bar(self):
+    def _steps_to_stop(self) -> int | None:
+        """Steps from now to the stop iteration or the stop time (None when only a wall-time limit is set)."""
         m = self.model
         total = None
         if self.stop_iteration is not None:
@@ -350,12 +355,25 @@ class Simulation:
         if self.stop_time_s is not None and dt:
             by_time = math.ceil((self.stop_time_s - m.time_s) / dt - 1e-6)
             total = by_time if total is None else min(total, by_time)
+        return None if total is None else max(total, 0)
+
+    def _log_progress(self, done: int, total: int | None, elapsed_s: float):
+        """One INFO line: the step reached, the share of this run done and the wall time it will still take."""
+        m = self.model
+        msg = f"step {m.iteration}, t = {m.time_s:.4g} s"
+        if total:
+            msg += f", {100.0 * done / total:.0f} % of {total} steps"
+            if done > 0:
+                msg += f", about {(total - done) * elapsed_s / done / 60.0:.0f} min to go"
+        log.info("%s (%.0f min so far, %.2f MLUPS)", msg, elapsed_s / 60.0, self.mlups)
+
+    def _progress_bar(self, total: int | None):
         enabled = self.progress and sys.stderr.isatty()
         if not enabled:
             return None
         from tqdm import tqdm
 
-        return tqdm(total=max(total, 0) if total is not None else None, unit="step", dynamic_ncols=True,
+        return tqdm(total=total, unit="step", dynamic_ncols=True,
                     file=sys.stderr)
 
     # -- the loop -------------------------------------------------------------------------------------
@@ -374,7 +392,9 @@ class Simulation:
         if not pickup:
             self._actuate()
         self._check_stop()
-        bar = self._progress_bar()
+        total, first = self._steps_to_stop(), self.steps_done
+        bar = self._progress_bar(total)
+        last_log = time.perf_counter()
         try:
             while self.running:
                 n = self._chunk()
@@ -391,6 +411,10 @@ class Simulation:
                     bar.set_postfix_str(f"{self.mlups:.1f} MLUPS", refresh=False)
                 self._actuate()
                 self._check_stop()
+                now = time.perf_counter()
+                if bar is None and now - last_log >= PROGRESS_LOG_S:
+                    last_log = now
+                    self._log_progress(self.steps_done - first, total, now - self._start_wall)
             for _, w in self.output_writers.items():
                 if hasattr(w, "finalize"):
                     w.finalize(self)

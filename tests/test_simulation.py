@@ -206,3 +206,27 @@ def test_progress_bar_stays_quiet_when_not_a_tty(capsys):
     out = capsys.readouterr()
     assert out.err == "" and out.out == ""
     assert sim.steps_done == 20 and sim.mlups > 0
+
+
+def test_a_run_without_a_bar_logs_its_progress(monkeypatch, caplog):
+    """No tty (a batch run): a line every PROGRESS_LOG_S of wall time with the step, the share done and the time
+    still to go. With one fake second per clock reading and 10 s between lines, the lines count up to 100 %."""
+    import logging
+
+    import iceresist.simulation as simmod
+
+    clock = [0.0]
+
+    def fake_clock():
+        clock[0] += 1.0
+        return clock[0]
+
+    monkeypatch.setattr(simmod.time, "perf_counter", fake_clock)
+    monkeypatch.setattr(simmod, "PROGRESS_LOG_S", 10.0)
+    with caplog.at_level(logging.INFO, logger="iceresist.simulation"):
+        Simulation(LogisticModel(), stop_iteration=200, progress=True).run()
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("step ")]
+    assert len(lines) >= 3
+    shares = [float(line.split(", ")[2].split(" %")[0]) for line in lines]
+    assert shares == sorted(shares) and 0 < shares[0] and shares[-1] <= 100
+    assert all(" of 200 steps" in line and "min to go" in line for line in lines)

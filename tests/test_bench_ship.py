@@ -1,0 +1,50 @@
+"""The tier-2 ship benchmark (``python -m validation.bench ship``): the grids it cuts, the finest grid that fits a
+memory budget, and one measured row on the CI-sized case whose projection is its own rate times its records."""
+
+import math
+
+import pytest
+
+from iceresist.errors import InputError
+from iceresist.ship.presets import TIER2, case_scene
+from iceresist.sweep import TINY_TIER2_OVERRIDES
+from validation.bench_ship import bytes_per_cell, finest_fit, measure, scaled_scene
+
+CASE = "A-c68-v1.0"
+
+
+def test_scaled_scene_keeps_the_tank_in_metres():
+    """At the preset's own width in cells both presets give their own grid back; at half of it, half the cells
+    on every axis (rounded up to the 8-cell block) and twice the cell size."""
+    for preset in ("quick", "paper"):
+        t2 = TIER2[preset]
+        assert tuple(scaled_scene(CASE, preset, t2["cells"][1]).shape_cells()) == tuple(t2["cells"])
+    half = scaled_scene(CASE, "paper", 256)
+    assert tuple(half.shape_cells()) == (2056, 256, 256)   # 4104 / 2 = 2052 -> 2056
+    assert half.domain.dx_m == pytest.approx(2 * TIER2["paper"]["dx_m"], rel=1e-12)
+    with pytest.raises(InputError, match="--across"):
+        scaled_scene(CASE, "quick", 100)
+
+
+def test_finest_fit_is_the_last_grid_under_the_budget():
+    def cells_of(n):
+        return math.prod(scaled_scene(CASE, "paper", n).shape_cells()) if n else 0
+
+    per, fixed = 300.0, 2 ** 30
+    exact = per * cells_of(256) + fixed
+    assert finest_fit(per, fixed, exact, cells_of) == 256
+    assert finest_fit(per, fixed, exact - 1, cells_of) == 248
+    assert finest_fit(per, fixed, fixed, cells_of) == 0
+    # the paper's 512 cells across (1.08e9 cells) at 300 B per cell needs about 300 GiB
+    assert finest_fit(per, fixed, 300 * 2 ** 30, cells_of) < 512 <= finest_fit(per, fixed, 320 * 2 ** 30, cells_of)
+
+
+def test_measure_projects_its_own_rate_on_the_ci_sized_case():
+    scene = case_scene(CASE, "quick", 2, **TINY_TIER2_OVERRIDES)
+    row = measure(scene, "cpu", 2)
+    assert row["cells"] == 64 * 16 * 16 and row["finite"]
+    assert row["records_total"] == math.ceil(scene.run.end_time_s / (row["steps"] / 2 * scene.units().dt_s) - 1e-9)
+    assert row["projected_h"] == pytest.approx(row["records_total"] * row["s_per_record"] / 3600, rel=1e-12)
+    assert row["mlups"] == pytest.approx(row["cells"] * row["steps"] / row["seconds"] / 1e6, rel=1e-12)
+    per, fixed = bytes_per_cell({"lbm": 1000, "phase_field": 500, "coupling": 100, "dem": 7}, 10)
+    assert (per, fixed) == (160.0, 7)

@@ -1,0 +1,134 @@
+"""Cost of a tier-2 ship case (coupled LBM-DEM) at a chosen resolution, and the projected time to finish it:
+``python -m validation.bench ship --preset paper --backend cuda --fit-gib 70 --records 3``.
+
+The case's tank (``iceresist.ship.presets.TIER2``) is kept in metres and cut into ``--across N`` cells over its
+width (dx = width / N; every cell count rounded up to a multiple of the 8-cell block). ``--fit-gib G`` first
+builds the case at ``--probe-across`` cells, reads what its arrays hold (the model's ``allocation``: LBM
+populations, phase field and coupling per cell, the DEM fixed) and picks the finest N, a multiple of 8, whose
+arrays fill at most G GiB: the finest uniform grid that fits a device of that memory.
+
+Each measured row: cells and shape, dx, the build time (kernel compilation included), one record of warm-up,
+then ``--records`` records timed (``model.step``: LBM steps, coupling and DEM, no output and no watchdog),
+seconds per record, MLUPS, the records the case needs (its ``run.end_time_s`` over the record interval) and
+the projected hours to finish it at the measured rate. ``--records 0`` prints the ``--fit-gib`` row alone
+(a machine without the memory can say what a device with it would hold). The preset's precision (float32) is used; the common
+``--precision`` flag is ignored.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+GIB = 1024 ** 3
+
+
+def add_arguments(parser):
+    parser.add_argument("--preset", default="paper", help="fidelity: paper | quick (default paper)")
+    parser.add_argument("--case", default="A-c68-v1.0", help="case name (default A-c68-v1.0)")
+    parser.add_argument("--across", type=int, action="append",
+                        help="cells across the tank's width (repeatable; default: the preset's)")
+    parser.add_argument("--fit-gib", type=float, action="append",
+                        help="also run the finest grid whose arrays fit this many GiB (repeatable)")
+    parser.add_argument("--probe-across", type=int, default=64,
+                        help="cells across of the build that measures the bytes per cell for --fit-gib")
+    parser.add_argument("--records", type=int, default=3,
+                        help="timed records after one of warm-up (0: only the --fit-gib row, nothing timed)")
+
+
+def scaled_scene(case: str, preset: str, across: int, **overrides):
+    """The tier-2 scene of ``case`` at ``preset`` with the tank cut into ``across`` cells over its width."""
+    from iceresist.errors import InputError
+    from iceresist.ship.presets import TIER2, case_scene
+
+    if across < 8 or across % 8:
+        raise InputError(f"--across: a positive multiple of 8 cells (got {across})")
+    t2 = TIER2[preset]
+    width_m = t2["cells"][1] * t2["dx_m"]
+    dx = width_m / across
+    cells = [max(8, int(math.ceil(n * t2["dx_m"] / dx / 8 - 1e-9)) * 8) for n in t2["cells"]]
+    cells[1] = across
+    domain = {**overrides.pop("domain", {}), "cells": cells, "dx_m": dx}
+    return case_scene(case, preset, 2, domain=domain, **overrides)
+
+
+def bytes_per_cell(allocation: dict, cells: int) -> tuple[float, int]:
+    """(bytes per cell, fixed bytes) of a tier-2 model's ``allocation()``: the LBM, phase field and coupling
+    scale with the cells, the DEM does not."""
+    per = (allocation["lbm"] + allocation["phase_field"] + allocation["coupling"]) / cells
+    return per, int(allocation["dem"])
+
+
+def finest_fit(per_cell: float, fixed: int, budget_bytes: float, cells_of) -> int:
+    """The largest ``across`` (a multiple of 8) with ``per_cell * cells_of(across) + fixed <= budget_bytes``;
+    0 when not even 8 fits. ``cells_of(n)``: the cells of the grid n cells across (grows with n)."""
+    n = 0
+    while per_cell * cells_of(n + 8) + fixed <= budget_bytes:
+        n += 8
+    return n
+
+
+def measure(scene, backend: str, records: int) -> dict:
+    """Build the tier-2 model of ``scene``, step one record of warm-up and ``records`` timed ones."""
+    from iceresist.tier2 import Tier2Model
+
+    t0 = time.perf_counter()
+    model = Tier2Model(scene, backend=backend)
+    build_s = time.perf_counter() - t0
+    model.step(1)
+    _sync(model)
+    t0 = time.perf_counter()
+    model.step(records)
+    _sync(model)
+    seconds = time.perf_counter() - t0
+    per_record = seconds / records
+    total = int(math.ceil(scene.run.end_time_s / model.dt_s - 1e-9))
+    lbm = records * model.lbm_steps_per_record
+    return {"name": f"ship {scene.scene.name}", "backend": model.target.name, "precision": model.precision,
+            "cells": model.cells, "shape": "x".join(str(n) for n in model.shape_cells),
+            "dx_mm": 1e3 * model.units.dx_m, "steps": lbm, "seconds": seconds,
+            "mlups": model.cells * lbm / seconds / 1e6, "s_per_record": per_record,
+            "records_total": total, "projected_h": total * per_record / 3600.0,
+            "allocated_GiB": model.allocated_bytes() / GIB, "build_s": build_s,
+            "finite": bool(model.is_finite())}
+
+
+def _sync(model):
+    if model.target.is_cuda:
+        from numba import cuda
+
+        cuda.synchronize()
+
+
+def run(args):
+    from iceresist.errors import InputError
+    from iceresist.ship.presets import FIDELITIES, TIER2
+    from iceresist.tier2 import Tier2Model
+
+    if args.preset not in FIDELITIES:
+        raise InputError(f"--preset: unknown preset {args.preset!r}; use one of {', '.join(FIDELITIES)}")
+    if args.records < 0:
+        raise InputError(f"--records: 0 (the --fit-gib row only) or more (got {args.records})")
+    rows, acrosses = [], list(args.across or [])
+    if args.fit_gib:
+        probe = scaled_scene(args.case, args.preset, args.probe_across)
+        model = Tier2Model(probe, backend=args.backend)
+        per, fixed = bytes_per_cell(model.allocation(), model.cells)
+        del model
+
+        def cells_of(n):
+            return math.prod(scaled_scene(args.case, args.preset, n).shape_cells()) if n else 0
+
+        width_m = TIER2[args.preset]["cells"][1] * TIER2[args.preset]["dx_m"]
+        for gib in args.fit_gib:
+            n = finest_fit(per, fixed, gib * GIB, cells_of)
+            rows.append({"name": f"fit {gib:g} GiB", "backend": args.backend, "bytes_per_cell": per,
+                         "fixed_GiB": fixed / GIB, "across": n, "cells": cells_of(n),
+                         "dx_mm": 1e3 * width_m / n if n else 0.0})
+            if n:
+                acrosses.append(n)
+    if not acrosses and not args.fit_gib:
+        acrosses = [TIER2[args.preset]["cells"][1]]
+    for n in acrosses if args.records else []:
+        rows.append(measure(scaled_scene(args.case, args.preset, n), args.backend, args.records))
+    return rows

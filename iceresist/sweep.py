@@ -11,8 +11,8 @@ half-finished result under the final name. A running case also writes its whole 
 ``<case>.checkpoint.h5`` every ``CHECKPOINT_WALL_S`` of wall time (deleted when the case finishes). Started
 again, the sweep skips every finished case, continues an unfinished one from its checkpoint (when the
 partial file holds the same scene; otherwise it runs the case from its start) and rebuilds the table from the
-files, so it ends with the table an uninterrupted sweep gives (the runs are deterministic on a fixed backend
-and thread count, and a continued run is the straight run bit for bit).
+files, so it ends with the table an uninterrupted sweep gives: bit for bit in the tests (tier 1, and the
+CI-sized tier 2), statistically for a long tier-2 case (docs/SHIP.md, "Reproducibility").
 """
 
 from __future__ import annotations

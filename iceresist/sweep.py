@@ -183,13 +183,11 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         st = model.ice_state()
         g["final_positions_m"] = st["positions_m"]
         g["final_quaternions"] = st["quaternions"]
-        lbm_steps = int(getattr(model, "lbm_steps", 0))
-        lbm_leg = lbm_steps * sim.steps_done / max(model.iteration, 1)  # a fixed number per record
         rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
                       dem_substeps=int(model.dem.substeps_taken),
                       wall_time_s=wall_before_s + sim.wall_time_s + build_s,
-                      build_time_s=build_s, step_time_s=sim.step_time_s, lbm_steps=lbm_steps,
-                      mlups=model.cells * lbm_leg / sim.step_time_s / 1e6 if sim.step_time_s > 0 else 0.0,
+                      build_time_s=build_s, step_time_s=sim.step_time_s,
+                      lbm_steps=int(getattr(model, "lbm_steps", 0)), mlups=sim.mlups,
                       final_x_bow_m=model.x_bow_m, stop_reason=sim.stop_reason,
                       finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     partial.replace(final)

@@ -76,10 +76,10 @@ def measure(scene, backend: str, records: int) -> dict:
     model = Tier2Model(scene, backend=backend)
     build_s = time.perf_counter() - t0
     model.step(1)
-    _sync(model)
+    model.fb.fluid.fluid.synchronize()
     t0 = time.perf_counter()
     model.step(records)
-    _sync(model)
+    model.fb.fluid.fluid.synchronize()
     seconds = time.perf_counter() - t0
     per_record = seconds / records
     total = int(math.ceil(scene.run.end_time_s / model.dt_s - 1e-9))
@@ -91,13 +91,6 @@ def measure(scene, backend: str, records: int) -> dict:
             "records_total": total, "projected_h": total * per_record / 3600.0,
             "allocated_GiB": model.allocated_bytes() / GIB, "build_s": build_s,
             "finite": bool(model.is_finite())}
-
-
-def _sync(model):
-    if model.target.is_cuda:
-        from numba import cuda
-
-        cuda.synchronize()
 
 
 def run(args):

@@ -147,17 +147,9 @@ class FloatingBodies:
 
     def fields(self):
         """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it and in
-        the cells a body covers: their populations are not water's)."""
+        the cells a body covers, which the coupling flags GHOST and the free surface keeps so)."""
         rho, u = self.fluid.macroscopic()
-        dry = ~self.wet_cells()
-        rho[dry] = np.nan
-        u[:, dry] = np.nan
         return self.fluid.phi(), rho, u
-
-    def wet_cells(self) -> np.ndarray:
-        """Dense mask (nx, ny, nz) of the liquid cells no body covers (:meth:`FluidStructureCoupling.fluid_mask`:
-        the flags, which keep a covered cell GHOST, and the cell owners)."""
-        return np.nan_to_num(self.forest.to_dense(self.coupling.fluid_mask().astype(np.float64)), nan=0.0) > 0.5
 
     def record(self) -> dict:
         """One row of a time series: time, body positions and velocities, fluid forces, water volume."""

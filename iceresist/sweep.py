@@ -240,21 +240,29 @@ def _fsicr_r_ch_kN() -> dict:
     return out
 
 
-def ice_free_width_m(positions, x_range, centre_y_m, level_m, cube_m, channel_width_m, slice_m=0.1) -> float:
-    """Median over x-slices of the width of the lane around the centreline free of floating ice (m)."""
+def ice_free_width_m(positions, x_range, centre_y_m, cube_m, channel_width_m, slice_m=0.1,
+                     level_quantile=0.9) -> float:
+    """Median over x-slices of the width of the lane around the centreline free of floating ice (m).
+
+    A cube floats when its centre lies less than one cube edge below the top of the slice's ice, read as the
+    ``level_quantile`` of the slice's cube centres. The ice's own level, not the still water level: in tier 2
+    the water beside and behind the hull is drawn down, and the cubes float centimetres below the still level.
+    """
     p = np.asarray(positions, dtype=float)
-    floating = p[:, 2] > level_m - cube_m
     widths = []
     x0, x1 = x_range
     if not x1 > x0:
         return float("nan")
     slice_m = min(slice_m, x1 - x0)
+    half_w = channel_width_m / 2
     for a in np.arange(x0, x1 - 1e-9, slice_m):
-        sel = floating & (p[:, 0] >= a) & (p[:, 0] < a + slice_m)
-        y = p[sel, 1] - centre_y_m
+        in_slice = p[(p[:, 0] >= a) & (p[:, 0] < a + slice_m)]
+        if in_slice.size:
+            top_m = np.quantile(in_slice[:, 2], level_quantile)
+            in_slice = in_slice[in_slice[:, 2] > top_m - cube_m]
+        y = in_slice[:, 1] - centre_y_m
         port = y[y > 0] - cube_m / 2
         stbd = -y[y <= 0] - cube_m / 2
-        half_w = channel_width_m / 2
         w = (port.min() if port.size else half_w) + (stbd.min() if stbd.size else half_w)
         widths.append(max(0.0, w))
     return float(np.median(widths)) if widths else float("nan")
@@ -311,8 +319,8 @@ def analyse_case(path) -> dict:
         "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note,
         "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, SCALE)) / 1e3,
         "R_CH_FSICR_kN": r_ch, "ratio_sim_FSICR": R_kN / r_ch,
-        "ice_free_width_m": ice_free_width_m(final, (x_lo, x_hi), model["centre_y_m"], model["water_level_m"],
-                                             model["cube_m"], model["channel_width_m"]),
+        "ice_free_width_m": ice_free_width_m(final, (x_lo, x_hi), model["centre_y_m"], model["cube_m"],
+                                             model["channel_width_m"]),
         "floes_under_hull": floes_under_hull(final, geom.waterline_polygon(), x_bow, model["centre_y_m"],
                                              model["water_level_m"], model["cube_m"]),
         "resolution_m": float(model["resolution_m"]), "cells": int(model["cells"]),

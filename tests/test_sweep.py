@@ -7,7 +7,8 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.simulation import IterationInterval
-from iceresist.sweep import TINY_OVERRIDES, analyse_case, case_path, checkpoint_path, run_case, run_sweep, sweep_table
+from iceresist.sweep import (TINY_OVERRIDES, analyse_case, case_path, checkpoint_path, ice_free_width_m, run_case,
+                             run_sweep, sweep_table)
 
 CASES = ["A-c68-v1.0", "B-c68-v1.0"]
 VARYING = ["wall_time_s"]
@@ -97,6 +98,25 @@ def test_checkpoint_of_another_scene_is_not_continued(tmp_path):
         assert h5["meta"].attrs["legs"] == 1
         assert h5["meta"].attrs["time_s"] == pytest.approx(0.1, abs=0.003)
     assert not checkpoint_path(tmp_path, case).exists()
+
+
+def test_ice_free_width_reads_the_ice_level_not_the_still_level():
+    """Ice drawn down 3-9 cm below the still level (as in tier 2), cubes pressed under the lane, a few rafted:
+    the width is that of the lane between the floating cubes (2 x (0.40 - 0.0205) m)."""
+    cube, centre, still = 0.041, 0.695, 0.9
+    rows = []
+    for i, x in enumerate(np.arange(3.425, 4.2, 0.05)):
+        level = still - 0.03 - 0.06 * (x - 3.4) / 0.8 - 0.0185  # the floating cubes' centres, lower towards the bow
+        for k, y in enumerate(np.concatenate([-np.arange(0.40, 0.676, 0.05), np.arange(0.40, 0.676, 0.05)])):
+            rows.append((x, centre + y, level + (cube if (i + k) % 13 == 0 else 0.0)))  # 1 in 13 rafted
+        rows += [(x, centre + y, level - 0.25) for y in (-0.1, 0.0, 0.1)]  # pressed under the hull
+    p = np.array(rows)
+    expected = 2 * (0.40 - cube / 2)
+    assert ice_free_width_m(p, (3.4, 4.2), centre, cube, 1.39) == pytest.approx(expected, abs=1e-9)
+    # the still-level reading this replaces: no cube centre within one edge of 0.9 m, so the whole channel
+    assert (p[:, 2] <= still - cube).mean() > 0.9
+    # an empty slice reads the whole channel
+    assert ice_free_width_m(p, (5.0, 5.1), centre, cube, 1.39) == pytest.approx(1.39)
 
 
 def test_refusals(tmp_path):

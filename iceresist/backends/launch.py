@@ -33,38 +33,88 @@ def copy_into(dst, host):
         dst[...] = host
 
 
-class CellLauncher:
-    """Callable ``launcher(nblocks, *args)`` running ``cell(b, c, *args)`` for every cell of every block."""
+def jit_generated(target, src: str, name: str, namespace: dict):
+    """Compile the generated launcher ``name`` defined by ``src`` (the names it calls in ``namespace``): a CUDA
+    kernel, or a parallel njit with the project's fast-math flags on the CPU."""
+    if target.is_cuda:
+        from numba import cuda
 
-    def __init__(self, target, cell, argnames, per_block: bool = False):
-        """``cell(b, c, *args)``; with ``per_block`` (CPU only) ``cell(b, *args)`` updates a whole block."""
+        ns = {"cuda": cuda, **namespace}
+        exec(compile(src, f"<iceresist {name} cuda>", "exec"), ns)
+        return cuda.jit(ns[name])
+    ns = {"prange": numba.prange, **namespace}
+    exec(compile(src, f"<iceresist {name} cpu>", "exec"), ns)
+    return numba.njit(ns[name], parallel=True, fastmath=set(CPU_FASTMATH))
+
+
+class _GeneratedLauncher:
+    """A launcher generated around one device function ``fn``: subclasses give ``name``, the name ``fn`` has in
+    the generated source, the source (:meth:`_source`) and the CUDA launch shape (:meth:`_cuda_launch`)."""
+
+    name = ""
+    fn_name = ""
+
+    def __init__(self, target, fn, argnames, **options):
         self.target = target
-        self.cell = cell
         self.argnames = tuple(argnames)
-        sig = ", ".join(self.argnames)
-        if target.is_cuda:
-            from numba import cuda
+        self.source = self._source(target.is_cuda, ", ".join(self.argnames), **options)
+        self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn})
 
-            src = (f"def launch_cells({sig}):\n"
-                   "    b = cuda.blockIdx.x\n"
-                   "    c = cuda.threadIdx.x\n"
-                   f"    cell(b, c, {sig})\n")
-            ns = {"cuda": cuda, "cell": cell}
-            exec(compile(src, "<iceresist launcher cuda>", "exec"), ns)
-            self._kernel = cuda.jit(ns["launch_cells"])
-        else:
-            inner = (f"        cell(b, {sig})\n" if per_block else
-                     f"        for c in range({CUDA_BLOCK_CELLS}):\n            cell(b, c, {sig})\n")
-            src = f"def launch_cells(nblocks, {sig}):\n    for b in prange(nblocks):\n" + inner
-            ns = {"prange": numba.prange, "cell": cell}
-            exec(compile(src, "<iceresist launcher cpu>", "exec"), ns)
-            self._kernel = numba.njit(ns["launch_cells"], parallel=True, fastmath=set(CPU_FASTMATH))
-        self.source = src
-
-    def __call__(self, nblocks, *args):
-        if nblocks == 0:
+    def __call__(self, n, *args):
+        if n == 0:
             return
         if self.target.is_cuda:
-            self._kernel[nblocks, CUDA_BLOCK_CELLS](*args)
+            grid, threads, lead = self._cuda_launch(n)
+            self._kernel[grid, threads](*lead, *args)
         else:
-            self._kernel(nblocks, *args)
+            self._kernel(n, *args)
+
+
+class CellLauncher(_GeneratedLauncher):
+    """Callable ``launcher(nblocks, *args)`` running ``cell(b, c, *args)`` for every cell of every block;
+    with ``per_block=True`` (CPU only) ``cell(b, *args)`` updates a whole block."""
+
+    name, fn_name = "launch_cells", "cell"
+
+    def __init__(self, target, cell, argnames, per_block: bool = False):
+        super().__init__(target, cell, argnames, per_block=per_block)
+
+    @staticmethod
+    def _source(cuda: bool, sig: str, per_block: bool) -> str:
+        if cuda:
+            return (f"def launch_cells({sig}):\n    b = cuda.blockIdx.x\n    c = cuda.threadIdx.x\n"
+                    f"    cell(b, c, {sig})\n")
+        inner = (f"        cell(b, {sig})\n" if per_block else
+                 f"        for c in range({CUDA_BLOCK_CELLS}):\n            cell(b, c, {sig})\n")
+        return f"def launch_cells(nblocks, {sig}):\n    for b in prange(nblocks):\n" + inner
+
+    @staticmethod
+    def _cuda_launch(n):
+        return n, CUDA_BLOCK_CELLS, ()
+
+
+#: Threads per CUDA block for one-thread-per-forest-block launches (:class:`BlockLauncher`).
+CUDA_BLOCK_THREADS = 128
+
+
+class BlockLauncher(_GeneratedLauncher):
+    """Callable ``launcher(nblocks, *args)`` running ``block(b, *args)`` once per forest block: a reduction
+    over the block's cells into ``out[b, ...]`` (diagnostics read on the host from a small array, not a
+    copy of the fields).
+
+    * CPU: ``prange`` over blocks;
+    * CUDA: one thread per forest block, :data:`CUDA_BLOCK_THREADS` threads per CUDA block.
+    """
+
+    name, fn_name = "launch_blocks", "block"
+
+    @staticmethod
+    def _source(cuda: bool, sig: str) -> str:
+        if cuda:
+            return (f"def launch_blocks(nblocks, {sig}):\n    b = cuda.grid(1)\n    if b < nblocks:\n"
+                    f"        block(b, {sig})\n")
+        return f"def launch_blocks(nblocks, {sig}):\n    for b in prange(nblocks):\n        block(b, {sig})\n"
+
+    @staticmethod
+    def _cuda_launch(n):
+        return (n + CUDA_BLOCK_THREADS - 1) // CUDA_BLOCK_THREADS, CUDA_BLOCK_THREADS, (np.int64(n),)

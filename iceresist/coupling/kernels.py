@@ -54,6 +54,7 @@ import math
 import numpy as np
 
 from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
+from iceresist.backends.launch import jit_generated
 from iceresist.coupling.geometry import BOX, SPHERE
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
@@ -494,8 +495,6 @@ class BodyLauncher:
         self.target = target
         sig = ", ".join(argnames)
         if target.is_cuda:
-            from numba import cuda
-
             src = (f"def launch_bodies({sig}):\n"
                    "    k = cuda.blockIdx.x\n"
                    "    lx = bint[k, 3]\n    ly = bint[k, 4]\n    lz = bint[k, 5]\n"
@@ -503,9 +502,7 @@ class BodyLauncher:
                    "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
                    "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
                    f"        visit(k, gx, gy, gz, {sig})\n")
-            ns = {"cuda": cuda, "visit": visit}
-            exec(compile(src, "<iceresist body launcher cuda>", "exec"), ns)
-            self._kernel = cuda.jit(ns["launch_bodies"])
+            self._kernel = jit_generated(target, src, "launch_bodies", {"visit": visit})
         else:
             # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
             loop = (f"def body_loop(k, {sig}):\n"

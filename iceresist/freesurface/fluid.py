@@ -173,6 +173,7 @@ class FreeSurfaceFluid:
         self._base = self._to_target(np.ascontiguousarray(forest.flags.astype(np.uint8)))
         self._u = self._to_target(np.zeros((self.nblocks, 3, CELLS), self.real))
         self._dist = self._to_target(np.zeros((self.nblocks, CELLS), np.int8))
+        self._probe = None  # the watchdog's FluidProbe, made at the first probe()
         self.iteration = 0
 
     def _to_target(self, a):
@@ -291,6 +292,19 @@ class FreeSurfaceFluid:
         rho[~liquid] = np.nan
         u[:, ~liquid] = np.nan
         return self.forest.to_dense(rho), self.forest.to_dense(u)
+
+    def probe(self, full: bool, kinetic_energy_ref: float = 0.0) -> dict:
+        """The watchdog's quantities (:mod:`iceresist.freesurface.probe`), reduced per block on the target: phi
+        finite, the liquid's velocity finite and its fastest cell; ``full``: from the populations, with the
+        density band and the kinetic energy (lattice units). The same dict as
+        :func:`iceresist.watchdog.fluid_probe` on :meth:`macroscopic` (``full``) or
+        :func:`iceresist.watchdog.fluid_speed_probe` on :meth:`velocity`."""
+        if self._probe is None:
+            from iceresist.freesurface.probe import FluidProbe
+
+            self._probe = FluidProbe(self.forest, self.target)
+        return self._probe.probe(self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, self.phase.phi,
+                                 full, 0.5 * self.g, kinetic_energy_ref)
 
     def velocity(self) -> np.ndarray:
         """Velocity (3, nx, ny, nz) of the last step, lattice units, float64, NaN in gas and solid: the field the

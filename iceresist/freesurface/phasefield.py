@@ -43,7 +43,7 @@ from iceresist.backends import jit
 from iceresist.errors import InputError
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
-from iceresist.backends.launch import CellLauncher
+from iceresist.backends.launch import BlockLauncher, CellLauncher
 from iceresist.freesurface.layout import build_neighbour
 from iceresist.grid.forest import CELLS
 
@@ -173,6 +173,24 @@ def phase_launchers(target, precision: str, lattice_name: str):
             CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa")))
 
 
+@lru_cache(maxsize=None)
+def volume_launcher(target, lattice_name: str) -> BlockLauncher:
+    """``launch(nblocks, h, solid, out)``: ``out[b]`` = sum_k h_k over the cells of block b no solid covers, in
+    float64 (the conserved phase volume of the block, cells^3), reduced on the target."""
+    nq = lookup_h_lattice(lattice_name).q
+    f64 = np.float64
+
+    def volume_block(b, h, solid, out):
+        acc = f64(0.0)
+        for c in range(CELLS):
+            if solid[b, c] < 0:
+                for k in range(nq):
+                    acc += f64(h[b, k, c])
+        out[b] = acc
+
+    return BlockLauncher(target, target.device(volume_block), ("h", "solid", "out"))
+
+
 class PhaseField:
     """Phase field phi on a block forest, advanced by the conservative Allen-Cahn LBM (eqs. 5-10).
 
@@ -207,6 +225,7 @@ class PhaseField:
         self.phi = self._to_target(np.zeros((self.nblocks, CELLS), self.real))
         #: Body covering each cell (-1: none), ``[block, cell]`` int32; the coupling replaces it by its own table.
         self.solid = self._to_target(np.full((self.nblocks, CELLS), -1, np.int32))
+        self._volume = None  # (launcher, per-block sums), made at the first volume()
 
     @property
     def omega(self):
@@ -246,6 +265,11 @@ class PhaseField:
         return self._host(self.phi)
 
     def volume(self) -> float:
-        """sum_k h_k over the cells not covered by a solid (the conserved phase volume, cells^3), in float64."""
-        h = self._host(self.h).astype(np.float64).sum(axis=1)
-        return float(h[self._host(self.solid) < 0].sum())
+        """sum_k h_k over the cells not covered by a solid (the conserved phase volume, cells^3), in float64,
+        summed per block on the target (no host copy of h)."""
+        if self._volume is None:
+            self._volume = (volume_launcher(self.target, self.lat.name),
+                            self._to_target(np.zeros(self.nblocks, np.float64)))
+        launch, out = self._volume
+        launch(self.nblocks, self.h, self.solid, out)
+        return float(self._host(out).sum())

@@ -44,7 +44,7 @@ from iceresist.errors import InputError
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
 from iceresist.backends.launch import BlockLauncher, CellLauncher
-from iceresist.freesurface.layout import build_neighbour
+from iceresist.freesurface.layout import DIR_OF_OFFSET, build_neighbour
 from iceresist.grid.forest import CELLS
 
 PHI_AVE = 0.5
@@ -53,6 +53,50 @@ PHI_AVE = 0.5
 def tau_phi(mobility: float, lat: HLattice) -> float:
     """Relaxation time of h, paper eq. (10), lattice units (dt = 1)."""
     return 0.5 + mobility / lat.cs2
+
+
+def _stencils(real, lat: HLattice):
+    """(q, c_x, c_y, c_z, w, opposite) of the h lattice and (c_x, c_y, c_z, w / c_s^2) of the D3Q27 gradient
+    stencil, as the kernels read them."""
+    hc = np.ascontiguousarray(lat.c, dtype=np.int64)
+    gc = [np.ascontiguousarray(L.C[:, a]) for a in range(3)]
+    return (lat.q, *(np.ascontiguousarray(hc[:, a]) for a in range(3)), np.array(lat.w, dtype=real),
+            np.array(lat.opp, dtype=np.int64), *gc, (L.W / L.CS2).astype(real))
+
+
+def build_normal(target, real):
+    """Compile ``normal(phi, nbr, b, x, y, z) -> (nx, ny, nz)``: n = grad phi / |grad phi| by the isotropic D3Q27
+    stencil, walls clamped (zero normal gradient); the sums run in float64 (integer c_q times phi). Its
+    last step, ``unit(gx, gy, gz)``, is returned too: ``(normal, unit)``."""
+    _, neighbour_clamped = build_neighbour(target)
+    gcx, gcy, gcz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
+    gw = (L.W / L.CS2).astype(real)
+    zero, one = real(0.0), real(1.0)
+    tiny = real(1e-24) if real == np.float64 else real(1e-18)
+    dev = target.device
+
+    @dev
+    def unit(gx, gy, gz):
+        g2 = gx * gx + gy * gy + gz * gz
+        if g2 > tiny:
+            ig = one / math.sqrt(g2)
+            return gx * ig, gy * ig, gz * ig
+        return zero, zero, zero
+
+    @dev
+    def normal(phi, nbr, b, x, y, z):
+        gx = zero
+        gy = zero
+        gz = zero
+        for q in range(1, 27):
+            bn, cn_ = neighbour_clamped(nbr, b, x, y, z, gcx[q], gcy[q], gcz[q])
+            pn = gw[q] * phi[bn, cn_]
+            gx += gcx[q] * pn
+            gy += gcy[q] * pn
+            gz += gcz[q] * pn
+        return unit(gx, gy, gz)
+
+    return normal, unit
 
 
 def build_phase_cells(target, real, lat: HLattice):
@@ -67,17 +111,10 @@ def build_phase_cells(target, real, lat: HLattice):
     unrolled code: 26 unrolled look-ups with their branches take minutes to compile
     and are memory bound anyway.
     """
-    neighbour, neighbour_clamped = build_neighbour(target)
-    nq = lat.q
-    hc = np.ascontiguousarray(lat.c, dtype=np.int64)
-    hcx, hcy, hcz = (np.ascontiguousarray(hc[:, a]) for a in range(3))
-    hw = np.array(lat.w, dtype=real)
-    hopp = np.array(lat.opp, dtype=np.int64)
-    gcx, gcy, gcz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
-    gw = (L.W / L.CS2).astype(real)
+    neighbour, _ = build_neighbour(target)
+    nq, hcx, hcy, hcz, hw, hopp, *_ = _stencils(real, lat)
     zero, one, half, four = real(0.0), real(1.0), real(0.5), real(4.0)
     cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
-    tiny = real(1e-24) if real == np.float64 else real(1e-18)
     dev = target.device
     int64 = np.int64
 
@@ -90,23 +127,7 @@ def build_phase_cells(target, real, lat: HLattice):
                 return h_in[bs, k, cs_]
         return h_in[b, hopp[k], c]
 
-    @dev
-    def normal(phi, nbr, b, x, y, z):
-        """n = grad phi / |grad phi| by the isotropic D3Q27 stencil, walls clamped (zero normal gradient)."""
-        gx = zero
-        gy = zero
-        gz = zero
-        for q in range(1, 27):
-            bn, cn_ = neighbour_clamped(nbr, b, x, y, z, gcx[q], gcy[q], gcz[q])
-            pn = gw[q] * phi[bn, cn_]
-            gx += gcx[q] * pn
-            gy += gcy[q] * pn
-            gz += gcz[q] * pn
-        g2 = gx * gx + gy * gy + gz * gz
-        if g2 > tiny:
-            ig = one / math.sqrt(g2)
-            return gx * ig, gy * ig, gz * ig
-        return zero, zero, zero
+    normal, _ = build_normal(target, real)
 
     @dev
     def h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu):
@@ -164,13 +185,220 @@ def build_phase_cells(target, real, lat: HLattice):
     return phi_cell, stream_collide_cell, init_cell
 
 
+def build_phase_blocks(real, lat: HLattice):
+    """Compile the CPU block forms ``(phi_block, stream_collide_block)`` of passes 1 and 2 (the launchers call
+    them once per block, ``CellLauncher(per_block=True)``): the same updates as :func:`build_phase_cells`,
+    arranged so that LLVM vectorises them across the cells of a block.
+
+    * pull: h_k of the 512 cells into a block scratch line by line (8 cells from the source line, the one
+      cell that crosses the block's x face from the neighbour), then one select per cell between the pulled
+      value and the half-way bounce-back (a source outside the domain or solid);
+    * normal: from phi of the block and its halo in a 10^3 scratch (the stencil at constant offsets) in a
+      block whose 26 neighbours all exist; the per-cell clamped stencil in a block at a wall;
+    * collide: eq. (6) over the 512 cells for each k; solid cells keep phi and h (a select).
+    """
+    neighbour, _ = build_neighbour(jit.cpu)
+    normal, unit = build_normal(jit.cpu, real)
+    nq, hcx, hcy, hcz, hw, hopp, gcx, gcy, gcz, gw = _stencils(real, lat)
+    goff = np.array([gcx[q] + 10 * (gcy[q] + 10 * gcz[q]) for q in range(27)], dtype=np.int64)
+    dir_of = DIR_OF_OFFSET
+    fxm, fxp = L.index_of(-1, 0, 0), L.index_of(1, 0, 0)
+    fym, fyp = L.index_of(0, -1, 0), L.index_of(0, 1, 0)
+    fzm, fzp = L.index_of(0, 0, -1), L.index_of(0, 0, 1)
+    zero, one, half, four = real(0.0), real(1.0), real(0.5), real(4.0)
+    cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
+    dev = jit.cpu.device
+    rdtype = real
+
+    @dev
+    def block_at(nbr, b, bx, by, bz):
+        if bx == 0 and by == 0 and bz == 0:
+            return b
+        return nbr[b, dir_of[(bx + 1) + 3 * (by + 1) + 9 * (bz + 1)]]
+
+    @dev
+    def wrap(v):
+        """(block offset, cell) of the in-block coordinate v in -8..15."""
+        if v < 0:
+            return -1, v + 8
+        if v >= 8:
+            return 1, v - 8
+        return 0, v
+
+    @dev
+    def clamp(v, low_open, high_open):
+        """v, or the boundary cell 0 / 7 where v leaves the block through a wall face."""
+        if v < 0 and not low_open:
+            return 0
+        if v >= 8 and not high_open:
+            return 7
+        return v
+
+    @dev
+    def gather(b, k, h_in, nbr, solid, tmp, ln, sl):
+        """tmp[c] = h_k pulled into cell c of block b (bounce-back where the source is outside or solid)."""
+        cx = hcx[k]
+        cy = hcy[k]
+        cz = hcz[k]
+        ko = hopp[k]
+        for z in range(8):
+            bz, zs = wrap(z - cz)
+            for y in range(8):
+                by, ys = wrap(y - cy)
+                sbase = 8 * (ys + 8 * zs)
+                bm = block_at(nbr, b, 0, by, bz)
+                if bm >= 0:
+                    for x in range(8):
+                        ln[x + 1] = h_in[bm, k, sbase + x]
+                    for x in range(8):
+                        sl[x + 1] = solid[bm, sbase + x]
+                else:
+                    for x in range(10):
+                        ln[x] = zero
+                        sl[x] = 0
+                if cx == 1:  # cell x = 0 pulls from x = -1: the last cell of the line of the -x block
+                    be = block_at(nbr, b, -1, by, bz)
+                    if be >= 0:
+                        ln[0] = h_in[be, k, sbase + 7]
+                        sl[0] = solid[be, sbase + 7]
+                    else:
+                        sl[0] = 0
+                elif cx == -1:
+                    be = block_at(nbr, b, 1, by, bz)
+                    if be >= 0:
+                        ln[9] = h_in[be, k, sbase]
+                        sl[9] = solid[be, sbase]
+                    else:
+                        sl[9] = 0
+                c0 = 8 * (y + 8 * z)
+                o = 1 - cx
+                for x in range(8):
+                    own = h_in[b, ko, c0 + x]
+                    tmp[c0 + x] = ln[x + o] if sl[x + o] < 0 else own
+
+    @dev
+    def phi_block(b, h_in, phi, nbr, solid):
+        """Pass 1 for block b: phi = sum_k pulled h_k; a solid cell keeps its phi."""
+        b = np.int64(b)
+        tmp = np.empty(512, rdtype)
+        acc = np.zeros(512, rdtype)
+        ln = np.empty(10, rdtype)
+        sl = np.empty(10, np.int32)
+        for k in range(nq):
+            gather(b, k, h_in, nbr, solid, tmp, ln, sl)
+            for c in range(512):
+                acc[c] += tmp[c]
+        for c in range(512):
+            phi[b, c] = acc[c] if solid[b, c] < 0 else phi[b, c]
+
+    @dev
+    def normals(b, phi, nbr, nx_, ny_, nz_, pad, gx_, gy_, gz_):
+        """The interface normal of every cell of block b (as ``normal`` of :func:`build_phase_cells`)."""
+        # phi of the block and its halo; along an axis whose face is a wall the halo repeats the boundary cell
+        # (the clamp of the cell form). A halo cell in a missing block after clamping (a hole in the forest)
+        # leaves the clamp to the cell form.
+        padded = True
+        xlo = -1 if nbr[b, fxm] >= 0 else 0
+        xhi = 8 if nbr[b, fxp] >= 0 else 7
+        for pz in range(10):
+            bz, zs = wrap(clamp(pz - 1, nbr[b, fzm] >= 0, nbr[b, fzp] >= 0))
+            for py in range(10):
+                by, ys = wrap(clamp(py - 1, nbr[b, fym] >= 0, nbr[b, fyp] >= 0))
+                sbase = 8 * (ys + 8 * zs)
+                row = 10 * (py + 10 * pz)
+                bm = block_at(nbr, b, 0, by, bz)
+                bl, xl = wrap(xlo)
+                bh, xh = wrap(xhi)
+                bl = block_at(nbr, b, bl, by, bz)
+                bh = block_at(nbr, b, bh, by, bz)
+                if bm < 0 or bl < 0 or bh < 0:
+                    padded = False
+                    break
+                for x in range(8):
+                    pad[row + 1 + x] = phi[bm, sbase + x]
+                pad[row] = phi[bl, sbase + xl]
+                pad[row + 9] = phi[bh, sbase + xh]
+            if not padded:
+                break
+        if padded:
+            for c in range(512):
+                gx_[c] = 0.0
+                gy_[c] = 0.0
+                gz_[c] = 0.0
+            for q in range(1, 27):
+                wq = gw[q]
+                o = goff[q]
+                cxq = gcx[q]
+                cyq = gcy[q]
+                czq = gcz[q]
+                for z in range(8):
+                    for y in range(8):
+                        i0 = 1 + 10 * ((y + 1) + 10 * (z + 1)) + o
+                        c0 = 8 * (y + 8 * z)
+                        for x in range(8):
+                            pn = wq * pad[i0 + x]
+                            gx_[c0 + x] += cxq * pn
+                            gy_[c0 + x] += cyq * pn
+                            gz_[c0 + x] += czq * pn
+            for c in range(512):
+                nx_[c], ny_[c], nz_[c] = unit(gx_[c], gy_[c], gz_[c])
+        else:
+            for c in range(512):
+                nx_[c], ny_[c], nz_[c] = normal(phi, nbr, b, c % 8, (c // 8) % 8, c // 64)
+
+    @dev
+    def stream_collide_block(b, h_in, h_out, phi, u, nbr, omega, kappa, solid):
+        """Pass 2 for block b: pull h, collide towards h^eq(phi, u, n) (eqs. 6-9); a solid cell keeps its h."""
+        b = np.int64(b)
+        nx_ = np.empty(512, np.float64)  # the stencil sums in float64 (integer c_q times phi), as the cell form
+        ny_ = np.empty(512, np.float64)
+        nz_ = np.empty(512, np.float64)
+        th_ = np.empty(512, rdtype)
+        uu_ = np.empty(512, rdtype)
+        tmp = np.empty(512, rdtype)
+        pad = np.empty(1000, rdtype)
+        tmp64a = np.empty(512, np.float64)
+        tmp64b = np.empty(512, np.float64)
+        tmp64c = np.empty(512, np.float64)
+        ln = np.empty(10, rdtype)
+        sl = np.empty(10, np.int32)
+        normals(b, phi, nbr, nx_, ny_, nz_, pad, tmp64a, tmp64b, tmp64c)
+        for c in range(512):
+            dp = phi[b, c] - half
+            th_[c] = kappa * (one - four * dp * dp)
+            ux = u[b, 0, c]
+            uy = u[b, 1, c]
+            uz = u[b, 2, c]
+            uu_[c] = ux * ux + uy * uy + uz * uz
+        for k in range(nq):
+            gather(b, k, h_in, nbr, solid, tmp, ln, sl)
+            for c in range(512):
+                hk = tmp[c]
+                ux = u[b, 0, c]
+                uy = u[b, 1, c]
+                uz = u[b, 2, c]
+                cu = hcx[k] * ux + hcy[k] * uy + hcz[k] * uz
+                cn = hcx[k] * nx_[c] + hcy[k] * ny_[c] + hcz[k] * nz_[c]
+                heq = hw[k] * (phi[b, c] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu_[c])) + th_[c] * cn)
+                new = hk + omega * (heq - hk)
+                h_out[b, k, c] = new if solid[b, c] < 0 else h_out[b, k, c]
+
+    return phi_block, stream_collide_block
+
+
 @lru_cache(maxsize=None)
-def phase_launchers(target, precision: str, lattice_name: str):
-    """Compile (once per target, precision and h lattice) the launchers ``(phi, stream_collide, init)``."""
-    phi_cell, sc_cell, init_cell = build_phase_cells(target, jit.real_type(precision), lookup_h_lattice(lattice_name))
-    return (CellLauncher(target, phi_cell, ("h_in", "phi", "nbr", "solid")),
-            CellLauncher(target, sc_cell, ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa", "solid")),
-            CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa")))
+def phase_launchers(target, precision: str, lattice_name: str, vector: bool = True):
+    """Compile (once per target, precision and h lattice) the launchers ``(phi, stream_collide, init)``; on the
+    CPU passes 1 and 2 run in their block form (:func:`build_phase_blocks`) unless ``vector=False``."""
+    real, lat = jit.real_type(precision), lookup_h_lattice(lattice_name)
+    phi_cell, sc_cell, init_cell = build_phase_cells(target, real, lat)
+    phi_args, sc_args = ("h_in", "phi", "nbr", "solid"), ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa", "solid")
+    init = CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa"))
+    if target.is_cuda or not vector:
+        return CellLauncher(target, phi_cell, phi_args), CellLauncher(target, sc_cell, sc_args), init
+    phi_block, sc_block = build_phase_blocks(real, lat)
+    return (CellLauncher(target, phi_block, phi_args, per_block=True),
+            CellLauncher(target, sc_block, sc_args, per_block=True), init)
 
 
 @lru_cache(maxsize=None)
@@ -196,14 +424,16 @@ class PhaseField:
 
     ``forest``: the :class:`~iceresist.grid.BlockForest` (its ``nbr`` table; every block carries
     h and phi, gas blocks included); ``mobility`` M and
-    ``width`` W in lattice units; ``h_lattice`` one of D3Q7/D3Q15/D3Q19/D3Q27.
+    ``width`` W in lattice units; ``h_lattice`` one of D3Q7/D3Q15/D3Q19/D3Q27; ``vector=False`` runs the
+    per-cell form on the CPU too (the reference of the block form, :func:`build_phase_blocks`).
     Arrays live on the target: ``h`` (two buffers ``[block, k, cell]``) and ``phi[block, cell]``.
     ``step(u)`` takes the velocity ``u[block, 3, cell]`` (lattice units) the interface is
     advected with; in the gas it must hold the velocity extended from the liquid
     (:mod:`iceresist.freesurface.extension`).
     """
 
-    def __init__(self, forest, *, mobility=0.05, width=3.0, h_lattice="D3Q15", precision="float32", target=jit.cpu):
+    def __init__(self, forest, *, mobility=0.05, width=3.0, h_lattice="D3Q15", precision="float32", target=jit.cpu,
+                 vector: bool = True):
         if mobility <= 0:
             raise InputError(f"free_surface.mobility must be > 0 (lattice units), not {mobility}")
         if width < 2:
@@ -217,7 +447,7 @@ class PhaseField:
         self.forest = forest
         nbr = forest.nbr
         self.nblocks = int(nbr.shape[0])
-        self._phi, self._sc, self._init = phase_launchers(target, precision, self.lat.name)
+        self._phi, self._sc, self._init = phase_launchers(target, precision, self.lat.name, vector)
         self.nbr = self._to_target(np.ascontiguousarray(nbr, dtype=np.int64))
         shape = (self.nblocks, self.lat.q, CELLS)
         self.h = self._to_target(np.zeros(shape, self.real))

@@ -260,9 +260,10 @@ class Tier2Model:
     def watchdog_probe(self, full: bool | None = None) -> dict:
         """What the run watchdog checks, with the cell where it happens (:mod:`iceresist.watchdog`): finite phase
         field, finite velocity on the liquid cells (a cell a body covers is GHOST, not liquid), the fastest wet
-        cell (lattice speed), reduced on the target (:meth:`FreeSurfaceFluid.probe`), the fastest ice body against 10 x max(ship speed, sqrt(g a)) (as tier 1); and on a ``full`` probe (default:
-        every :attr:`full_probe_every`-th, the first included) finite populations, the lattice density band and
-        the fluid kinetic energy of the wet cells (lattice units; reference: all cells moving at the ship's
+        cell (lattice speed), reduced on the target (:meth:`FreeSurfaceFluid.probe`), the fastest ice body against
+        10 x max(ship speed, sqrt(g a)) (as tier 1); and on a ``full`` probe (default: every
+        :attr:`full_probe_every`-th, the first included) finite populations, the lattice density band and the
+        fluid kinetic energy of the wet cells (lattice units; reference: all cells moving at the ship's
         lattice speed)."""
         if full is None:
             full = self._probes % self.full_probe_every == 0

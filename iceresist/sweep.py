@@ -82,6 +82,18 @@ def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
     return meta if meta.get("scene_toml") == scene_text else None
 
 
+def _legs_json(earlier: dict | None, leg: int, backend: str) -> str:
+    """The case's legs as JSON, this one appended: where each started (record), when, on which code and
+    backend (a case continued from a checkpoint may span versions of the code and machines)."""
+    from iceresist.io.meta import device_name, git_revision
+
+    history = json.loads(earlier.get("legs_json", "[]")) if earlier is not None else []
+    history.append({"leg": int(leg), "from_iteration": int(earlier.get("checkpoint_iteration", 0)) if earlier else 0,
+                    "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                    "git_revision": git_revision(), "backend": backend, "device": device_name(backend)})
+    return json.dumps(history)
+
+
 class CaseCheckpointer(Checkpointer):
     """The checkpointer of a sweep case. Each time it writes, it notes in the partial case file the record it
     reached and the wall time spent up to it (earlier legs included), so a continued case reports the wall
@@ -159,7 +171,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
             g["hull_vertices_m"] = model.geometry.vertices()
         else:
             g = rf.h5["bodies"]
-        rf.write_meta(legs=legs)
+        rf.write_meta(legs=legs, legs_json=_legs_json(earlier, legs, model.describe()["backend"]))
         sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
         sim.output_writers["checkpointer"] = CaseCheckpointer(

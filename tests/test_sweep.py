@@ -1,5 +1,7 @@
 """Sweep machinery on a CI-sized channel: case files, table, hand calculation, interrupt and resume, refusals."""
 
+import json
+
 import h5py
 import numpy as np
 import pandas as pd
@@ -75,6 +77,8 @@ def test_interrupted_sweep_resumes_to_the_same_table(tiny_sweep, tmp_path):
     assert case_path(tmp_path, CASES[0]).stat().st_mtime_ns == mtime  # the finished case was skipped
     with h5py.File(case_path(tmp_path, CASES[1]), "r") as h5:
         assert h5["meta"].attrs["legs"] == 2
+        legs = json.loads(h5["meta"].attrs["legs_json"])
+        assert [(g["leg"], g["from_iteration"], g["backend"]) for g in legs] == [(1, 0, "cpu"), (2, 40, "cpu")]
         np.testing.assert_array_equal(h5["timeseries/iteration"][:], np.arange(len(h5["timeseries/iteration"])))
     assert not checkpoint_path(tmp_path, CASES[1]).exists()
     pd.testing.assert_frame_equal(resumed.drop(columns=VARYING), reference.drop(columns=VARYING), check_exact=True)

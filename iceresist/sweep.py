@@ -158,9 +158,9 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     build_s = time.perf_counter() - t_build
     wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0)) if earlier is not None else 0.0
     legs = int(earlier.get("legs", 1)) + 1 if earlier is not None else 1
+    desc = model.describe()
     with RunFile(partial, "a" if earlier is not None else "w", write_xdmf=False) as rf:
         if earlier is None:
-            desc = model.describe()
             rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"],
                                      precision=model.precision, cells=model.cells),
                           scene_name=scene.scene.name, case=case, fidelity=fidelity, tier=tier,
@@ -171,7 +171,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
             g["hull_vertices_m"] = model.geometry.vertices()
         else:
             g = rf.h5["bodies"]
-        rf.write_meta(legs=legs, legs_json=_legs_json(earlier, legs, model.describe()["backend"]))
+        rf.write_meta(legs=legs, legs_json=_legs_json(earlier, legs, desc["backend"]))
         sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
         sim.output_writers["checkpointer"] = CaseCheckpointer(

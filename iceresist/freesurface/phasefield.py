@@ -44,7 +44,7 @@ from iceresist.errors import InputError
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
 from iceresist.backends.launch import BlockLauncher, CellLauncher
-from iceresist.freesurface.layout import DIR_OF_OFFSET, build_neighbour
+from iceresist.freesurface.layout import build_neighbour
 from iceresist.grid.forest import CELLS
 
 PHI_AVE = 0.5
@@ -55,13 +55,16 @@ def tau_phi(mobility: float, lat: HLattice) -> float:
     return 0.5 + mobility / lat.cs2
 
 
+def _gradient_stencil(real):
+    """(c_x, c_y, c_z, w / c_s^2) of the isotropic D3Q27 gradient stencil, as the kernels read them."""
+    return (*(np.ascontiguousarray(L.C[:, a]) for a in range(3)), (L.W / L.CS2).astype(real))
+
+
 def _stencils(real, lat: HLattice):
-    """(q, c_x, c_y, c_z, w, opposite) of the h lattice and (c_x, c_y, c_z, w / c_s^2) of the D3Q27 gradient
-    stencil, as the kernels read them."""
+    """(q, c_x, c_y, c_z, w, opposite) of the h lattice and :func:`_gradient_stencil`, as the kernels read them."""
     hc = np.ascontiguousarray(lat.c, dtype=np.int64)
-    gc = [np.ascontiguousarray(L.C[:, a]) for a in range(3)]
     return (lat.q, *(np.ascontiguousarray(hc[:, a]) for a in range(3)), np.array(lat.w, dtype=real),
-            np.array(lat.opp, dtype=np.int64), *gc, (L.W / L.CS2).astype(real))
+            np.array(lat.opp, dtype=np.int64), *_gradient_stencil(real))
 
 
 def build_normal(target, real):
@@ -69,8 +72,7 @@ def build_normal(target, real):
     stencil, walls clamped (zero normal gradient); the sums run in float64 (integer c_q times phi). Its
     last step, ``unit(gx, gy, gz)``, is returned too: ``(normal, unit)``."""
     _, neighbour_clamped = build_neighbour(target)
-    gcx, gcy, gcz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
-    gw = (L.W / L.CS2).astype(real)
+    gcx, gcy, gcz, gw = _gradient_stencil(real)
     zero, one = real(0.0), real(1.0)
     tiny = real(1e-24) if real == np.float64 else real(1e-18)
     dev = target.device
@@ -193,15 +195,15 @@ def build_phase_blocks(real, lat: HLattice):
     * pull: h_k of the 512 cells into a block scratch line by line (8 cells from the source line, the one
       cell that crosses the block's x face from the neighbour), then one select per cell between the pulled
       value and the half-way bounce-back (a source outside the domain or solid);
-    * normal: from phi of the block and its halo in a 10^3 scratch (the stencil at constant offsets) in a
-      block whose 26 neighbours all exist; the per-cell clamped stencil in a block at a wall;
+    * normal: from phi of the block and its halo in a 10^3 scratch (the stencil at constant offsets; along a
+      wall face the halo repeats the boundary cell, the cell form's clamp); the per-cell clamped stencil only
+      in a block next to a hole in the forest;
     * collide: eq. (6) over the 512 cells for each k; solid cells keep phi and h (a select).
     """
     neighbour, _ = build_neighbour(jit.cpu)
     normal, unit = build_normal(jit.cpu, real)
     nq, hcx, hcy, hcz, hw, hopp, gcx, gcy, gcz, gw = _stencils(real, lat)
     goff = np.array([gcx[q] + 10 * (gcy[q] + 10 * gcz[q]) for q in range(27)], dtype=np.int64)
-    dir_of = DIR_OF_OFFSET
     fxm, fxp = L.index_of(-1, 0, 0), L.index_of(1, 0, 0)
     fym, fyp = L.index_of(0, -1, 0), L.index_of(0, 1, 0)
     fzm, fzp = L.index_of(0, 0, -1), L.index_of(0, 0, 1)
@@ -209,21 +211,6 @@ def build_phase_blocks(real, lat: HLattice):
     cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
     dev = jit.cpu.device
     rdtype = real
-
-    @dev
-    def block_at(nbr, b, bx, by, bz):
-        if bx == 0 and by == 0 and bz == 0:
-            return b
-        return nbr[b, dir_of[(bx + 1) + 3 * (by + 1) + 9 * (bz + 1)]]
-
-    @dev
-    def wrap(v):
-        """(block offset, cell) of the in-block coordinate v in -8..15."""
-        if v < 0:
-            return -1, v + 8
-        if v >= 8:
-            return 1, v - 8
-        return 0, v
 
     @dev
     def clamp(v, low_open, high_open):
@@ -242,11 +229,8 @@ def build_phase_blocks(real, lat: HLattice):
         cz = hcz[k]
         ko = hopp[k]
         for z in range(8):
-            bz, zs = wrap(z - cz)
             for y in range(8):
-                by, ys = wrap(y - cy)
-                sbase = 8 * (ys + 8 * zs)
-                bm = block_at(nbr, b, 0, by, bz)
+                bm, sbase = neighbour(nbr, b, 0, y, z, 0, -cy, -cz)  # the source line, its cell x = 0
                 if bm >= 0:
                     for x in range(8):
                         ln[x + 1] = h_in[bm, k, sbase + x]
@@ -257,17 +241,17 @@ def build_phase_blocks(real, lat: HLattice):
                         ln[x] = zero
                         sl[x] = 0
                 if cx == 1:  # cell x = 0 pulls from x = -1: the last cell of the line of the -x block
-                    be = block_at(nbr, b, -1, by, bz)
+                    be, ce = neighbour(nbr, b, 0, y, z, -1, -cy, -cz)
                     if be >= 0:
-                        ln[0] = h_in[be, k, sbase + 7]
-                        sl[0] = solid[be, sbase + 7]
+                        ln[0] = h_in[be, k, ce]
+                        sl[0] = solid[be, ce]
                     else:
                         sl[0] = 0
                 elif cx == -1:
-                    be = block_at(nbr, b, 1, by, bz)
+                    be, ce = neighbour(nbr, b, 7, y, z, 1, -cy, -cz)
                     if be >= 0:
-                        ln[9] = h_in[be, k, sbase]
-                        sl[9] = solid[be, sbase]
+                        ln[9] = h_in[be, k, ce]
+                        sl[9] = solid[be, ce]
                     else:
                         sl[9] = 0
                 c0 = 8 * (y + 8 * z)
@@ -292,7 +276,7 @@ def build_phase_blocks(real, lat: HLattice):
             phi[b, c] = acc[c] if solid[b, c] < 0 else phi[b, c]
 
     @dev
-    def normals(b, phi, nbr, nx_, ny_, nz_, pad, gx_, gy_, gz_):
+    def normals(b, phi, nbr, nx_, ny_, nz_, pad):
         """The interface normal of every cell of block b (as ``normal`` of :func:`build_phase_cells`)."""
         # phi of the block and its halo; along an axis whose face is a wall the halo repeats the boundary cell
         # (the clamp of the cell form). A halo cell in a missing block after clamping (a hole in the forest)
@@ -301,30 +285,27 @@ def build_phase_blocks(real, lat: HLattice):
         xlo = -1 if nbr[b, fxm] >= 0 else 0
         xhi = 8 if nbr[b, fxp] >= 0 else 7
         for pz in range(10):
-            bz, zs = wrap(clamp(pz - 1, nbr[b, fzm] >= 0, nbr[b, fzp] >= 0))
+            z = clamp(pz - 1, nbr[b, fzm] >= 0, nbr[b, fzp] >= 0)
             for py in range(10):
-                by, ys = wrap(clamp(py - 1, nbr[b, fym] >= 0, nbr[b, fyp] >= 0))
-                sbase = 8 * (ys + 8 * zs)
+                y = clamp(py - 1, nbr[b, fym] >= 0, nbr[b, fyp] >= 0)
                 row = 10 * (py + 10 * pz)
-                bm = block_at(nbr, b, 0, by, bz)
-                bl, xl = wrap(xlo)
-                bh, xh = wrap(xhi)
-                bl = block_at(nbr, b, bl, by, bz)
-                bh = block_at(nbr, b, bh, by, bz)
+                bm, sbase = neighbour(nbr, b, 0, 0, 0, 0, y, z)
+                bl, cl = neighbour(nbr, b, 0, 0, 0, xlo, y, z)
+                bh, ch = neighbour(nbr, b, 0, 0, 0, xhi, y, z)
                 if bm < 0 or bl < 0 or bh < 0:
                     padded = False
                     break
                 for x in range(8):
                     pad[row + 1 + x] = phi[bm, sbase + x]
-                pad[row] = phi[bl, sbase + xl]
-                pad[row + 9] = phi[bh, sbase + xh]
+                pad[row] = phi[bl, cl]
+                pad[row + 9] = phi[bh, ch]
             if not padded:
                 break
         if padded:
-            for c in range(512):
-                gx_[c] = 0.0
-                gy_[c] = 0.0
-                gz_[c] = 0.0
+            for c in range(512):  # the gradient first, normalised in place below
+                nx_[c] = 0.0
+                ny_[c] = 0.0
+                nz_[c] = 0.0
             for q in range(1, 27):
                 wq = gw[q]
                 o = goff[q]
@@ -337,11 +318,11 @@ def build_phase_blocks(real, lat: HLattice):
                         c0 = 8 * (y + 8 * z)
                         for x in range(8):
                             pn = wq * pad[i0 + x]
-                            gx_[c0 + x] += cxq * pn
-                            gy_[c0 + x] += cyq * pn
-                            gz_[c0 + x] += czq * pn
+                            nx_[c0 + x] += cxq * pn
+                            ny_[c0 + x] += cyq * pn
+                            nz_[c0 + x] += czq * pn
             for c in range(512):
-                nx_[c], ny_[c], nz_[c] = unit(gx_[c], gy_[c], gz_[c])
+                nx_[c], ny_[c], nz_[c] = unit(nx_[c], ny_[c], nz_[c])
         else:
             for c in range(512):
                 nx_[c], ny_[c], nz_[c] = normal(phi, nbr, b, c % 8, (c // 8) % 8, c // 64)
@@ -357,12 +338,9 @@ def build_phase_blocks(real, lat: HLattice):
         uu_ = np.empty(512, rdtype)
         tmp = np.empty(512, rdtype)
         pad = np.empty(1000, rdtype)
-        tmp64a = np.empty(512, np.float64)
-        tmp64b = np.empty(512, np.float64)
-        tmp64c = np.empty(512, np.float64)
         ln = np.empty(10, rdtype)
         sl = np.empty(10, np.int32)
-        normals(b, phi, nbr, nx_, ny_, nz_, pad, tmp64a, tmp64b, tmp64c)
+        normals(b, phi, nbr, nx_, ny_, nz_, pad)
         for c in range(512):
             dp = phi[b, c] - half
             th_[c] = kappa * (one - four * dp * dp)

@@ -23,8 +23,9 @@ NU = (TAU - 0.5) / 3.0
 AXES = "xyz"
 
 
-def half_channel_error(n, normal, flow, slip_side, operator="bgk", precision="float64"):
-    """Relative L2 error of the steady profile across ``normal`` (n cells) against the half-Poiseuille."""
+def half_channel_error(n, normal, flow, slip_side, operator="bgk", precision="float64", rtol=1e-8):
+    """Relative L2 error of the steady profile across ``normal`` (n cells) against the half-Poiseuille; steady
+    when the velocity changes by less than ``rtol`` of its largest value over a chunk."""
     u_max = 0.01
     force = 2.0 * NU * u_max / n ** 2             # u(N) = F N^2 / (2 nu)
     a, b = AXES.index(normal), AXES.index(flow)
@@ -42,7 +43,7 @@ def half_channel_error(n, normal, flow, slip_side, operator="bgk", precision="fl
     u0 = np.zeros((3, *shape))
     u0[b] = 0.5 * exact                           # start away from the answer
     s.initialize(u=u0)
-    u = run_to_steady(s, chunk=max(50, int(0.1 * 4 * n * n / (NU * np.pi ** 2))), rtol=1e-8,
+    u = run_to_steady(s, chunk=max(50, int(0.1 * 4 * n * n / (NU * np.pi ** 2))), rtol=rtol,
                       max_steps=160 * n * n)
     other = [c for c in range(3) if c != b]
     assert np.nanmax(np.abs(u[other])) < 1e-12                 # no cross flow
@@ -55,7 +56,8 @@ def half_channel_error(n, normal, flow, slip_side, operator="bgk", precision="fl
 @pytest.mark.parametrize("normal, flow", [("z", "x"), ("z", "y"), ("x", "y"), ("x", "z"), ("y", "z"), ("y", "x")])
 @pytest.mark.parametrize("slip_side", ["-", "+"])
 def test_half_channel_matches_half_poiseuille(normal, flow, slip_side):
-    err = half_channel_error(16, normal, flow, slip_side)
+    # steady to 1e-6 (the transient left is 1e-5 of the profile, the bound 2e-3): 30 % fewer steps than 1e-8
+    err = half_channel_error(16, normal, flow, slip_side, rtol=1e-6)
     assert err < 2e-3, err
 
 

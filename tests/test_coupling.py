@@ -222,7 +222,7 @@ def test_bodies_split_into_slabs_give_the_unsplit_result(backend):
     cell boxes change and they uncover cells: the refill reads the velocity of the body that uncovered a cell
     through the row that covered it a step earlier, so the rows must keep their bodies (counting the slabs anew
     every step moves them: the populations then differ by 0.035). On the CUDA simulator 3 steps (each uncovers
-    6-9 cells): a simulated step takes about 20 s, 8 + 8 of them were the longest test of the suite."""
+    6-9 cells): a simulated step takes 20-30 s, and 8 + 8 of them made this the longest test of the suite."""
     target = jit.cpu if backend == "cpu" else jit.cuda()
     steps = 3 if backend == "cuda" and SIMULATED else 8
     whole, split = _two_moving_boxes(target, 10 ** 6, steps), _two_moving_boxes(target, 64, steps)

@@ -28,7 +28,7 @@ def test_quick_tier2_sweep_trends(tmp_path):
     The FSICR bound is the issue's "same order" (a factor of ten), against the 3 x bound that tier 1 meets (the
     paper: 0.64, 0.93). In the 0.9 m tank the cases run so far give 0.06 (50 %), 0.16 (68 %), 0.78 (2 knots)
     and 0.19 (Bow B) x FSICR (docs/SHIP.md): the concentration, speed and bow trends hold, but the 50 % case is
-    under the bound, so this test fails on the present quick tank. The water there does not stay level (at 2 knots it piles up
-    against the fore wall, at 1 knot it sloshes; docs/SHIP.md, "2 knots again in the sweep, and the water
-    level"); how much of the low 1-knot level that explains was not separated."""
+    under the bound, so this test fails on the present quick tank. The water there does not stay level (at 2
+    knots it piles up against the fore wall, at 1 knot it sloshes; docs/SHIP.md, "2 knots again in the sweep,
+    and the water level"); how much of the low 1-knot level that explains was not separated."""
     assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

@@ -341,7 +341,25 @@ def analyse_case(path) -> dict:
         "backend": model["backend"], "file": f"cases/{Path(path).name}",
         # tier 2: the ship's depth Froude number over Schijf's limit of the tank (iceresist.ship.tank)
         "tank_froude_fraction": float(model.get("tank", {}).get("fraction_of_limit", float("nan"))),
+        "start_wave_fraction": start_wave_fraction(model, geom),
     }
+
+
+def start_wave_fraction(model: dict, geom) -> float:
+    """Tier 2: the part of the steady window before the stern's start wave reaches the bow
+    (:func:`iceresist.ship.tank.start_wave`), from a case file's model description (the tank's width from its
+    blockage, so files written before the start wave was described read the same); NaN for tier 1."""
+    from iceresist.ship.tank import start_wave
+
+    tank = model.get("tank")
+    speed = float(model["speed_m_s"])
+    if not tank or speed <= 0:
+        return float("nan")
+    depth = float(model["water_level_m"])
+    width = geom.midship_area_m2 / (float(tank["blockage"]) * depth)
+    wave = start_wave(geom.midship_area_m2, width, depth, speed, geom.prismatic_length_m)
+    x0 = float(model["start_x_m"])
+    return wave.window_fraction(*((x - x0) / speed for x in model["steady_window_m"]))
 
 
 def sweep_table(out_dir) -> pd.DataFrame:

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceresist.errors import InputError
-from iceresist.ship.tank import tank_flow
+from iceresist.ship.tank import start_wave, tank_flow
 from iceresist.tier1 import hull_geometry, hull_shape, ice_layout, steady_window_m
 from iceresist.units import GRAVITY_M_S2
 
@@ -82,6 +82,25 @@ def array_bytes(*objects) -> int:
     return total
 
 
+def ship_start_x_m(scene) -> float:
+    """Stem position at the start (m): ``ship.start_x_m``, by default 5 cm before the channel."""
+    sh = scene.ship
+    return float(sh.start_x_m) if sh.start_x_m is not None else float(scene.ice.channel_start_x_m) - 0.05
+
+
+def start_wave_of_scene(scene, geometry, layout) -> tuple:
+    """(:class:`~iceresist.ship.tank.StartWave`, steady window in s after the start) of a tier-2 ship scene:
+    the long wave of the impulsive start in the scene's tank, and when the window begins and ends."""
+    width_m = scene.shape_cells()[1] * scene.units().dx_m
+    speed = float(scene.ship.speed_m_s)
+    wave = start_wave(geometry.midship_area_m2, width_m, float(scene.free_surface.water_depth_m), speed,
+                      geometry.prismatic_length_m)
+    x0 = ship_start_x_m(scene)
+    window_m = steady_window_m(scene, geometry, layout)
+    window_s = tuple((x - x0) / speed for x in window_m) if speed > 0 else (math.inf, math.inf)
+    return wave, window_s
+
+
 class Tier2Model:
     """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
 
@@ -126,7 +145,7 @@ class Tier2Model:
         width = ice.channel_width_m or self.domain_m[1]
         self.layout = ice_layout(scene, width, self.centre_y_m, self.level_m, self.rho_w)
         self.speed_m_s = float(sh.speed_m_s)
-        self.start_x_m = float(sh.start_x_m) if sh.start_x_m is not None else ice.channel_start_x_m - 0.05
+        self.start_x_m = ship_start_x_m(scene)
         self.window_m = steady_window_m(scene, g, self.layout)
         self.tank = tank_flow(g.midship_area_m2, self.domain_m[1], self.level_m, float(sh.speed_m_s))
         if not self.tank.subcritical:
@@ -134,6 +153,10 @@ class Tier2Model:
                         "Schijf's limit %.3g at blockage %.2f): the ship pushes a bore ahead and the flow past "
                         "it never settles; a deeper or wider tank (free_surface.water_depth_m, domain) lowers the "
                         "blockage", sh.speed_m_s, self.tank.depth_froude, self.tank.limit_froude, self.tank.blockage)
+        self.start_wave, self.window_s = start_wave_of_scene(scene, g, self.layout)
+        warning = self.start_wave.warning(*self.window_s)
+        if warning:
+            log.warning("tier 2: %s", warning)
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
@@ -353,6 +376,8 @@ class Tier2Model:
                 "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": u.g_lattice,
                 "nu_m2_s": u.nu_m2_s, "operator": self.scene.fluid.operator,
                 "ship_lattice_speed": self.speed_m_s * u.lbm_dt_s / u.dx_m, "tank": self.tank.describe(),
+                "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
+                               "window_fraction": self.start_wave.window_fraction(*self.window_s)},
                 "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
                 "hull": {"length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
                          "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,

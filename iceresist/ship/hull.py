@@ -98,6 +98,12 @@ class HullGeometry:
         return self.beam_m * self.draught_m
 
     @property
+    def prismatic_length_m(self) -> float:
+        """V / A_s: displaced volume over the midship section (C_P L_wl), the spacing of the hull's long-wave
+        source and sink (:mod:`iceresist.ship.tank`)."""
+        return self.volume_m3() / self.midship_area_m2
+
+    @property
     def bottom_parallel_length_m(self) -> float:
         return self.parallel_length_m - self.draught_m * (_cot(self.bow_rake_deg) + _cot(self.stern_rake_deg))
 

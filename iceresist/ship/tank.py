@@ -12,8 +12,21 @@ sin(3 theta) = 1 - m; F_L = 1 in open water, m = 0). Faster than U_L the ship pu
 flow past the hull is not steady: neither a towing tank nor a tank of the simulation gives a steady resistance
 there. The paper's tank (1.39 m wide, 1.11 m deep, m = 0.20) has F_L = 0.47 against F_h = 0.31 at 2 knots.
 
-Reference: J. B. Schijf, "Protection of embankments and bed in inland and maritime waters, and in overflows or
-weirs", XVII International Navigation Congress (PIANC), Lisbon, 1949.
+The start wave (:func:`start_wave`). A ship that starts at full speed U sends long waves both ways. In the
+linear long-wave equations (Lamb, Hydrodynamics, ch. VIII) the hull's ends act as a source and a sink of flux
+U A_s: the bow pushes water ahead, the stern leaves a hollow. Each sends half its flux each way at
+c = sqrt(g h). Ahead of the bow the water stands eta = U A_s / (2 W c) high and moves forward at
+u = g eta / c = U m / 2, until the stern's negative wave catches the bow and cancels it. That takes
+t_s = L_s / (c - U), where L_s is the spacing of the source and the sink. With the hull's section area A(x),
+the centroid of the bow's source -dA/dx lies V_end / A_s ahead of the full section. So L_s = V / A_s exactly,
+the displaced volume over the midship section (the prismatic length C_P L). In a long tank the water ahead
+of the bow is at rest after t_s, apart from the bow's own local flow; before t_s a measured resistance is
+that of a ship pushing ice that drifts away from it. The estimate is linear in m and F_h; near Schijf's
+limit the disturbance is larger.
+
+References: J. B. Schijf, "Protection of embankments and bed in inland and maritime waters, and in overflows
+or weirs", XVII International Navigation Congress (PIANC), Lisbon, 1949. H. Lamb, Hydrodynamics, 6th ed.,
+Cambridge University Press, 1932, chapter VIII (long waves in canals).
 """
 
 from __future__ import annotations
@@ -71,3 +84,57 @@ class TankFlow:
 def tank_flow(midship_area_m2: float, width_m: float, depth_m: float, speed_m_s: float) -> TankFlow:
     m = blockage_ratio(midship_area_m2, width_m, depth_m)
     return TankFlow(m, depth_froude(speed_m_s, depth_m), schijf_limit_froude(m))
+
+
+@dataclass(frozen=True)
+class StartWave:
+    """The long wave of an impulsive start ahead of the bow (module docstring): ``level_m`` eta,
+    ``drift_m_s`` u, ``duration_s`` t_s after the start, for a ship at ``speed_m_s``."""
+
+    level_m: float
+    drift_m_s: float
+    duration_s: float
+    speed_m_s: float
+
+    @property
+    def run_up_m(self) -> float:
+        """Distance the ship covers before the stern's wave reaches the bow: U t_s."""
+        return self.speed_m_s * self.duration_s
+
+    def window_fraction(self, window_start_s: float, window_end_s: float) -> float:
+        """Part of the window [start, end] (s after the start) that lies before t_s, in [0, 1]."""
+        span = float(window_end_s) - float(window_start_s)
+        if not span > 0:  # also a ship at rest (an infinite window)
+            return 0.0
+        return min(1.0, max(0.0, (self.duration_s - float(window_start_s)) / span))
+
+    def warning(self, window_start_s: float, window_end_s: float) -> str | None:
+        """A one-line warning when the steady window starts before t_s, else None."""
+        part = self.window_fraction(window_start_s, window_end_s)
+        if part <= 0.0:
+            return None
+        return (f"the steady window starts {window_start_s:.2f} s after the ship's impulsive start, before the "
+                f"stern's start wave reaches the bow ({self.duration_s:.2f} s, linear long-wave estimate): over "
+                f"the first {100 * part:.0f} % of the window the water ahead of the bow drifts forward at about "
+                f"{self.drift_m_s:.2g} m/s ({100 * self.drift_m_s / self.speed_m_s:.0f} % of the ship's speed) in "
+                f"a tank of any length; a run-up of {self.run_up_m:.2f} m before the window (ship.start_x_m "
+                f"further aft, or a later ship.steady_window_m) avoids it")
+
+    def describe(self) -> dict:
+        return {"level_m": self.level_m, "drift_m_s": self.drift_m_s, "duration_s": self.duration_s,
+                "run_up_m": self.run_up_m}
+
+
+def start_wave(midship_area_m2: float, width_m: float, depth_m: float, speed_m_s: float,
+               source_spacing_m: float, g_m_s2: float = GRAVITY_M_S2) -> StartWave:
+    """The start wave of a hull of midship section A_s (m^2) started at ``speed_m_s`` in a tank ``width_m``
+    wide and ``depth_m`` deep; ``source_spacing_m`` L_s = V / A_s (module docstring). t_s is infinite at or
+    above the long-wave speed c."""
+    m = blockage_ratio(midship_area_m2, width_m, depth_m)
+    c = math.sqrt(g_m_s2 * float(depth_m))
+    u = float(speed_m_s)
+    if not source_spacing_m > 0:
+        raise InputError(f"tank: the hull's source spacing V / A_s must be > 0 (got {source_spacing_m} m)")
+    duration = float(source_spacing_m) / (c - u) if u < c else math.inf
+    return StartWave(level_m=u * midship_area_m2 / (2.0 * float(width_m) * c), drift_m_s=0.5 * m * u,
+                     duration_s=duration, speed_m_s=u)

@@ -295,7 +295,6 @@ def analyse_case(path) -> dict:
     """One table row from a finished case file (see :func:`sweep_table` for the columns)."""
     from iceresist.io.hdf5 import RunFile
     from iceresist.post import force_to_full_scale, ice_resistance_from_timeseries
-    from iceresist.ship.hull import HullGeometry
 
     with RunFile(path, "r") as rf:
         meta = rf.meta
@@ -312,10 +311,7 @@ def analyse_case(path) -> dict:
         sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1,
                                             n_batches=FALLBACK_BATCHES)
         ci_note = f"{FALLBACK_BATCHES} batches (window short against tau_int)"
-    hull = model["hull"]
-    geom = HullGeometry(length_overall_m=hull["length_overall_m"], beam_m=hull["beam_m"], draught_m=hull["draught_m"],
-                        parallel_length_m=hull["parallel_length_m"], waterline_angle_deg=hull["waterline_angle_deg"],
-                        bow_rake_deg=hull["bow_rake_deg"], stern_rake_deg=hull["stern_rake_deg"])
+    geom = hull_of_model(model)
     x_bow = float(meta["final_x_bow_m"])
     x_lo = model["channel_start_x_m"]
     x_hi = x_bow - geom.end_length_m
@@ -345,21 +341,38 @@ def analyse_case(path) -> dict:
     }
 
 
-def start_wave_fraction(model: dict, geom) -> float:
-    """Tier 2: the part of the steady window before the stern's start wave reaches the bow
-    (:func:`iceresist.ship.tank.start_wave`), from a case file's model description (the tank's width from its
-    blockage, so files written before the start wave was described read the same); NaN for tier 1."""
+def hull_of_model(model: dict):
+    """The :class:`~iceresist.ship.hull.HullGeometry` of a case file's model description."""
+    from iceresist.ship.hull import HullGeometry
+
+    h = model["hull"]
+    return HullGeometry(length_overall_m=h["length_overall_m"], beam_m=h["beam_m"], draught_m=h["draught_m"],
+                        parallel_length_m=h["parallel_length_m"], waterline_angle_deg=h["waterline_angle_deg"],
+                        bow_rake_deg=h["bow_rake_deg"], stern_rake_deg=h["stern_rake_deg"])
+
+
+def case_start_wave(model: dict, geom) -> tuple | None:
+    """Tier 2: (:class:`~iceresist.ship.tank.StartWave`, steady window in s after the start) from a case file's
+    model description, the tank's width from its blockage, so files written before the start wave was
+    described read the same; None for tier 1 (no tank flow) or a ship at rest."""
     from iceresist.ship.tank import start_wave
 
     tank = model.get("tank")
     speed = float(model["speed_m_s"])
     if not tank or speed <= 0:
-        return float("nan")
+        return None
     depth = float(model["water_level_m"])
     width = geom.midship_area_m2 / (float(tank["blockage"]) * depth)
     wave = start_wave(geom.midship_area_m2, width, depth, speed, geom.prismatic_length_m)
     x0 = float(model["start_x_m"])
-    return wave.window_fraction(*((x - x0) / speed for x in model["steady_window_m"]))
+    return wave, tuple((x - x0) / speed for x in model["steady_window_m"])
+
+
+def start_wave_fraction(model: dict, geom) -> float:
+    """Tier 2: the part of the steady window before the stern's start wave reaches the bow
+    (:func:`iceresist.ship.tank.start_wave`, :func:`case_start_wave`); NaN for tier 1."""
+    sw = case_start_wave(model, geom)
+    return float("nan") if sw is None else sw[0].window_fraction(*sw[1])
 
 
 def sweep_table(out_dir) -> pd.DataFrame:

@@ -309,12 +309,42 @@ class Tier2Model:
 
     def diagnostics(self) -> dict:
         """One record: mean ice (contact) force on the hull (N), the mean fluid force on it (N), stem position (m),
-        contacts, ice kinetic energy (J), water volume (m^3, outside the bodies)."""
+        contacts, ice kinetic energy (J), water volume (m^3, outside the bodies), and the tank's water motion
+        (:meth:`tank_motion`)."""
         f, w = self._force_mean, self._fluid_mean
         return {"Fx_N": f[0], "Fy_N": f[1], "Fz_N": f[2], "Fx_last_N": self._force_last[0],
                 "Fx_fluid_N": w[0], "Fy_fluid_N": w[1], "Fz_fluid_N": w[2], "x_bow_m": self.x_bow_m,
                 "contacts": self.dem.contact_count(), "ice_kinetic_energy_J": self.dem.kinetic_energy(),
-                "water_volume_m3": self.fb.water_volume_m3()}
+                "water_volume_m3": self.fb.water_volume_m3(), **self.tank_motion()}
+
+    #: Length (m) of the bands along the tank over which :meth:`tank_motion` reads the water level.
+    level_band_m = 0.32
+
+    def tank_motion(self) -> dict:
+        """How the tank's water moves (docs/SHIP.md, "The start wave"): the median height of the surface above
+        the still level (m) in the side strips of the tank (outside the hull's beam, so the bow's overhang
+        is not read as water) over the band of :attr:`level_band_m` at the fore wall (``level_fore_wall_m``)
+        and the band from 0.05 m ahead of the stem (``level_ahead_m``), a floe counted as water
+        (:meth:`FreeSurfaceFluid.surface_height`); and the mean x-velocity (m/s) of the cubes whose centres
+        lie ahead of the stem (``ice_drift_ahead_m_s``; positive: moving away from the bow). NaN where a band
+        lies outside the tank or no cube is ahead."""
+        dx = self.units.dx_m
+        nx, ny = self.shape_cells[:2]
+        h = self.fb.fluid.surface_height(covered_as_water=True) * dx - self.level_m
+        x = (np.arange(nx) + 0.5) * dx
+        y = (np.arange(ny) + 0.5) * dx
+        side = np.abs(y - self.centre_y_m) > 0.5 * self.geometry.beam_m
+
+        def band(x0):
+            cols = (x >= x0) & (x < x0 + self.level_band_m)
+            vals = h[np.ix_(cols, side)]
+            return float(np.median(vals)) if vals.size else math.nan
+
+        ice = self.ice_state()
+        ahead = ice["positions_m"][:, 0] > self.x_bow_m
+        drift = float(ice["velocities_m_s"][ahead, 0].mean()) if ahead.any() else math.nan
+        return {"level_fore_wall_m": band(self.domain_m[0] - self.level_band_m),
+                "level_ahead_m": band(self.x_bow_m + 0.05), "ice_drift_ahead_m_s": drift}
 
     def ice_state(self) -> dict:
         """Cube centres (n, 3) m, quaternions (n, 4) and velocities (n, 3) m/s now (hull excluded)."""

@@ -102,6 +102,41 @@ def fig_bows(plt, table):
     return fig
 
 
+def fig_tank(plt, cases: dict):
+    """Tier 2: the water level at the fore wall and ahead of the bow and the drift of the ice ahead of the bow
+    against time (:meth:`iceresist.tier2.Tier2Model.tank_motion`), with the steady window and the time the
+    stern's start wave reaches the bow (docs/SHIP.md, "The start wave"); None when no case recorded them."""
+    from iceresist.sweep import case_start_wave, hull_of_model
+
+    shown = {k: c for k, c in cases.items() if "level_ahead_m" in c["ts"]}
+    if not shown:
+        return None
+    fig, axes = plt.subplots(len(shown), 1, figsize=(7.0, 1.7 * len(shown) + 0.5), sharex=True, squeeze=False)
+    for ax, (name, c) in zip(axes[:, 0], shown.items()):
+        ts = c["ts"]
+        t = ts["time_s"]
+        ax.plot(t, 100 * ts["level_fore_wall_m"], color="tab:blue", lw=0.9, label="level at the fore wall")
+        ax.plot(t, 100 * ts["level_ahead_m"], color="tab:cyan", lw=0.9, label="level ahead of the bow")
+        ax.axhline(0.0, color="0.6", lw=0.5)
+        ax.set_ylabel("level [cm]")
+        drift = ax.twinx()
+        drift.plot(t, ts["ice_drift_ahead_m_s"], color="tab:orange", lw=0.9, label="ice drift ahead [m/s]")
+        drift.set_ylabel("drift [m/s]")
+        sw = case_start_wave(c["model"], hull_of_model(c["model"]))
+        title = name
+        if sw is not None:
+            wave, (w0, w1) = sw
+            ax.axvspan(w0, w1, color="tab:blue", alpha=0.08)
+            ax.axvline(wave.duration_s, color="k", ls="--", lw=0.8)
+            drift.axhline(wave.drift_m_s, color="tab:orange", ls=":", lw=0.8)
+            title += f": start wave over {100 * wave.window_fraction(w0, w1):.0f} % of the window"
+        ax.set_title(title, fontsize=8, loc="left")
+    h1, l1 = axes[0, 0].get_legend_handles_labels()
+    axes[0, 0].legend(h1 + [drift.get_lines()[0]], l1 + ["ice drift ahead"], fontsize=6, loc="upper left")
+    axes[-1, 0].set_xlabel("time since the start [s]")
+    return fig
+
+
 def fig_topviews(plt, cases: dict):
     from matplotlib.collections import PolyCollection
 
@@ -171,6 +206,9 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     plt = _plt()
     figs = {"forces": fig_forces(plt, cases, table), "trends": fig_trends(plt, table),
             "bows": fig_bows(plt, table), "topviews": fig_topviews(plt, cases)}
+    tank = fig_tank(plt, cases)
+    if tank is not None:
+        figs["tank"] = tank
     images = {k: _png64(f) for k, f in figs.items()}
     r_sim, r_fs = bow_ratios(table)
     trends = trends_table(table)

@@ -125,3 +125,22 @@ def test_cuda_matches_cpu_on_a_tilted_surface(walls):
 def test_depth_outside_domain_is_an_input_error():
     with pytest.raises(InputError, match="depth_cells"):
         FreeSurfaceFluid(_tank(), tau=0.6, gravity_lattice=G, depth_cells=20.0, operator="bgk", precision="float64")
+
+
+def test_surface_height_over_a_covered_column():
+    """A body covering cells 8-13 of one column (GHOST) across the surface at z = 10: read as water, the surface
+    runs over it, at 13.5 + 0.5 / (1 - phi(14.5)) = 14.0012 with phi(14.5) = 1/2 + tanh(-3) / 2 (eq. 4 profile,
+    W = 3); read plainly, the column keeps the initial 10.0 like every other column."""
+    fs = FreeSurfaceFluid(_tank(), tau=0.6, gravity_lattice=G, depth_cells=DEPTH, operator="bgk",
+                          precision="float64")
+    fs.initialize()
+    flags = fs.forest.to_dense(np.asarray(fs.fluid.flags).astype(float))
+    flags[3, 4, 8:14] = FL.GHOST
+    fs.fluid.flags[...] = fs.forest.from_dense(flags).astype(np.uint8)
+    plain, over = fs.surface_height(), fs.surface_height(covered_as_water=True)
+    assert np.allclose(plain, DEPTH, atol=1e-12)
+    p_gas = 0.5 + 0.5 * np.tanh(-3.0)
+    assert over[3, 4] == pytest.approx(13.5 + 0.5 / (1.0 - p_gas), abs=1e-9)
+    rest = np.ones(over.shape, bool)
+    rest[3, 4] = False
+    assert np.allclose(over[rest], DEPTH, atol=1e-12)

@@ -72,6 +72,20 @@ def test_tier2_case_file_is_what_the_report_reads(tiny_run):
     m_block = 0.08 * 0.06 / (16 * 0.041 / 3 * 0.14)
     f_limit = (2 * np.sin(np.arcsin(1 - m_block) / 3)) ** 1.5
     assert row["tank_froude_fraction"] == pytest.approx(0.514 / np.sqrt(9.81 * 0.14) / f_limit, rel=1e-9)
+    # the tank's water motion, every record: the start wave of this tank, U A_s / (2 W c) = 4.8 mm, is a third of
+    # a cell, so both bands stay within one cell of the still level (a band reading the hull or a column with no
+    # surface would be off by many); the cubes start at rest
+    with h5py.File(path, "r") as h5:
+        levels = np.stack([h5["timeseries/level_fore_wall_m"][...], h5["timeseries/level_ahead_m"][...]])
+        drift = h5["timeseries/ice_drift_ahead_m_s"][...]
+    assert levels.shape == (2, 1 + 13) and np.isfinite(levels).all()
+    assert np.abs(levels).max() < m.units.dx_m
+    assert drift[0] == 0.0 and np.isfinite(drift).all()
+    # the start wave read back from the file (tank width from the blockage) is the model's own
+    sw = m.describe()["start_wave"]
+    assert row["start_wave_fraction"] == pytest.approx(sw["window_fraction"], abs=1e-12)
+    assert sw["duration_s"] == pytest.approx(m.geometry.prismatic_length_m / (np.sqrt(9.81 * 0.14) - 0.514),
+                                             rel=1e-9)
     # units: dt from the Mach rule against sqrt(g h), gravity from dt (module docstring of iceresist.tier2)
     u = m.units
     assert u.lbm_dt_s == pytest.approx(0.1 * u.dx_m / np.sqrt(9.81 * 0.14), rel=1e-9)
@@ -255,3 +269,26 @@ def test_tier2_scene_runs_through_iceresist_run_with_hydrostatic_fields(tmp_path
         snap = h5["fields"][sorted(h5["fields"].keys())[-1]]
         assert int(snap.attrs["iteration"]) == 2
         assert all(np.isfinite(snap[k][...]).all() for k in ("rho", "u", "pressure"))
+
+
+def test_report_draws_the_tanks_water_from_the_case_file(tiny_run):
+    """The report's tier-2 tank figure plots the recorded levels (cm) and drift against time, and marks t_s of the
+    case's start wave; a tier-1 case (no levels recorded) gets no figure."""
+    from reports.common import pyplot
+    from reports.report import fig_tank, load_case
+
+    path, probe = tiny_run
+    case = load_case(path)
+    plt = pyplot()
+    fig = fig_tank(plt, {"A-c68-v1.0": case})
+    ax, drift = fig.axes[0], fig.axes[1]
+    fore, ahead = ax.get_lines()[:2]
+    assert np.array_equal(fore.get_xdata(), case["ts"]["time_s"])
+    assert np.allclose(fore.get_ydata(), 100 * case["ts"]["level_fore_wall_m"])
+    assert np.allclose(ahead.get_ydata(), 100 * case["ts"]["level_ahead_m"])
+    assert np.allclose(drift.get_lines()[0].get_ydata(), case["ts"]["ice_drift_ahead_m_s"], equal_nan=True)
+    t_s = probe["model"].start_wave.duration_s
+    assert any(np.allclose(line.get_xdata(), t_s) for line in ax.get_lines()[2:])
+    tier1 = {**case, "ts": {k: v for k, v in case["ts"].items() if not k.startswith(("level_", "ice_drift"))}}
+    assert fig_tank(plt, {"A-c68-v1.0": tier1}) is None
+    plt.close("all")

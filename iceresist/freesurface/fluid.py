@@ -318,10 +318,15 @@ class FreeSurfaceFluid:
         mask = ((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64)
         return np.nan_to_num(self.forest.to_dense(mask), nan=0.0) > 0.5
 
-    def surface_height(self) -> np.ndarray:
+    def surface_height(self, covered_as_water: bool = False) -> np.ndarray:
         """Height z where phi crosses 1/2 in each column (nx, ny), cells, by linear interpolation (the
-        top-most crossing)."""
+        top-most crossing). ``covered_as_water``: a cell a body covers (GHOST) counts as phi = 1, so the surface
+        runs over the top of a floating body (within half a cell) rather than through the phi that the coupling
+        mirrors into it; a column through a body that stands out of the water then reads the body's top."""
         phi = self.phi()
+        if covered_as_water:
+            covered = self.forest.to_dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))
+            phi[np.nan_to_num(covered, nan=0.0) > 0.5] = 1.0
         nz = phi.shape[2]
         z = np.arange(nz) + 0.5
         below = phi[:, :, :-1] >= 0.5

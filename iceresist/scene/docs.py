@@ -155,6 +155,13 @@ from its checkpoint to the (new) stop criterion.
   0.28 at m = 0.40) no steady flow past the hull exists: the ship pushes a
   bore ahead. The run warns then; make the tank deeper or wider
   (docs/SHIP.md, "The tank's limiting speed").
+* **Start wave (tier 2).** The ship starts at full speed. Until the stern's
+  start wave reaches the bow, t_s = (V / A_s) / (sqrt(g h) - U) after the
+  start, the water ahead of the bow drifts forward at U m / 2 in a tank of
+  any length. The run warns when `ship.steady_window_m` begins before t_s
+  and names the run-up U t_s it needs: start the ship further aft
+  (`ship.start_x_m`) or begin the window later (docs/SHIP.md, "The start
+  wave").
 
 ## Result file
 

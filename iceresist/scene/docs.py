@@ -158,8 +158,9 @@ from its checkpoint to the (new) stop criterion.
 * **Start wave (tier 2).** The ship starts at full speed. Until the stern's
   start wave reaches the bow, t_s = (V / A_s) / (sqrt(g h) - U) after the
   start, the water ahead of the bow drifts forward at U m / 2 in a tank of
-  any length. The run warns when `ship.steady_window_m` begins before t_s
-  and names the run-up U t_s it needs: start the ship further aft
+  any length. The run warns when the steady window (`ship.steady_window_m`
+  or its default) begins before t_s and names the run-up U t_s it needs:
+  start the ship further aft
   (`ship.start_x_m`) or begin the window later (docs/SHIP.md, "The start
   wave").
 

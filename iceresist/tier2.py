@@ -336,8 +336,8 @@ class Tier2Model:
         side = np.abs(y - self.centre_y_m) > 0.5 * self.geometry.beam_m
 
         def band(x0):
-            cols = (x >= x0) & (x < x0 + self.level_band_m)
-            vals = h[np.ix_(cols, side)]
+            vals = h[np.ix_((x >= x0) & (x < x0 + self.level_band_m), side)]
+            vals = vals[np.isfinite(vals)]  # a column with no surface (all water or all gas) is left out
             return float(np.median(vals)) if vals.size else math.nan
 
         ice = self.ice_state()

@@ -144,3 +144,18 @@ def test_surface_height_over_a_covered_column():
     rest = np.ones(over.shape, bool)
     rest[3, 4] = False
     assert np.allclose(over[rest], DEPTH, atol=1e-12)
+
+
+def test_surface_height_is_nan_in_a_column_without_a_surface():
+    """A body standing through the whole depth of one column, read as water: no crossing there, NaN (not a
+    division by zero); the other columns keep 10.0."""
+    fs = FreeSurfaceFluid(_tank(), tau=0.6, gravity_lattice=G, depth_cells=DEPTH, operator="bgk",
+                          precision="float64")
+    fs.initialize()
+    flags = fs.forest.to_dense(np.asarray(fs.fluid.flags).astype(float))
+    flags[2, 5, :] = FL.GHOST
+    fs.fluid.flags[...] = fs.forest.from_dense(flags).astype(np.uint8)
+    with np.errstate(all="raise"):
+        over = fs.surface_height(covered_as_water=True)
+    assert np.isnan(over[2, 5]) and np.isfinite(np.delete(over.ravel(), 2 * 8 + 5)).all()
+    assert np.allclose(np.delete(over.ravel(), 2 * 8 + 5), DEPTH, atol=1e-12)

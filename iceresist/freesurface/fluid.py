@@ -320,7 +320,7 @@ class FreeSurfaceFluid:
 
     def surface_height(self, covered_as_water: bool = False) -> np.ndarray:
         """Height z where phi crosses 1/2 in each column (nx, ny), cells, by linear interpolation (the
-        top-most crossing). ``covered_as_water``: a cell a body covers (GHOST) counts as phi = 1, so the surface
+        top-most crossing); NaN in a column with no crossing (all water or all gas). ``covered_as_water``: a cell a body covers (GHOST) counts as phi = 1, so the surface
         runs over the top of a floating body (within half a cell) rather than through the phi that the coupling
         mirrors into it; a column through a body that stands out of the water then reads the body's top."""
         phi = self.phi()
@@ -335,4 +335,5 @@ class FreeSurfaceFluid:
         k = nz - 2 - np.argmax(cross[:, :, ::-1], axis=2)
         p0 = np.take_along_axis(phi, k[..., None], axis=2)[..., 0]
         p1 = np.take_along_axis(phi, (k + 1)[..., None], axis=2)[..., 0]
-        return z[k] + (p0 - 0.5) / (p0 - p1)
+        found = cross.any(axis=2)  # there p0 >= 1/2 > p1
+        return np.where(found, z[k] + (p0 - 0.5) / np.where(found, p0 - p1, 1.0), np.nan)

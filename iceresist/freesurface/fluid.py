@@ -320,9 +320,10 @@ class FreeSurfaceFluid:
 
     def surface_height(self, covered_as_water: bool = False) -> np.ndarray:
         """Height z where phi crosses 1/2 in each column (nx, ny), cells, by linear interpolation (the
-        top-most crossing); NaN in a column with no crossing (all water or all gas). ``covered_as_water``: a cell a body covers (GHOST) counts as phi = 1, so the surface
-        runs over the top of a floating body (within half a cell) rather than through the phi that the coupling
-        mirrors into it; a column through a body that stands out of the water then reads the body's top."""
+        top-most crossing); NaN in a column with no crossing (all water or all gas). ``covered_as_water``: a cell
+        a body covers (GHOST) counts as phi = 1, so the surface runs over the top of a floating body (within half
+        a cell) rather than through the phi that the coupling mirrors into it; a column through a body that
+        stands out of the water then reads the body's top."""
         phi = self.phi()
         if covered_as_water:
             covered = self.forest.to_dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))

@@ -160,9 +160,8 @@ from its checkpoint to the (new) stop criterion.
   start, the water ahead of the bow drifts forward at U m / 2 in a tank of
   any length. The run warns when the steady window (`ship.steady_window_m`
   or its default) begins before t_s and names the run-up U t_s it needs:
-  start the ship further aft
-  (`ship.start_x_m`) or begin the window later (docs/SHIP.md, "The start
-  wave").
+  start the ship further aft (`ship.start_x_m`) or begin the window later
+  (docs/SHIP.md, "The start wave").
 
 ## Result file
 

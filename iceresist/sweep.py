@@ -294,7 +294,7 @@ def floes_under_hull(positions, waterline_xy, x_bow_m, centre_y_m, level_m, cube
 def analyse_case(path) -> dict:
     """One table row from a finished case file (see :func:`sweep_table` for the columns)."""
     from iceresist.io.hdf5 import RunFile
-    from iceresist.post import force_to_full_scale, ice_resistance_from_timeseries
+    from iceresist.post import force_to_full_scale, ice_resistance_from_timeseries, window_halves
 
     with RunFile(path, "r") as rf:
         meta = rf.meta
@@ -311,6 +311,12 @@ def analyse_case(path) -> dict:
         sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1,
                                             n_batches=FALLBACK_BATCHES)
         ci_note = f"{FALLBACK_BATCHES} batches (window short against tau_int)"
+    try:  # is the window steady? (the halves of a short window may hold too few samples)
+        halves = window_halves(t, fx, x, window_m=window, motion_direction=+1)
+        half_ratio, steady = halves.ratio, halves.steady
+    except InputError as exc:
+        log.warning("%s: no steadiness check of the window: %s", meta["case"], exc)
+        half_ratio, steady = float("nan"), None
     geom = hull_of_model(model)
     x_bow = float(meta["final_x_bow_m"])
     x_lo = model["channel_start_x_m"]
@@ -325,6 +331,8 @@ def analyse_case(path) -> dict:
         "mean_force_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "std_N": sm.std_N,
         "window_x0_m": model["steady_window_m"][0], "window_x1_m": model["steady_window_m"][1],
         "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note,
+        # second-half over first-half mean of the window, and whether they agree (iceresist.post.window_halves)
+        "half_ratio": half_ratio, "window_steady": steady,
         "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, SCALE)) / 1e3,
         "R_CH_FSICR_kN": r_ch, "ratio_sim_FSICR": R_kN / r_ch,
         "ice_free_width_m": ice_free_width_m(final, (x_lo, x_hi), model["centre_y_m"], model["cube_m"],

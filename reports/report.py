@@ -183,7 +183,8 @@ TREND_COLUMNS = {"trend": "trend of the paper", "values": "mean ice force +- 95 
 RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "cubes", "spheres": "DEM spheres",
                "resolution_m": "resolution [m]", "cells": "cells", "steps": "records",
                "dem_substeps": "DEM sub-steps", "simulated_s": "simulated [s]", "wall_time_s": "wall time [s]",
-               "backend": "backend", "tank_froude_fraction": "F_h / F_L",
+               "backend": "backend", "half_ratio": "2nd / 1st half", "window_steady": "steady window",
+               "tank_froude_fraction": "F_h / F_L",
                "start_wave_fraction": "window in start wave", "ci_method": "CI method"}
 
 

@@ -47,6 +47,10 @@ def test_post_processing_equals_hand_calculation(tiny_sweep):
         # batch means drops the first n mod n_batches samples of the window; the plain mean is within 1 % here
         assert row.mean_force_N == pytest.approx(-fx[sel].mean(), rel=0.03)
         assert row.R_sim_kN == pytest.approx(row.mean_force_N * 25**3 / 1e3, rel=1e-12)
+        # the steadiness check: plain means of the two halves of the window (batch means drop a few samples)
+        mid = 0.5 * (x0 + x1)
+        first, second = -fx[sel & (x <= mid)].mean(), -fx[sel & (x >= mid)].mean()
+        assert row.half_ratio == pytest.approx(second / first, rel=0.05)
         # the record is the mean of the sub-step forces: x advances by speed * record interval
         assert np.allclose(np.diff(x), 0.514 * 0.002 * 1.0, rtol=0.3)
 

@@ -12,7 +12,12 @@ from iceresist.post.comparison import (
     comparison_table,
     format_comparison_table,
 )
-from iceresist.post.resistance import ice_resistance_from_timeseries, resistance_from_contact_force
+from iceresist.post.resistance import (
+    WindowHalves,
+    ice_resistance_from_timeseries,
+    resistance_from_contact_force,
+    window_halves,
+)
 from iceresist.post.scaling import (
     PAPER_SCALE,
     RHO_FRESH_WATER_KG_M3,
@@ -46,6 +51,7 @@ __all__ = [
     "RHO_SEA_WATER_KG_M3",
     "BatchMeans",
     "SteadyMean",
+    "WindowHalves",
     "WindowSamples",
     "autocorrelation",
     "batch_means",
@@ -69,4 +75,5 @@ __all__ = [
     "steady_mean",
     "time_to_full_scale",
     "time_to_model_scale",
+    "window_halves",
 ]

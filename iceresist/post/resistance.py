@@ -10,6 +10,9 @@ it is ``R = +F_x``. The direction is the parameter ``motion_direction``
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
 import numpy as np
 
 from iceresist.errors import InputError
@@ -47,3 +50,53 @@ def ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m=None, *, window_s=None, w
     r_n = resistance_from_contact_force(Fx_N, motion_direction)
     return steady_mean(t_s, r_n, window_s=window_s, window_m=window_m, x_ship_m=x_ship_m,
                        n_batches=n_batches, confidence=confidence, signal_name="Fx_N")
+
+
+#: Batches per half of the window in :func:`window_halves` (a half of a short window holds too few samples for
+#: the automatic count; the interval of each half is then likely too narrow, which makes the check stricter).
+HALF_WINDOW_BATCHES = 5
+
+
+@dataclass(frozen=True)
+class WindowHalves:
+    """Mean ice resistance over the first and the second half of a steady window (:func:`window_halves`)."""
+
+    first: SteadyMean
+    second: SteadyMean
+
+    @property
+    def change_N(self) -> float:
+        """Second-half mean minus first-half mean (N)."""
+        return self.second.mean_N - self.first.mean_N
+
+    @property
+    def change_ci_N(self) -> float:
+        """Half-width of the interval of the change: the two halves' half-widths added in quadrature."""
+        return math.hypot(self.first.ci_half_width_N, self.second.ci_half_width_N)
+
+    @property
+    def ratio(self) -> float:
+        """Second-half mean over first-half mean (NaN when the first is not positive)."""
+        return self.second.mean_N / self.first.mean_N if self.first.mean_N > 0 else math.nan
+
+    @property
+    def steady(self) -> bool:
+        """The halves agree: the change lies within its interval. False means the force is still rising or
+        falling across the window, so its mean depends on where the window ends."""
+        return abs(self.change_N) <= self.change_ci_N
+
+
+def window_halves(t_s, Fx_N, x_ship_m=None, *, window_s=None, window_m=None, motion_direction: int = +1,
+                  n_batches: int = HALF_WINDOW_BATCHES, confidence: float = 0.95) -> WindowHalves:
+    """The steadiness check of a steady window: :func:`ice_resistance_from_timeseries` over each half of it
+    (split at the middle of ``window_s`` or ``window_m``), ``n_batches`` batch means each."""
+    if (window_s is None) == (window_m is None):
+        raise InputError("window_halves needs exactly one of window_s (s) and window_m (m)")
+    lo, hi = (float(v) for v in (window_s if window_s is not None else window_m))
+    mid = 0.5 * (lo + hi)
+    halves = []
+    for part in ((lo, mid), (mid, hi)):
+        key = {"window_s": part} if window_s is not None else {"window_m": part}
+        halves.append(ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m, motion_direction=motion_direction,
+                                                     n_batches=n_batches, confidence=confidence, **key))
+    return WindowHalves(*halves)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import base64
 import io
+import textwrap
 from pathlib import Path
 
 HERE = Path(__file__).parent
@@ -42,10 +43,16 @@ def pdf_table_page(plt, table, columns: dict, title: str, na_rep: str = "nan"):
     cells = [[na_rep if v is None or (isinstance(v, float) and v != v) else f"{v:.4g}" if isinstance(v, float)
               else str(v) for v in row] for row in table[list(columns)].values]
     if cells:
-        t = ax.table(cellText=cells, colLabels=list(columns.values()), loc="center")
+        labels = [textwrap.fill(str(h), 12) for h in columns.values()]  # headings wrap instead of overlapping
+        t = ax.table(cellText=cells, colLabels=labels, loc="center")
         t.auto_set_font_size(False)
         t.set_fontsize(7)
+        t.auto_set_column_width(list(range(len(labels))))
         t.scale(1.0, 1.3)
+        lines = max(h.count("\n") + 1 for h in labels)
+        for (row, _), cell in t.get_celld().items():
+            if row == 0:
+                cell.set_height(cell.get_height() * lines)
     ax.set_title(title)
     return fig
 

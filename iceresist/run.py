@@ -49,6 +49,11 @@ def _override(scene: Scene, section: str, **values) -> Scene:
     return new
 
 
+#: Wall time (s) between checkpoints of a run whose scene sets neither ``output.checkpoint_every_steps`` nor
+#: ``output.checkpoint_wall_s`` (the sweep's interval, :data:`iceresist.sweep.CHECKPOINT_WALL_S`).
+DEFAULT_CHECKPOINT_WALL_S = 600.0
+
+
 def result_paths(scene: Scene, output_dir=None) -> tuple[Path, Path]:
     """(result file, checkpoint file) of a scene."""
     out = Path(output_dir if output_dir is not None else scene.output.directory)
@@ -72,10 +77,8 @@ def build_simulation(scene: Scene, model, runfile: RunFile, checkpoint_path, *, 
     sim.output_writers["timeseries"] = TimeSeriesWriter(runfile, IterationInterval(o.timeseries_every_steps))
     if o.checkpoint_every_steps is not None:
         chk_schedule = IterationInterval(o.checkpoint_every_steps)
-    elif o.checkpoint_wall_s is not None:
-        chk_schedule = WallTimeInterval(o.checkpoint_wall_s)
-    else:
-        chk_schedule = None
+    else:  # a killed long run keeps its work: by default every DEFAULT_CHECKPOINT_WALL_S of wall time
+        chk_schedule = WallTimeInterval(o.checkpoint_wall_s or DEFAULT_CHECKPOINT_WALL_S)
     sim.output_writers["checkpointer"] = Checkpointer(checkpoint_path, chk_schedule)
     from iceresist import watchdog
 

@@ -182,3 +182,23 @@ def test_pickup_continues_a_result(tmp_path, main, fake_model):
 def test_units_of_the_preset_match_the_scene_doc():
     u = Units.from_physical(0.001, 1e-6, 0.01)
     assert (u.dt_s, u.tau) == pytest.approx((0.01, 0.53))
+
+
+@pytest.mark.parametrize("output, schedule", [({}, ("WallTimeInterval", 600.0)),
+                                              ({"checkpoint_wall_s": 30.0}, ("WallTimeInterval", 30.0)),
+                                              ({"checkpoint_every_steps": 7}, ("IterationInterval", 7))])
+def test_run_checkpoints_every_ten_minutes_unless_the_scene_says(tmp_path, output, schedule):
+    """A long run killed without a checkpoint loses all its work (an interrupt skips the final one), so a scene
+    that names no checkpoint schedule gets the sweep's 600 s of wall time; one that does keeps its own."""
+    from iceresist.run import DEFAULT_CHECKPOINT_WALL_S, build_simulation
+    from iceresist.scene.load import load_scene
+
+    scene = load_scene("poiseuille")
+    scene = scene.model_copy(update={"output": scene.output.model_copy(update=output)})
+    with RunFile(tmp_path / "r.h5", "w", shape_cells=scene.shape_cells()) as rf:
+        sim = build_simulation(scene, FakeFluid(scene), rf, tmp_path / "r.checkpoint.h5", progress=False)
+    chk = sim.output_writers["checkpointer"].schedule
+    kind, value = schedule
+    assert type(chk).__name__ == kind
+    assert (chk.interval_s if kind == "WallTimeInterval" else chk.interval) == value
+    assert DEFAULT_CHECKPOINT_WALL_S == 600.0

@@ -197,7 +197,8 @@ class Output(_Section):
                                                               "every N steps.")
     checkpoint_every_steps: int | None = Field(None, ge=1, description="Checkpoint every N steps (a checkpoint "
                                                                         "is always written at the end).")
-    checkpoint_wall_s: float | None = Field(None, gt=0, description="Checkpoint every t seconds of wall time.")
+    checkpoint_wall_s: float | None = Field(None, gt=0, description="Checkpoint every t seconds of wall time. "
+                                                                     "Neither key: every 600 s of wall time.")
 
     @model_validator(mode="after")
     def _one_field_schedule(self):

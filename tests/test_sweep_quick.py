@@ -30,9 +30,9 @@ def test_quick_tier2_sweep_trends(tmp_path):
     0.78 (2 knots) and 0.19 (Bow B) x FSICR (docs/SHIP.md): the concentration, speed and bow trends hold, but
     the 50 % case is under the bound, so this test fails on the present quick tank. The water there does not
     stay level (at 2 knots it piles up against the fore wall, at 1 knot it sloshes; docs/SHIP.md, "2 knots
-    again in the sweep, and the water level"), but in the 1-knot windows the ice drifts towards the bow. The quick window is short:
-    tier 1 on a channel twice as long settles only after 1.2 m of window, 40 % above its quick-window mean, and
-    the tier-2 means rise across the quick window about 1.6 x as steeply as tier 1's at 68 % (inside each case's
-    intervals; docs/SHIP.md, "The start wave"). Where tier 2 settles is the question of
-    validation/scenes/quick_t2_long_channel.toml."""
+    again in the sweep, and the water level"), but in the 1-knot windows the ice drifts towards the bow. The
+    quick window is short: tier 1 on a channel twice as long settles only after 1.2 m of window, 40 % above its
+    quick-window mean, and the tier-2 means rise across the quick window about 1.6 x as steeply as tier 1's at
+    68 % (inside each case's intervals; docs/SHIP.md, "The start wave"). Where tier 2 settles is the question
+    of validation/scenes/quick_t2_long_channel.toml."""
     assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

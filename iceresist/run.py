@@ -50,7 +50,7 @@ def _override(scene: Scene, section: str, **values) -> Scene:
 
 
 #: Wall time (s) between checkpoints of a run whose scene sets neither ``output.checkpoint_every_steps`` nor
-#: ``output.checkpoint_wall_s`` (the sweep's interval, :data:`iceresist.sweep.CHECKPOINT_WALL_S`).
+#: ``output.checkpoint_wall_s``; the sweep's :data:`iceresist.sweep.CHECKPOINT_WALL_S` is this value.
 DEFAULT_CHECKPOINT_WALL_S = 600.0
 
 

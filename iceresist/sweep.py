@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
+from iceresist.run import DEFAULT_CHECKPOINT_WALL_S
 from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
 from iceresist.simulation import Checkpointer
 
@@ -40,7 +41,7 @@ TINY_OVERRIDES = {"ice": {"channel_length_m": 0.3}, "run": {"end_time_s": 0.75},
                   "ship": {"steady_window_m": [4.1, 4.3], "sphere_band_m": 0.03, "sphere_spacing_m": 0.05}}
 
 #: Wall-clock seconds between the checkpoints of a running case (a tier-2 quick case runs for hours here).
-CHECKPOINT_WALL_S = 600.0
+CHECKPOINT_WALL_S = DEFAULT_CHECKPOINT_WALL_S  # the same interval as `iceresist run`
 
 #: Batches used where the window is too short for the automatic choice (the table says so).
 FALLBACK_BATCHES = 5

@@ -1,4 +1,4 @@
-"""Command line: ``iceresist demo | run | sweep | report | validate``.
+"""Command line: ``iceresist demo | run | sweep | report | steadiness | validate``.
 
 Every subcommand turns bad input into one line on stderr and exit status 2,
 with no traceback (:class:`iceresist.errors.InputError`).
@@ -53,6 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_sweep_arguments(s)
     rp = sub.add_parser("report", help="write report.html and report.pdf of a sweep folder")
     add_report_arguments(rp)
+
+    from iceresist.steadiness import add_steadiness_arguments
+
+    st = sub.add_parser("steadiness", help="mean ice force over steps of stem travel through the channel: does it "
+                                         "settle? (finished or running case files)")
+    add_steadiness_arguments(st)
 
     from iceresist.validate.cli import add_validate_arguments
 

@@ -55,6 +55,26 @@ def test_post_processing_equals_hand_calculation(tiny_sweep):
         assert np.allclose(np.diff(x), 0.514 * 0.002 * 1.0, rtol=0.3)
 
 
+def test_steadiness_steps_equal_hand_means(tiny_sweep):
+    """``iceresist steadiness`` on a real case file: steps of half the window from its start, each mean the plain
+    mean of -Fx over the step read straight from the HDF5 time series (batch means drop a few samples)."""
+    from iceresist.steadiness import steadiness_table
+
+    out, _ = tiny_sweep
+    x0, x1 = TINY_OVERRIDES["ship"]["steady_window_m"]
+    path = case_path(out, CASES[0])
+    table = steadiness_table([path], step_m=0.5 * (x1 - x0))
+    with h5py.File(path, "r") as h5:
+        x, fx = h5["timeseries/x_bow_m"][1:], h5["timeseries/Fx_N"][1:]
+        channel_x0 = json.loads(h5["meta"].attrs["model"])["channel_start_x_m"]
+    assert len(table) >= 2 and table.in_window.iloc[:2].all()
+    for row in table.itertuples():
+        lo, hi = row.travel_from_m + channel_x0, row.travel_to_m + channel_x0
+        sel = (x >= lo) & (x <= hi)
+        assert row.samples == sel.sum()
+        assert row.mean_N == pytest.approx(-fx[sel].mean(), rel=0.05)
+
+
 def test_interrupted_sweep_resumes_to_the_same_table(tiny_sweep, tmp_path):
     """Killed at record 50 of the second case with checkpoints every 20 records: started again, the sweep skips
     the first case, continues the second from record 40 (dropping the records 41-49 the killed leg wrote) and

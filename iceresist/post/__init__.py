@@ -17,6 +17,7 @@ from iceresist.post.resistance import (
     ice_resistance_from_timeseries,
     resistance_from_contact_force,
     window_halves,
+    window_parts,
 )
 from iceresist.post.scaling import (
     PAPER_SCALE,
@@ -76,4 +77,5 @@ __all__ = [
     "time_to_full_scale",
     "time_to_model_scale",
     "window_halves",
+    "window_parts",
 ]

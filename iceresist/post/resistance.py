@@ -86,17 +86,30 @@ class WindowHalves:
         return abs(self.change_N) <= self.change_ci_N
 
 
+def window_parts(t_s, Fx_N, x_ship_m=None, *, edges_s=None, edges_m=None, motion_direction: int = +1,
+                 n_batches: int = HALF_WINDOW_BATCHES, confidence: float = 0.95) -> list[SteadyMean]:
+    """Mean ice resistance over consecutive parts of a record: :func:`ice_resistance_from_timeseries` between
+    each pair of neighbouring ``edges_s`` (s) or ``edges_m`` (ship position, m), ``n_batches`` batch means
+    each. Does the force settle along the channel? Read the means part by part."""
+    if (edges_s is None) == (edges_m is None):
+        raise InputError("window_parts needs exactly one of edges_s (s) and edges_m (m)")
+    edges = np.asarray(edges_s if edges_s is not None else edges_m, dtype=float)
+    if edges.ndim != 1 or edges.size < 2 or not np.all(np.diff(edges) > 0):
+        raise InputError(f"window edges {edges.tolist()} must be two or more increasing values")
+    key = "window_s" if edges_s is not None else "window_m"
+    return [ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m, motion_direction=motion_direction,
+                                           n_batches=n_batches, confidence=confidence, **{key: (lo, hi)})
+            for lo, hi in zip(edges[:-1], edges[1:])]
+
+
 def window_halves(t_s, Fx_N, x_ship_m=None, *, window_s=None, window_m=None, motion_direction: int = +1,
                   n_batches: int = HALF_WINDOW_BATCHES, confidence: float = 0.95) -> WindowHalves:
-    """The steadiness check of a steady window: :func:`ice_resistance_from_timeseries` over each half of it
-    (split at the middle of ``window_s`` or ``window_m``), ``n_batches`` batch means each."""
+    """The steadiness check of a steady window: :func:`window_parts` over each half of it (split at the
+    middle of ``window_s`` or ``window_m``), ``n_batches`` batch means each."""
     if (window_s is None) == (window_m is None):
         raise InputError("window_halves needs exactly one of window_s (s) and window_m (m)")
     lo, hi = (float(v) for v in (window_s if window_s is not None else window_m))
-    mid = 0.5 * (lo + hi)
-    halves = []
-    for part in ((lo, mid), (mid, hi)):
-        key = {"window_s": part} if window_s is not None else {"window_m": part}
-        halves.append(ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m, motion_direction=motion_direction,
-                                                     n_batches=n_batches, confidence=confidence, **key))
-    return WindowHalves(*halves)
+    edges = (lo, 0.5 * (lo + hi), hi)
+    key = {"edges_s": edges} if window_s is not None else {"edges_m": edges}
+    return WindowHalves(*window_parts(t_s, Fx_N, x_ship_m, motion_direction=motion_direction,
+                                      n_batches=n_batches, confidence=confidence, **key))

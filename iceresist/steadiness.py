@@ -1,0 +1,204 @@
+"""Does the ice force settle along the channel? ``iceresist steadiness CASE.h5 [CASE.h5 ...]``.
+
+The steady mean of a case (paper section 4.2) is taken over a fixed window of the stem's travel. Whether that
+window is long enough shows in the mean over consecutive steps of the travel: if the force is still rising from
+step to step, the window's mean depends on where it ends (docs/SHIP.md, "Where tier 1 settles"). This module
+reads case files (finished, stopped or still being written), cuts each into steps of ``step_m`` of stem travel
+from the start of its steady window, and gives the mean ice resistance of each step with its batch-means
+interval (:func:`iceresist.post.window_parts`). Positions are stem travel into the ice channel, so cases whose
+channels start at different x (tier 1 and tier 2) line up.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from iceresist.errors import InputError
+
+log = logging.getLogger(__name__)
+
+#: Default step of stem travel [m]: half the quick presets' steady window (0.78 m), the split of
+#: :func:`iceresist.post.window_halves`.
+DEFAULT_STEP_M = 0.39
+
+
+@dataclass(frozen=True)
+class CaseRecord:
+    """The ice-force record of one ship case file (model scale)."""
+
+    path: Path
+    case: str
+    tier: int
+    t_s: np.ndarray
+    Fx_N: np.ndarray
+    x_bow_m: np.ndarray
+    channel_start_x_m: float
+    window_m: tuple[float, float]
+    finished: bool
+
+    @property
+    def travel_m(self) -> np.ndarray:
+        """Stem travel into the ice channel at each record [m]."""
+        return self.x_bow_m - self.channel_start_x_m
+
+    @property
+    def window_start_travel_m(self) -> float:
+        """Start of the steady window as stem travel into the channel [m]."""
+        return self.window_m[0] - self.channel_start_x_m
+
+
+def read_case_record(path) -> CaseRecord:
+    """Read a ship case file written by ``iceresist run`` or ``iceresist sweep``. A file still being written
+    is read as far as it goes (no file lock is taken, so a running case can be looked at)."""
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such case file; give the .h5 file of a ship case (iceresist run/sweep)")
+    try:
+        with h5py.File(path, "r", locking=False) as f:
+            meta = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f["meta"].attrs.items()}
+            model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
+            ts = {k: f["timeseries"][k][...] for k in ("time_s", "Fx_N", "x_bow_m")}
+            window = tuple(float(v) for v in model["steady_window_m"])
+            channel_x0 = float(model["channel_start_x_m"])
+    except (OSError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"{path}: not a ship case file ({exc.__class__.__name__}: {exc}); give the .h5 file "
+                         f"of a ship scene written by iceresist run or sweep") from None
+    name = str(meta.get("case", meta.get("scene_name", path.stem)))
+    # row 0 is the state before the first step (as in iceresist.sweep.analyse_case)
+    return CaseRecord(path=path, case=name, tier=int(model.get("tier", 0)), t_s=ts["time_s"][1:],
+                      Fx_N=ts["Fx_N"][1:], x_bow_m=ts["x_bow_m"][1:], channel_start_x_m=channel_x0,
+                      window_m=window, finished="final_x_bow_m" in meta)
+
+
+def step_edges_m(record: CaseRecord, step_m: float = DEFAULT_STEP_M) -> np.ndarray:
+    """Stem positions [m] bounding whole steps of ``step_m`` from the start of the window to the last record
+    (an unfinished last step is left out; empty when not even one step has been recorded)."""
+    if not (math.isfinite(step_m) and step_m > 0):
+        raise InputError(f"step {step_m!r} m must be a positive length in metres (e.g. --step-m 0.39)")
+    x0 = record.window_m[0]
+    x_end = float(record.x_bow_m[-1]) if record.x_bow_m.size else x0
+    n = int(math.floor((x_end - x0) / step_m + 1e-9))
+    return x0 + step_m * np.arange(n + 1) if n >= 1 else np.empty(0)
+
+
+def steadiness_table(paths, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
+    """One row per case and step: ``case``, ``tier``, ``finished``, ``step`` (0 is the first step of the
+    window), ``travel_from_m`` / ``travel_to_m`` (stem travel into the channel), ``mean_N``, ``ci95_N``,
+    ``samples``, ``in_window`` (the step lies inside the case's steady window)."""
+    from iceresist.post import window_parts
+
+    rows = []
+    for path in paths:
+        rec = read_case_record(path)
+        edges = step_edges_m(rec, step_m)
+        if edges.size == 0:
+            log.warning("%s: the stem has not yet travelled one step (%.2f m) past the window start", rec.case,
+                        step_m)
+            continue
+        parts = window_parts(rec.t_s, rec.Fx_N, rec.x_bow_m, edges_m=edges, motion_direction=+1)
+        for k, (lo, hi, sm) in enumerate(zip(edges[:-1], edges[1:], parts)):
+            rows.append({"case": rec.case, "tier": rec.tier, "finished": rec.finished, "step": k,
+                         "travel_from_m": lo - rec.channel_start_x_m, "travel_to_m": hi - rec.channel_start_x_m,
+                         "mean_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "samples": sm.n_samples,
+                         "in_window": bool(hi <= rec.window_m[1] + 1e-9), "file": str(rec.path)})
+    return pd.DataFrame(rows)
+
+
+def format_steadiness(table: pd.DataFrame) -> str:
+    """The table as text: one line per case, one column per step ("mean +- ci95 N")."""
+    if table.empty:
+        return "no case has a whole step recorded yet"
+    cols = sorted({(round(a, 2), round(b, 2)) for a, b in zip(table.travel_from_m, table.travel_to_m)})
+    head = ["case (tier)"] + [f"{a:.2f}-{b:.2f} m" for a, b in cols]
+    lines = []
+    names = table.drop_duplicates("file").case
+    for file, g in table.groupby("file", sort=False):
+        cells = {(round(r.travel_from_m, 2), round(r.travel_to_m, 2)):
+                 f"{r.mean_N:.1f} +- {r.ci95_N:.1f}{'' if r.in_window else '*'}" for r in g.itertuples()}
+        case, tier = g.case.iloc[0], g.tier.iloc[0]
+        state = "" if g.finished.iloc[0] else ", not finished"
+        where = f" {file}" if (names == case).sum() > 1 else ""  # two files of one case: say which is which
+        lines.append([f"{case} (tier {tier}{state}){where}"] + [cells.get(c, "") for c in cols])
+    widths = [max(len(row[i]) for row in [head] + lines) for i in range(len(head))]
+    fmt = lambda row: "  ".join(c.ljust(w) for c, w in zip(row, widths))  # noqa: E731
+    out = [f"mean ice resistance [N] (+- 95 % interval) over steps of stem travel into the channel; "
+           f"* after the case's steady window", fmt(head)] + [fmt(r) for r in lines]
+    return "\n".join(out)
+
+
+def plot_steadiness(table: pd.DataFrame, paths, png) -> Path:
+    """Force against stem travel into the channel for each case (thin line) with the step means and their
+    intervals (bars): where the bars stop rising, the force has settled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    records = [read_case_record(path) for path in paths]
+    names = [rec.case for rec in records]
+    for i, rec in enumerate(records):
+        colour = f"C{i}"
+        label = f"{rec.case} (tier {rec.tier}{'' if rec.finished else ', not finished'})"
+        if names.count(rec.case) > 1:  # two files of one case: name the folder
+            label += f" [{_folder_tag(rec.path)}]"
+        g = table[table.file == str(rec.path)] if len(table) else table
+        ax.plot(rec.travel_m, -rec.Fx_N, color=colour, lw=0.4, alpha=0.35, label=None if len(g) else label)
+        if len(g):
+            mid = 0.5 * (g.travel_from_m + g.travel_to_m)
+            ax.errorbar(mid, g.mean_N, yerr=g.ci95_N, xerr=0.5 * (g.travel_to_m - g.travel_from_m), fmt="o",
+                        color=colour, capsize=3, label=label)
+        ax.axvspan(rec.window_m[0] - rec.channel_start_x_m, rec.window_m[1] - rec.channel_start_x_m,
+                   color=colour, alpha=0.06)
+    ax.set_xlabel("stem travel into the ice channel [m]")
+    ax.set_ylabel("ice resistance, model scale [N]")
+    ax.set_title("Does the ice force settle? Step means (bars: 95 % interval); shaded: steady window")
+    if len(table):
+        top = float((table.mean_N + table.ci95_N).max())
+        ax.set_ylim(min(0.0, float((table.mean_N - table.ci95_N).min())) * 1.2, 2.5 * top)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.grid(alpha=0.3)
+    png = Path(png)
+    png.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return png
+
+
+def _folder_tag(path: Path) -> str:
+    """The folder that tells a case file apart: the sweep folder for ``SWEEP/cases/CASE.h5``, else the parent."""
+    parent = path.resolve().parent
+    return parent.parent.name if parent.name == "cases" else parent.name
+
+
+def add_steadiness_arguments(p) -> None:
+    p.add_argument("cases", nargs="+", help="case files (.h5) of ship runs; a running case is read as far as it goes")
+    p.add_argument("--step-m", type=float, default=DEFAULT_STEP_M,
+                   help=f"step of stem travel in metres (default {DEFAULT_STEP_M}, half the quick window)")
+    p.add_argument("--plot", default=None, help="also draw the force against stem travel into this PNG file")
+    p.add_argument("--csv", default=None, help="also write the table (one row per case and step) to this CSV file")
+    p.add_argument("--json", action="store_true", help="print the table as JSON (one object per case and step)")
+    p.set_defaults(func=_cmd_steadiness)
+
+
+def _cmd_steadiness(args) -> int:
+    table = steadiness_table(args.cases, args.step_m)
+    print(table.to_json(orient="records") if args.json else format_steadiness(table))
+    if args.csv:
+        table.to_csv(args.csv, index=False)
+        if not args.json:
+            print(f"table: {args.csv}")
+    if args.plot:
+        png = plot_steadiness(table, args.cases, args.plot)
+        if not args.json:
+            print(f"figure: {png}")
+    return 0

@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +22,8 @@ import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
+from iceresist.post.statistics import MIN_BATCH_LENGTH_TAU
+from iceresist.post.statistics import log as statistics_log
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +96,9 @@ def step_edges_m(record: CaseRecord, step_m: float = DEFAULT_STEP_M) -> np.ndarr
 def steadiness_table(paths, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
     """One row per case and step: ``case``, ``tier``, ``finished``, ``step`` (0 is the first step of the
     window), ``travel_from_m`` / ``travel_to_m`` (stem travel into the channel), ``mean_N``, ``ci95_N``,
-    ``samples``, ``in_window`` (the step lies inside the case's steady window)."""
+    ``samples``, ``batch_tau_int`` (batch length over the integrated autocorrelation time),
+    ``interval_too_narrow`` (batches shorter than 5 tau_int: the interval is likely too narrow), ``in_window``
+    (the step lies inside the case's steady window)."""
     from iceresist.post import window_parts
 
     rows = []
@@ -104,11 +109,14 @@ def steadiness_table(paths, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
             log.warning("%s: the stem has not yet travelled one step (%.2f m) past the window start", rec.case,
                         step_m)
             continue
-        parts = window_parts(rec.t_s, rec.Fx_N, rec.x_bow_m, edges_m=edges, motion_direction=+1)
+        with _quiet(statistics_log):  # short batches are a column here, not a warning per step
+            parts = window_parts(rec.t_s, rec.Fx_N, rec.x_bow_m, edges_m=edges, motion_direction=+1)
         for k, (lo, hi, sm) in enumerate(zip(edges[:-1], edges[1:], parts)):
             rows.append({"case": rec.case, "tier": rec.tier, "finished": rec.finished, "step": k,
                          "travel_from_m": lo - rec.channel_start_x_m, "travel_to_m": hi - rec.channel_start_x_m,
                          "mean_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "samples": sm.n_samples,
+                         "batch_tau_int": sm.batch_length / sm.tau_int_samples,
+                         "interval_too_narrow": bool(sm.batch_length < MIN_BATCH_LENGTH_TAU * sm.tau_int_samples),
                          "in_window": bool(hi <= rec.window_m[1] + 1e-9), "file": str(rec.path)})
     return pd.DataFrame(rows)
 
@@ -123,15 +131,17 @@ def format_steadiness(table: pd.DataFrame) -> str:
     names = table.drop_duplicates("file").case
     for file, g in table.groupby("file", sort=False):
         cells = {(round(r.travel_from_m, 2), round(r.travel_to_m, 2)):
-                 f"{r.mean_N:.1f} +- {r.ci95_N:.1f}{'' if r.in_window else '*'}" for r in g.itertuples()}
+                 f"{r.mean_N:.1f} +- {r.ci95_N:.1f}{'~' if r.interval_too_narrow else ''}{'' if r.in_window else '*'}"
+                 for r in g.itertuples()}
         case, tier = g.case.iloc[0], g.tier.iloc[0]
         state = "" if g.finished.iloc[0] else ", not finished"
         where = f" {file}" if (names == case).sum() > 1 else ""  # two files of one case: say which is which
         lines.append([f"{case} (tier {tier}{state}){where}"] + [cells.get(c, "") for c in cols])
     widths = [max(len(row[i]) for row in [head] + lines) for i in range(len(head))]
     fmt = lambda row: "  ".join(c.ljust(w) for c, w in zip(row, widths))  # noqa: E731
-    out = [f"mean ice resistance [N] (+- 95 % interval) over steps of stem travel into the channel; "
-           f"* after the case's steady window", fmt(head)] + [fmt(r) for r in lines]
+    out = ["mean ice resistance [N] (+- 95 % interval) over steps of stem travel into the channel; "
+           "~ interval likely too narrow (batches shorter than 5 tau_int); * after the case's steady window",
+           fmt(head)] + [fmt(r) for r in lines]
     return "\n".join(out)
 
 
@@ -172,6 +182,17 @@ def plot_steadiness(table: pd.DataFrame, paths, png) -> Path:
     fig.savefig(png, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return png
+
+
+@contextmanager
+def _quiet(logger: logging.Logger):
+    """Silence ``logger``'s warnings for the block."""
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
 
 
 def _folder_tag(path: Path) -> str:

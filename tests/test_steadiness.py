@@ -2,6 +2,7 @@
 
 import hashlib
 import json
+import logging
 import math
 
 import numpy as np
@@ -56,7 +57,7 @@ def test_window_parts_of_a_ramp():
         window_parts(t, -x, x)
 
 
-def test_step_means_of_a_settling_force(tmp_path):
+def test_step_means_of_a_settling_force(tmp_path, caplog):
     """Whole steps of 0.39 m from the window start (0.606 m into the channel) up to 2.2 m of travel: four steps,
     each the exact mean of R(s) over it; the steps after the steady window are marked."""
     path = write_case(tmp_path / "case.h5", travel_end_m=2.2)
@@ -72,8 +73,11 @@ def test_step_means_of_a_settling_force(tmp_path):
     assert table.mean_N.iloc[0] < 0.9 * R_INF_N
     assert list(table.in_window) == [True, True, False, False]
     assert table.finished.all() and (table.tier == 2).all()
+    # a smooth force is correlated over the whole step: each interval is flagged once, in the table, not logged
+    assert table.interval_too_narrow.all() and (table.batch_tau_int < 5).all()
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
     text = format_steadiness(table)
-    assert "T-c68-v1.0 (tier 2)" in text and "0.61-1.00 m" in text and "*" in text.splitlines()[-1]
+    assert "T-c68-v1.0 (tier 2)" in text and "0.61-1.00 m" in text and "~*" in text.splitlines()[-1]
 
 
 def test_a_running_case_is_read_as_far_as_it_goes(tmp_path):

@@ -22,7 +22,6 @@ import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
-from iceresist.post.statistics import MIN_BATCH_LENGTH_TAU
 from iceresist.post.statistics import log as statistics_log
 
 log = logging.getLogger(__name__)
@@ -51,25 +50,20 @@ class CaseRecord:
         """Stem travel into the ice channel at each record [m]."""
         return self.x_bow_m - self.channel_start_x_m
 
-    @property
-    def window_start_travel_m(self) -> float:
-        """Start of the steady window as stem travel into the channel [m]."""
-        return self.window_m[0] - self.channel_start_x_m
-
 
 def read_case_record(path) -> CaseRecord:
     """Read a ship case file written by ``iceresist run`` or ``iceresist sweep``. A file still being written
     is read as far as it goes (no file lock is taken, so a running case can be looked at)."""
-    import h5py
+    from iceresist.io.hdf5 import RunFile
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such case file; give the .h5 file of a ship case (iceresist run/sweep)")
     try:
-        with h5py.File(path, "r", locking=False) as f:
-            meta = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f["meta"].attrs.items()}
+        with RunFile(path, "r", locking=False) as rf:
+            meta = rf.meta
             model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
-            ts = {k: f["timeseries"][k][...] for k in ("time_s", "Fx_N", "x_bow_m")}
+            ts = {k: rf.h5["timeseries"][k][...] for k in ("time_s", "Fx_N", "x_bow_m")}
             window = tuple(float(v) for v in model["steady_window_m"])
             channel_x0 = float(model["channel_start_x_m"])
     except (OSError, KeyError, TypeError, ValueError) as exc:
@@ -93,17 +87,24 @@ def step_edges_m(record: CaseRecord, step_m: float = DEFAULT_STEP_M) -> np.ndarr
     return x0 + step_m * np.arange(n + 1) if n >= 1 else np.empty(0)
 
 
-def steadiness_table(paths, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
-    """One row per case and step: ``case``, ``tier``, ``finished``, ``step`` (0 is the first step of the
-    window), ``travel_from_m`` / ``travel_to_m`` (stem travel into the channel), ``mean_N``, ``ci95_N``,
-    ``samples``, ``batch_tau_int`` (batch length over the integrated autocorrelation time),
-    ``interval_too_narrow`` (batches shorter than 5 tau_int: the interval is likely too narrow), ``in_window``
-    (the step lies inside the case's steady window)."""
+def case_labels(records) -> list[str]:
+    """"case (tier N[, not finished])" for each record, with its folder where two records are of one case."""
+    names = [rec.case for rec in records]
+    return [f"{rec.case} (tier {rec.tier}{'' if rec.finished else ', not finished'})"
+            + (f" [{_folder_tag(rec.path)}]" if names.count(rec.case) > 1 else "") for rec in records]
+
+
+def steadiness_table(cases, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
+    """One row per case and step: ``case``, ``label`` (:func:`case_labels`), ``tier``, ``finished``, ``step``
+    (0 is the first step of the window), ``travel_from_m`` / ``travel_to_m`` (stem travel into the channel),
+    ``mean_N``, ``ci95_N``, ``samples``, ``batch_tau_int`` (batch length over the integrated autocorrelation
+    time), ``interval_too_narrow`` (:attr:`~iceresist.post.SteadyMean.interval_too_narrow`), ``in_window`` (the
+    step lies inside the case's steady window). ``cases``: paths or :class:`CaseRecord`."""
     from iceresist.post import window_parts
 
+    records = [c if isinstance(c, CaseRecord) else read_case_record(c) for c in cases]
     rows = []
-    for path in paths:
-        rec = read_case_record(path)
+    for rec, label in zip(records, case_labels(records)):
         edges = step_edges_m(rec, step_m)
         if edges.size == 0:
             log.warning("%s: the stem has not yet travelled one step (%.2f m) past the window start", rec.case,
@@ -112,11 +113,11 @@ def steadiness_table(paths, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
         with _quiet(statistics_log):  # short batches are a column here, not a warning per step
             parts = window_parts(rec.t_s, rec.Fx_N, rec.x_bow_m, edges_m=edges, motion_direction=+1)
         for k, (lo, hi, sm) in enumerate(zip(edges[:-1], edges[1:], parts)):
-            rows.append({"case": rec.case, "tier": rec.tier, "finished": rec.finished, "step": k,
+            rows.append({"case": rec.case, "label": label, "tier": rec.tier, "finished": rec.finished, "step": k,
                          "travel_from_m": lo - rec.channel_start_x_m, "travel_to_m": hi - rec.channel_start_x_m,
                          "mean_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "samples": sm.n_samples,
                          "batch_tau_int": sm.batch_length / sm.tau_int_samples,
-                         "interval_too_narrow": bool(sm.batch_length < MIN_BATCH_LENGTH_TAU * sm.tau_int_samples),
+                         "interval_too_narrow": sm.interval_too_narrow,
                          "in_window": bool(hi <= rec.window_m[1] + 1e-9), "file": str(rec.path)})
     return pd.DataFrame(rows)
 
@@ -128,15 +129,11 @@ def format_steadiness(table: pd.DataFrame) -> str:
     cols = sorted({(round(a, 2), round(b, 2)) for a, b in zip(table.travel_from_m, table.travel_to_m)})
     head = ["case (tier)"] + [f"{a:.2f}-{b:.2f} m" for a, b in cols]
     lines = []
-    names = table.drop_duplicates("file").case
-    for file, g in table.groupby("file", sort=False):
+    for label, g in table.groupby("label", sort=False):
         cells = {(round(r.travel_from_m, 2), round(r.travel_to_m, 2)):
                  f"{r.mean_N:.1f} +- {r.ci95_N:.1f}{'~' if r.interval_too_narrow else ''}{'' if r.in_window else '*'}"
                  for r in g.itertuples()}
-        case, tier = g.case.iloc[0], g.tier.iloc[0]
-        state = "" if g.finished.iloc[0] else ", not finished"
-        where = f" {file}" if (names == case).sum() > 1 else ""  # two files of one case: say which is which
-        lines.append([f"{case} (tier {tier}{state}){where}"] + [cells.get(c, "") for c in cols])
+        lines.append([label] + [cells.get(c, "") for c in cols])
     widths = [max(len(row[i]) for row in [head] + lines) for i in range(len(head))]
     fmt = lambda row: "  ".join(c.ljust(w) for c, w in zip(row, widths))  # noqa: E731
     out = ["mean ice resistance [N] (+- 95 % interval) over steps of stem travel into the channel; "
@@ -145,7 +142,7 @@ def format_steadiness(table: pd.DataFrame) -> str:
     return "\n".join(out)
 
 
-def plot_steadiness(table: pd.DataFrame, paths, png) -> Path:
+def plot_steadiness(table: pd.DataFrame, records, png) -> Path:
     """Force against stem travel into the channel for each case (thin line) with the step means and their
     intervals (bars): where the bars stop rising, the force has settled."""
     import matplotlib
@@ -154,13 +151,8 @@ def plot_steadiness(table: pd.DataFrame, paths, png) -> Path:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    records = [read_case_record(path) for path in paths]
-    names = [rec.case for rec in records]
-    for i, rec in enumerate(records):
+    for i, (rec, label) in enumerate(zip(records, case_labels(records))):
         colour = f"C{i}"
-        label = f"{rec.case} (tier {rec.tier}{'' if rec.finished else ', not finished'})"
-        if names.count(rec.case) > 1:  # two files of one case: name the folder
-            label += f" [{_folder_tag(rec.path)}]"
         g = table[table.file == str(rec.path)] if len(table) else table
         ax.plot(rec.travel_m, -rec.Fx_N, color=colour, lw=0.4, alpha=0.35, label=None if len(g) else label)
         if len(g):
@@ -212,14 +204,15 @@ def add_steadiness_arguments(p) -> None:
 
 
 def _cmd_steadiness(args) -> int:
-    table = steadiness_table(args.cases, args.step_m)
+    records = [read_case_record(path) for path in args.cases]
+    table = steadiness_table(records, args.step_m)
     print(table.to_json(orient="records") if args.json else format_steadiness(table))
     if args.csv:
         table.to_csv(args.csv, index=False)
         if not args.json:
             print(f"table: {args.csv}")
     if args.plot:
-        png = plot_steadiness(table, args.cases, args.plot)
+        png = plot_steadiness(table, records, args.plot)
         if not args.json:
             print(f"figure: {png}")
     return 0

@@ -85,7 +85,7 @@ def test_a_running_case_is_read_as_far_as_it_goes(tmp_path):
     has not travelled one step past the window start gives no row."""
     path = write_case(tmp_path / "running.h5", travel_end_m=1.2, finished=False)
     rec = read_case_record(path)
-    assert not rec.finished and rec.window_start_travel_m == pytest.approx(0.606)
+    assert not rec.finished and rec.window_m[0] - rec.channel_start_x_m == pytest.approx(0.606)
     table = steadiness_table([path], step_m=0.39)
     assert list(table.step) == [0] and not table.finished.any()
     assert "not finished" in format_steadiness(table)

@@ -68,15 +68,16 @@ class RunFile:
 
     ``mode``: ``"w"`` create or overwrite, ``"x"`` create and fail if it exists, ``"a"`` continue (pickup),
     ``"r"`` read. ``shape_cells``, ``dx_m`` and ``origin_m`` describe the grid (needed to write fields).
+    ``locking=False`` reads a file another process is still writing (as far as it goes).
     """
 
     def __init__(self, path, mode: str = "r", *, shape_cells=None, dx_m: float = 1.0, origin_m=(0.0, 0.0, 0.0),
-                 write_xdmf: bool = True):
+                 write_xdmf: bool = True, locking: bool = True):
         self.path = Path(path)
         self.mode = mode
         self.xdmf_path = self.path.with_suffix(".xdmf")
         self._write_xdmf = write_xdmf and mode != "r"
-        self.h5 = h5py.File(self.path, mode)
+        self.h5 = h5py.File(self.path, mode) if locking else h5py.File(self.path, mode, locking=False)
         if mode in ("w", "x", "w-"):
             self.h5.create_group("meta")
             self.h5.create_group("timeseries")

@@ -208,6 +208,11 @@ class SteadyMean:
     t_end_s: float
     window: str
 
+    @property
+    def interval_too_narrow(self) -> bool:
+        """Batches shorter than MIN_BATCH_LENGTH_TAU tau_int: the interval is likely too narrow."""
+        return self.batch_length < MIN_BATCH_LENGTH_TAU * self.tau_int_samples
+
     def to_dict(self) -> dict:
         """Plain dict of the fields (for JSON and DataFrames)."""
         return dataclasses.asdict(self)

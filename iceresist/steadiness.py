@@ -11,7 +11,6 @@ channels start at different x (tier 1 and tier 2) line up.
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 from contextlib import contextmanager
@@ -62,7 +61,7 @@ def read_case_record(path) -> CaseRecord:
     try:
         with RunFile(path, "r", locking=False) as rf:
             meta = rf.meta
-            model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
+            model = rf.meta_object("model")
             ts = {k: rf.h5["timeseries"][k][...] for k in ("time_s", "Fx_N", "x_bow_m")}
             window = tuple(float(v) for v in model["steady_window_m"])
             channel_x0 = float(model["channel_start_x_m"])

@@ -299,9 +299,9 @@ def analyse_case(path) -> dict:
 
     with RunFile(path, "r") as rf:
         meta = rf.meta
+        model = rf.meta_object("model")
         ts = rf.timeseries()
         bodies = {k: rf.h5["bodies"][k][...] for k in rf.h5["bodies"].keys()}
-    model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
     t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]  # row 0 is the state before the first step
     window = tuple(model["steady_window_m"])
     try:

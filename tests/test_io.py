@@ -115,6 +115,19 @@ def test_meta_attributes(tmp_path):
     assert m["git_revision"] == git_revision()
 
 
+def test_meta_object_decodes_what_write_meta_encoded(tmp_path):
+    model = {"tier": 2, "steady_window_m": [4.01, 4.79], "hull": "b063", "mixed": [1, "a"]}
+    with RunFile(tmp_path / "r.h5", "w") as rf:
+        rf.write_meta(model=model, cells=96, window=[0.5, 1.5])
+    with RunFile(tmp_path / "r.h5") as rf:
+        assert isinstance(rf.meta["model"], str)  # stored as JSON text
+        assert rf.meta_object("model") == model
+        assert rf.meta_object("cells") == 96
+        np.testing.assert_array_equal(rf.meta_object("window"), [0.5, 1.5])  # numeric lists stay arrays
+        with pytest.raises(KeyError):
+            rf.meta_object("absent")
+
+
 def test_mode_x_refuses_to_overwrite(tmp_path):
     p = tmp_path / "r.h5"
     with RunFile(p, "w") as rf:

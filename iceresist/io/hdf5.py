@@ -139,6 +139,12 @@ class RunFile:
             out[k] = v.decode() if isinstance(v, bytes) else v
         return out
 
+    def meta_object(self, key: str):
+        """A meta attribute that :meth:`write_meta` stored as JSON text (a dict, a mixed list), decoded; a
+        plain attribute (a number, an array) as it is. KeyError when the file has no such attribute."""
+        v = self.meta[key]
+        return json.loads(v) if isinstance(v, str) else v
+
     # -- fields ---------------------------------------------------------------------------------------
     def write_fields(self, iteration: int, time_s: float, fields: dict, units: dict | None = None):
         """One snapshot: ``fields`` maps names to ``[x, y, z]`` or ``[x, y, z, 3]`` arrays of the grid shape."""

@@ -111,8 +111,7 @@ def warm_up(backend: str, precision: str) -> float:
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
     """One tier-2 run through :func:`iceresist.sweep.run_case` into a scratch folder (the LBM in ``precision``,
     the DEM in float64), after :func:`warm_up` (its seconds in ``extra["compile_s"]``)."""
-    import h5py
-
+    from iceresist.io.hdf5 import RunFile
     from iceresist.sweep import analyse_case, run_case
 
     compile_s = warm_up(backend, precision)
@@ -123,12 +122,9 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> Ca
         path = run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
         total = time.perf_counter() - t0
         row = analyse_case(path)
-        with h5py.File(path, "r") as h5:
-            fluid_x = h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step
-            model = h5["meta"].attrs["model"]
-    import json
-
-    model = json.loads(model) if isinstance(model, (str, bytes)) else model
+        with RunFile(path, "r") as rf:
+            fluid_x = rf.h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step
+            model = rf.meta_object("model")
     lbm_steps = int(row["steps"]) * int(model["lbm_steps_per_record"])
     return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]),
                       cells=int(row["cells"]), steps=lbm_steps, wall_s=float(row["wall_time_s"]),

@@ -60,8 +60,10 @@ def result_paths(scene: Scene, output_dir=None) -> tuple[Path, Path]:
     return out / f"{scene.scene.name}.h5", out / f"{scene.scene.name}.checkpoint.h5"
 
 
-def build_simulation(scene: Scene, model, runfile: RunFile, checkpoint_path, *, progress: bool = True) -> Simulation:
-    """The Simulation of a scene: stop criteria from ``[run]``, writers from ``[output]``."""
+def build_simulation(scene: Scene, model, runfile: RunFile, checkpoint_path, *, progress: bool = True,
+                     wall_before_s: float = 0.0) -> Simulation:
+    """The Simulation of a scene: stop criteria from ``[run]``, writers from ``[output]``. ``wall_before_s``:
+    wall time of the earlier legs of a continued run (the checkpointer notes the running total in the file)."""
     r, o = scene.run, scene.output
     sim = Simulation(model, stop_iteration=r.steps, stop_time_s=r.end_time_s, wall_time_limit_s=r.wall_time_limit_s,
                      progress=progress)
@@ -79,7 +81,8 @@ def build_simulation(scene: Scene, model, runfile: RunFile, checkpoint_path, *, 
         chk_schedule = IterationInterval(o.checkpoint_every_steps)
     else:  # a killed long run keeps its work: by default every DEFAULT_CHECKPOINT_WALL_S of wall time
         chk_schedule = WallTimeInterval(o.checkpoint_wall_s or DEFAULT_CHECKPOINT_WALL_S)
-    sim.output_writers["checkpointer"] = Checkpointer(checkpoint_path, chk_schedule)
+    sim.output_writers["checkpointer"] = Checkpointer(checkpoint_path, chk_schedule, runfile=runfile,
+                                                      wall_before_s=wall_before_s)
     from iceresist import watchdog
 
     watchdog.install(sim, interval=r.watchdog_every_steps, runfile=runfile,
@@ -126,15 +129,23 @@ def cmd_run(args) -> int:
                           scene_name=scene.scene.name, scene_source=scene.source_name,
                           description=scene.scene.description, model=desc, units=u.describe(),
                           shape_cells=None if model.shape_cells is None else list(model.shape_cells))
-        sim = build_simulation(scene, model, rf, chk_path, progress=not args.no_progress)
+        earlier = rf.meta if pickup else {}
+        wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0))
+        if pickup and "checkpoint_wall_s" not in earlier:
+            log.warning("%s does not record the wall time up to its checkpoint (an older iceresist wrote it): "
+                        "its wall_time_s will count from the pickup", h5_path)
+        legs = int(earlier.get("legs", 1)) + 1 if pickup else 1
+        sim = build_simulation(scene, model, rf, chk_path, progress=not args.no_progress,
+                               wall_before_s=wall_before_s)
         log.info("running %s: %d cells, dt = %.4g s, tau = %.6g, %s on %s -> %s", scene.scene.name, model.cells,
                  u.dt_s, u.tau, model.precision, model.target.name, h5_path)
         try:
             sim.run(pickup=chk_path if pickup is True else pickup)
         finally:
-            rf.write_meta(iteration=model.iteration, time_s=model.time_s,
-                          steps=int(rf.meta.get("steps", 0)) + sim.steps_done if pickup else sim.steps_done,
-                          wall_time_s=sim.wall_time_s, step_time_s=sim.step_time_s, mlups=sim.mlups,
+            # totals over the legs of the run: steps from iteration 0, the wall time of the work kept (a leg
+            # killed after its last checkpoint loses the steps and the time after it); mlups: this leg's rate
+            rf.write_meta(iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration), legs=legs,
+                          wall_time_s=wall_before_s + sim.wall_time_s, step_time_s=sim.step_time_s, mlups=sim.mlups,
                           stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged,
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     log.info("%s: %d steps in %.2f s (%.2f MLUPS) -> %s", sim.stop_reason, sim.steps_done, sim.wall_time_s,

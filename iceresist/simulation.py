@@ -204,10 +204,18 @@ class TimeSeriesWriter:
 
 
 class Checkpointer:
-    """The whole model state in one file ``path``, replaced atomically each time the schedule is due."""
+    """The whole model state in one file ``path``, replaced atomically each time the schedule is due.
 
-    def __init__(self, path, schedule, *, write_final: bool = True):
+    With a ``runfile`` it also notes there, at each checkpoint, the iteration reached (``checkpoint_iteration``)
+    and the wall time spent up to it (``checkpoint_wall_s``: ``wall_before_s`` of earlier legs plus the time
+    since ``t0``, a ``time.perf_counter()`` reading, default now), so a run continued from the checkpoint after a
+    kill can report the wall time of the work it kept."""
+
+    def __init__(self, path, schedule, *, write_final: bool = True, runfile=None, wall_before_s: float = 0.0,
+                 t0: float | None = None):
         self.path, self.schedule, self.write_final = Path(path), schedule, write_final
+        self.runfile, self.wall_before_s = runfile, float(wall_before_s)
+        self.t0 = time.perf_counter() if t0 is None else t0
         self.last_iteration = None
 
     def write(self, sim):
@@ -215,6 +223,9 @@ class Checkpointer:
         write_checkpoint(self.path, {"model": m.state(), "iteration": np.int64(m.iteration),
                                      "time_s": np.float64(m.time_s)})
         self.last_iteration = m.iteration
+        if self.runfile is not None:
+            self.runfile.write_meta(checkpoint_iteration=int(m.iteration),
+                                    checkpoint_wall_s=self.wall_before_s + time.perf_counter() - self.t0)
         log.debug("checkpoint at iteration %d -> %s", m.iteration, self.path)
 
     def finalize(self, sim):

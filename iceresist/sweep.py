@@ -95,21 +95,6 @@ def _legs_json(earlier: dict | None, leg: int, backend: str) -> str:
     return json.dumps(history)
 
 
-class CaseCheckpointer(Checkpointer):
-    """The checkpointer of a sweep case. Each time it writes, it notes in the partial case file the record it
-    reached and the wall time spent up to it (earlier legs included), so a continued case reports the wall
-    time of the work it kept."""
-
-    def __init__(self, path, schedule, runfile, wall_before_s: float, t0: float):
-        super().__init__(path, schedule, write_final=False)
-        self.runfile, self.wall_before_s, self.t0 = runfile, wall_before_s, t0
-
-    def write(self, sim):
-        super().write(sim)
-        self.runfile.write_meta(checkpoint_iteration=int(sim.model.iteration),
-                                checkpoint_wall_s=self.wall_before_s + time.perf_counter() - self.t0)
-
-
 def is_finished(path: Path) -> bool:
     """A case file under its final name that records a completed run."""
     if not path.is_file():
@@ -175,8 +160,9 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         rf.write_meta(legs=legs, legs_json=_legs_json(earlier, legs, desc["backend"]))
         sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
-        sim.output_writers["checkpointer"] = CaseCheckpointer(
-            chk, checkpoint_schedule or WallTimeInterval(CHECKPOINT_WALL_S), rf, wall_before_s, t_build)
+        sim.output_writers["checkpointer"] = Checkpointer(
+            chk, checkpoint_schedule or WallTimeInterval(CHECKPOINT_WALL_S), write_final=False, runfile=rf,
+            wall_before_s=wall_before_s, t0=t_build)
         from iceresist import watchdog
 
         dog = watchdog.install(sim, runfile=rf, json_path=partial.with_suffix(".watchdog.json"))

@@ -179,6 +179,39 @@ def test_pickup_continues_a_result(tmp_path, main, fake_model):
         assert a.meta["steps"] == 1200 and a.meta["iteration"] == 1200
 
 
+def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_path, main, monkeypatch):
+    """Interrupted at iteration 650 with a checkpoint at 500, then continued to 1200: the result counts 1200
+    steps (not 650 + 700), two legs, and the wall time up to the checkpoint plus the second leg's."""
+    import iceresist.model
+
+    class Interrupted(FakeFluid):
+        at = 650
+
+        def step(self, n=1):
+            if Interrupted.at is not None and self.iteration >= Interrupted.at:
+                Interrupted.at = None
+                raise KeyboardInterrupt
+            super().step(n)
+
+    monkeypatch.setattr(iceresist.model, "build_model", lambda scene, **kw: Interrupted(scene, **kw))
+    scene = tmp_path / "poiseuille.toml"
+    scene.write_text(POISEUILLE + "checkpoint_every_steps = 500\n")
+    rc, err = main(scene, "--output", tmp_path, "--steps", "1200")
+    assert rc == 130 and "interrupted" in err
+    with RunFile(tmp_path / "poiseuille.h5") as rf:
+        m = rf.meta
+        assert (m["checkpoint_iteration"], m["steps"], m["stop_reason"]) == (500, 650, "interrupted")
+        kept_s, first_leg_s = m["checkpoint_wall_s"], m["wall_time_s"]
+    assert 0 < kept_s <= first_leg_s
+    assert main(scene, "--output", tmp_path, "--steps", "1200", "--pickup")[0] == 0
+    with RunFile(tmp_path / "poiseuille.h5") as rf:
+        m = rf.meta
+        assert (m["steps"], m["iteration"], m["legs"]) == (1200, 1200, 2)
+        assert m["checkpoint_iteration"] == 1200  # the final checkpoint of the second leg
+        assert kept_s < m["wall_time_s"] < kept_s + m["checkpoint_wall_s"]
+        np.testing.assert_array_equal(rf.timeseries()["iteration"], np.arange(0, 1201, 10))  # 510-650 once
+
+
 def test_units_of_the_preset_match_the_scene_doc():
     u = Units.from_physical(0.001, 1e-6, 0.01)
     assert (u.dt_s, u.tau) == pytest.approx((0.01, 0.53))

@@ -39,7 +39,7 @@ def write_case(path, travel_end_m, finished=True, window_m=(4.006, 4.786)):
             rf.append_timeseries({"iteration": i, "time_s": DT_S * i, "x_bow_m": x,
                                   "Fx_N": -float(settling_force_N(max(x - CHANNEL_X0_M, 0.0)))})
         if finished:
-            rf.write_meta(final_x_bow_m=x)
+            rf.write_meta(finished=True, final_x_bow_m=x)
     return path
 
 
@@ -91,6 +91,24 @@ def test_a_running_case_is_read_as_far_as_it_goes(tmp_path):
     assert "not finished" in format_steadiness(table)
     short = write_case(tmp_path / "short.h5", travel_end_m=0.9, finished=False)
     assert steadiness_table([short], step_m=0.39).empty
+
+
+@pytest.mark.parametrize("stop_reason, diverged, rows_after, finished", [
+    ("stop time 5.5 s reached", False, 0, True),
+    ("interrupted", False, 0, False),                 # killed by Ctrl-C
+    ("NaN or Inf in the solution", True, 0, False),
+    ("stop time 5.5 s reached", False, 3, False),     # continued with --pickup past its earlier end, running
+])
+def test_a_run_result_is_finished_when_its_stop_reason_is_its_end(tmp_path, stop_reason, diverged, rows_after,
+                                                                   finished):
+    """``iceresist run`` writes no ``finished``: its stop reason at the iteration of its last record says it."""
+    path = write_case(tmp_path / "run.h5", travel_end_m=1.2, finished=False)
+    with RunFile(path, "a") as rf:
+        last = int(rf.timeseries()["iteration"][-1])
+        rf.write_meta(stop_reason=stop_reason, diverged=diverged, iteration=last)
+        for i in range(last + 1, last + 1 + rows_after):
+            rf.append_timeseries({"iteration": i, "time_s": DT_S * i, "x_bow_m": 4.6, "Fx_N": -1.0})
+    assert read_case_record(path).finished is finished
 
 
 def test_cli_prints_plots_and_leaves_the_case_file_alone(tmp_path, capsys):

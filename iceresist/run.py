@@ -130,10 +130,12 @@ def cmd_run(args) -> int:
                           description=scene.scene.description, model=desc, units=u.describe(),
                           shape_cells=None if model.shape_cells is None else list(model.shape_cells))
         earlier = rf.meta if pickup else {}
-        wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0))
-        if pickup and "checkpoint_wall_s" not in earlier:
-            log.warning("%s does not record the wall time up to its checkpoint (an older iceresist wrote it): "
-                        "its wall_time_s will count from the pickup", h5_path)
+        # the file notes the wall time up to its own checkpoint, not up to one named with --pickup CHECKPOINT
+        wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0)) if pickup is True else 0.0
+        if pickup and (pickup is not True or "checkpoint_wall_s" not in earlier):
+            log.warning("%s: the wall time up to the checkpoint is not known (%s): its wall_time_s will count from "
+                        "the pickup", h5_path, "another checkpoint" if pickup is not True else "an older iceresist "
+                        "wrote the file")
         legs = int(earlier.get("legs", 1)) + 1 if pickup else 1
         sim = build_simulation(scene, model, rf, chk_path, progress=not args.no_progress,
                                wall_before_s=wall_before_s)

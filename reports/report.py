@@ -188,6 +188,23 @@ RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "c
                "start_wave_fraction": "window in start wave", "ci_method": "CI method"}
 
 
+def preset_note(preset: str | None, tier: int) -> str:
+    """What the quick preset trades away, from :mod:`iceresist.ship.presets` (its tier-2 bullet too for a tier-2
+    sweep, with the grid caveat); empty for the paper preset."""
+    from iceresist.ship.presets import __doc__ as doc
+
+    if preset != "quick":
+        return ""
+
+    def plain(text: str) -> str:
+        return " ".join(text.split()).replace("``", "").replace(":mod:", "")
+
+    note = "Quick preset: " + plain(doc.split("* ``quick``:")[1].split("Tier 2")[0])
+    if tier == 2:
+        note += " Tier 2: " + plain(doc.split("* ``quick`` tier 2:")[1])
+    return note
+
+
 def write_report(sweep_dir) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.pdf`` into ``sweep_dir``; returns their paths."""
     from matplotlib.backends.backend_pdf import PdfPages
@@ -213,12 +230,7 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     images = {k: _png64(f) for k, f in figs.items()}
     r_sim, r_fs = bow_ratios(table)
     trends = trends_table(table)
-    from iceresist.ship.presets import __doc__ as presets_doc
-
-    note = ""
-    if info.get("preset") == "quick":
-        note = ("Quick preset: " + presets_doc.split("* ``quick``:")[1].split("Tier 2")[0].strip()
-                .replace("\n ", "").replace("  ", " "))
+    note = preset_note(info.get("preset"), int(info.get("tier", 1)))
     env = template_env()
     html = env.get_template("report.html.j2").render(
         title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),

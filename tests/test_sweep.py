@@ -180,6 +180,16 @@ def test_report_is_self_contained(tiny_sweep):
     assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 10_000
 
 
+def test_preset_note_names_what_the_quick_tiers_trade_away():
+    from reports.report import preset_note
+
+    tier1, tier2 = preset_note("quick", 1), preset_note("quick", 2)
+    assert tier1.startswith("Quick preset: a 1.39 m long channel") and "grid" not in tier1
+    assert tier2.startswith(tier1) and "3 cells per 41 mm cube" in tier2 and "Not grid-converged" in tier2
+    assert "``" not in tier2 and ":mod:" not in tier2 and "  " not in tier2
+    assert preset_note("paper", 2) == ""
+
+
 def test_report_refuses_missing_folder(tmp_path):
     from reports.report import write_report
 

@@ -38,7 +38,9 @@ Tier 2 (coupled LBM-DEM, :mod:`iceresist.tier2`) changes the tank where the flow
   buoyancy distribution are coarse), the flow under the keel (a shallower tank, more blockage and squat),
   the true viscosity, and compressibility (12 % density change). 1 550 (2 knots) to 3 100 (1 knot) LBM steps
   per case: hours on a 2-core x86 VM (docs/PERFORMANCE.md "Tier 2 ship"); ``TINY_TIER2_OVERRIDES`` of
-  :mod:`iceresist.sweep` is the CI-sized version.
+  :mod:`iceresist.sweep` is the CI-sized version. Not grid-converged: on 2.1 cells per cube the 68 %, 1-knot ice
+  resistance is 0.3 x that on these 3.1 (docs/SHIP.md, "The cube resolution"), so the quick tier-2 forces are
+  under-resolved and may rise on a finer grid.
 """
 
 from __future__ import annotations

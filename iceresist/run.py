@@ -139,6 +139,7 @@ def cmd_run(args) -> int:
         legs = int(earlier.get("legs", 1)) + 1 if pickup else 1
         sim = build_simulation(scene, model, rf, chk_path, progress=not args.no_progress,
                                wall_before_s=wall_before_s)
+        rf.write_meta(finished=False)  # a result being continued is unfinished until this leg completes
         log.info("running %s: %d cells, dt = %.4g s, tau = %.6g, %s on %s -> %s", scene.scene.name, model.cells,
                  u.dt_s, u.tau, model.precision, model.target.name, h5_path)
         try:
@@ -148,7 +149,7 @@ def cmd_run(args) -> int:
             # killed after its last checkpoint loses the steps and the time after it); mlups: this leg's rate
             rf.write_meta(iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration), legs=legs,
                           wall_time_s=wall_before_s + sim.wall_time_s, step_time_s=sim.step_time_s, mlups=sim.mlups,
-                          stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged,
+                          stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged, finished=sim.completed,
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     log.info("%s: %d steps in %.2f s (%.2f MLUPS) -> %s", sim.stop_reason, sim.steps_done, sim.wall_time_s,
              sim.mlups, h5_path)

@@ -251,6 +251,8 @@ class Simulation:
                                                                        IterationInterval(nan_check_interval))}
         self.output_writers: dict[str, object] = {}
         self.stop_reason: str | None = None
+        # stopped at its stop iteration or time, not by an interrupt, a divergence, the watchdog or the wall limit
+        self.completed = False
         self.diverged = False
         self.steps_done = 0
         self.wall_time_s = 0.0
@@ -289,11 +291,17 @@ class Simulation:
     def _check_stop(self):
         m = self.model
         if self.stop_iteration is not None and m.iteration >= self.stop_iteration:
-            self.stop(f"stop iteration {self.stop_iteration} reached")
+            self._reach_end(f"stop iteration {self.stop_iteration} reached")
         if self.stop_time_s is not None and m.time_s >= self.stop_time_s - 1e-6 * (getattr(m, "dt_s", 0.0) or 0.0):
-            self.stop(f"stop time {self.stop_time_s:g} s reached")
+            self._reach_end(f"stop time {self.stop_time_s:g} s reached")
         if self.wall_time_limit_s is not None and time.perf_counter() - self._start_wall >= self.wall_time_limit_s:
             self.stop(f"wall time limit {self.wall_time_limit_s:g} s reached")
+
+    def _reach_end(self, reason: str):
+        """Stop at the stop iteration or time; the run is ``completed`` unless something stopped it first."""
+        if self.stop_reason is None:
+            self.completed = True
+        self.stop(reason)
 
     def _actions(self):
         """(name, object) in call order: NaN checker, callbacks, writers, checkpointers last."""
@@ -393,7 +401,7 @@ class Simulation:
         if self.stop_iteration is None and self.stop_time_s is None and self.wall_time_limit_s is None:
             raise InputError("the simulation has no stop criterion: set stop_iteration, stop_time_s or "
                              "wall_time_limit_s")
-        self.stop_reason, self.diverged = None, False
+        self.stop_reason, self.diverged, self.completed = None, False, False
         self._start_wall = time.perf_counter()
         if pickup:
             self._pickup(pickup)

@@ -62,7 +62,7 @@ def read_case_record(path) -> CaseRecord:
         with RunFile(path, "r", locking=False) as rf:
             meta = rf.meta
             model = rf.meta_object("model")
-            ts = {k: rf.h5["timeseries"][k][...] for k in ("iteration", "time_s", "Fx_N", "x_bow_m")}
+            ts = {k: rf.h5["timeseries"][k][...] for k in ("time_s", "Fx_N", "x_bow_m")}
             window = tuple(float(v) for v in model["steady_window_m"])
             channel_x0 = float(model["channel_start_x_m"])
     except (OSError, KeyError, TypeError, ValueError) as exc:
@@ -72,17 +72,7 @@ def read_case_record(path) -> CaseRecord:
     # row 0 is the state before the first step (as in iceresist.sweep.analyse_case)
     return CaseRecord(path=path, case=name, tier=int(model.get("tier", 0)), t_s=ts["time_s"][1:],
                       Fx_N=ts["Fx_N"][1:], x_bow_m=ts["x_bow_m"][1:], channel_start_x_m=channel_x0,
-                      window_m=window, finished=_finished(meta, int(ts["iteration"][-1])))
-
-
-def _finished(meta: dict, last_iteration: int) -> bool:
-    """Has the case reached its end? A sweep case says so (``finished``); an ``iceresist run`` result has a stop
-    reason other than an interrupt or a divergence, written at the iteration of its last record (a result being
-    continued with ``--pickup`` still holds the stop reason of its earlier leg)."""
-    if "finished" in meta:
-        return bool(meta["finished"])
-    return (meta.get("stop_reason", "interrupted") != "interrupted" and not bool(meta.get("diverged", False))
-            and int(meta.get("iteration", -1)) == last_iteration)
+                      window_m=window, finished=bool(meta.get("finished", False)))
 
 
 def step_edges_m(record: CaseRecord, step_m: float = DEFAULT_STEP_M) -> np.ndarray:

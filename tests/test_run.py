@@ -135,7 +135,7 @@ def test_run_writes_result_meta_fields_and_xdmf(tmp_path, main, fake_model):
         m = rf.meta
         assert m["scene_name"] == "poiseuille" and m["scene_toml"] == POISEUILLE
         assert m["steps"] == 1200 and m["iteration"] == 1200 and m["cells"] == 8 * 8 * 16
-        assert m["stop_reason"] == "stop iteration 1200 reached" and not m["diverged"]
+        assert m["stop_reason"] == "stop iteration 1200 reached" and not m["diverged"] and m["finished"]
         assert m["wall_time_s"] > 0 and m["mlups"] > 0 and m["precision"] == "float32"
         assert '"dt_s": 0.01' in m["units"]
         # fields every 5 s of simulated time = every 500 steps of 0.01 s, and the end
@@ -181,7 +181,9 @@ def test_pickup_continues_a_result(tmp_path, main, fake_model):
 
 def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_path, main, monkeypatch):
     """Interrupted at iteration 650 with a checkpoint at 500, then continued to 1200: the result counts 1200
-    steps (not 650 + 700), two legs, and the wall time up to the checkpoint plus the second leg's."""
+    steps (not 650 + 700), two legs, and the wall time up to the checkpoint plus the second leg's. It is
+    finished only after a leg that reached its stop criterion: not after the interrupt, and not again once a
+    third leg towards 1500 is interrupted."""
     import iceresist.model
 
     class Interrupted(FakeFluid):
@@ -201,15 +203,20 @@ def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_p
     with RunFile(tmp_path / "poiseuille.h5") as rf:
         m = rf.meta
         assert (m["checkpoint_iteration"], m["steps"], m["stop_reason"]) == (500, 650, "interrupted")
+        assert not m["finished"]
         kept_s, first_leg_s = m["checkpoint_wall_s"], m["wall_time_s"]
     assert 0 < kept_s <= first_leg_s
     assert main(scene, "--output", tmp_path, "--steps", "1200", "--pickup")[0] == 0
     with RunFile(tmp_path / "poiseuille.h5") as rf:
         m = rf.meta
-        assert (m["steps"], m["iteration"], m["legs"]) == (1200, 1200, 2)
+        assert (m["steps"], m["iteration"], m["legs"]) == (1200, 1200, 2) and m["finished"]
         assert m["checkpoint_iteration"] == 1200  # the final checkpoint of the second leg
         assert kept_s < m["wall_time_s"] < kept_s + m["checkpoint_wall_s"]
         np.testing.assert_array_equal(rf.timeseries()["iteration"], np.arange(0, 1201, 10))  # 510-650 once
+    Interrupted.at = 1300  # continued past its earlier end and stopped short of the new one
+    assert main(scene, "--output", tmp_path, "--steps", "1500", "--pickup")[0] == 130
+    with RunFile(tmp_path / "poiseuille.h5") as rf:
+        assert (rf.meta["stop_reason"], rf.meta["legs"], bool(rf.meta["finished"])) == ("interrupted", 3, False)
 
 
 def test_units_of_the_preset_match_the_scene_doc():

@@ -219,4 +219,5 @@ def test_real_fluid_beyond_the_limits_is_stopped_and_readable(tmp_path, capsys):
         assert its and its[-1] <= js["iteration"] - 20 + 1e-9
         assert np.isfinite(rf.read_field(its[-1], "rho")).all()
         assert rf.meta["diverged"] and rf.meta["stop_reason"].startswith("watchdog")
+        assert not rf.meta["finished"]
         assert rf.h5["watchdog"].attrs["quantity"] == js["quantity"]

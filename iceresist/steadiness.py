@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import logging
 import math
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,7 +20,6 @@ import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
-from iceresist.post.statistics import log as statistics_log
 
 log = logging.getLogger(__name__)
 
@@ -109,8 +107,7 @@ def steadiness_table(cases, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
             log.warning("%s: the stem has not yet travelled one step (%.2f m) past the window start", rec.case,
                         step_m)
             continue
-        with _quiet(statistics_log):  # short batches are a column here, not a warning per step
-            parts = window_parts(rec.t_s, rec.Fx_N, rec.x_bow_m, edges_m=edges, motion_direction=+1)
+        parts = window_parts(rec.t_s, rec.Fx_N, rec.x_bow_m, edges_m=edges, motion_direction=+1)
         for k, (lo, hi, sm) in enumerate(zip(edges[:-1], edges[1:], parts)):
             rows.append({"case": rec.case, "label": label, "tier": rec.tier, "finished": rec.finished, "step": k,
                          "travel_from_m": lo - rec.channel_start_x_m, "travel_to_m": hi - rec.channel_start_x_m,
@@ -173,17 +170,6 @@ def plot_steadiness(table: pd.DataFrame, records, png) -> Path:
     fig.savefig(png, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return png
-
-
-@contextmanager
-def _quiet(logger: logging.Logger):
-    """Silence ``logger``'s warnings for the block."""
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    try:
-        yield
-    finally:
-        logger.setLevel(level)
 
 
 def _folder_tag(path: Path) -> str:

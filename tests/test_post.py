@@ -318,3 +318,25 @@ def test_window_halves_of_a_ramp_and_of_noise():
     assert sum(steady) >= 18
     with pytest.raises(InputError, match="exactly one"):
         window_halves(t, ramp, x)
+
+
+def test_short_batches_warn_from_steady_mean_not_from_window_parts(caplog):
+    """AR(1) with tau_int = 66 samples, 400 samples in 10 batches of 40 (< 5 tau_int): steady_mean with a given
+    batch count warns and flags the interval as likely too narrow; window_parts, whose parts are short by
+    design, flags each part the same way without a warning per part."""
+    import logging
+
+    from iceresist.post import window_parts
+
+    t = np.arange(400) * 0.01
+    f = -(5.0 + ar1(np.random.default_rng(3), 400, a=0.97))
+    with caplog.at_level(logging.WARNING, logger="iceresist.post.statistics"):
+        sm = steady_mean(t, f, n_batches=10)
+    assert sm.interval_too_narrow and sm.batch_length == 40
+    assert sum("likely too narrow" in r.getMessage() for r in caplog.records) == 1
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="iceresist.post.statistics"):
+        parts = window_parts(t, f, edges_s=(0.0, 2.0, 3.99), n_batches=5)
+    assert [p.n_samples for p in parts] == [201, 200] and all(p.interval_too_narrow for p in parts)
+    assert [p.mean_N for p in parts] == pytest.approx([-np.mean(f[:201]), -np.mean(f[200:])], rel=0.05)
+    assert not [r for r in caplog.records if "too narrow" in r.getMessage()]

@@ -31,7 +31,7 @@ def resistance_from_contact_force(Fx_N, motion_direction: int = +1):
 
 def ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m=None, *, window_s=None, window_m=None,
                                    motion_direction: int = +1, n_batches: int | None = None,
-                                   confidence: float = 0.95) -> SteadyMean:
+                                   confidence: float = 0.95, warn_short_batches: bool = True) -> SteadyMean:
     """Mean ice resistance over the steady window with its batch-means uncertainty.
 
     Args:
@@ -43,13 +43,15 @@ def ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m=None, *, window_s=None, w
         motion_direction: +1 when the ship moves in +x (R = -Fx), -1 when it moves in -x (R = +Fx).
         n_batches: batch count; None chooses it from the autocorrelation time.
         confidence: confidence level of the interval.
+        warn_short_batches: see :func:`~iceresist.post.statistics.steady_mean`.
 
     Returns:
         :class:`SteadyMean` of the resistance R [N] (positive opposes the motion).
     """
     r_n = resistance_from_contact_force(Fx_N, motion_direction)
     return steady_mean(t_s, r_n, window_s=window_s, window_m=window_m, x_ship_m=x_ship_m,
-                       n_batches=n_batches, confidence=confidence, signal_name="Fx_N")
+                       n_batches=n_batches, confidence=confidence, signal_name="Fx_N",
+                       warn_short_batches=warn_short_batches)
 
 
 #: Batches per half of the window in :func:`window_halves` (a half of a short window holds too few samples for
@@ -90,7 +92,8 @@ def window_parts(t_s, Fx_N, x_ship_m=None, *, edges_s=None, edges_m=None, motion
                  n_batches: int = HALF_WINDOW_BATCHES, confidence: float = 0.95) -> list[SteadyMean]:
     """Mean ice resistance over consecutive parts of a record: :func:`ice_resistance_from_timeseries` between
     each pair of neighbouring ``edges_s`` (s) or ``edges_m`` (ship position, m), ``n_batches`` batch means
-    each. Does the force settle along the channel? Read the means part by part."""
+    each. Does the force settle along the channel? Read the means part by part. Parts are short by design, so
+    short batches are not warned of; each part's ``interval_too_narrow`` says so."""
     if (edges_s is None) == (edges_m is None):
         raise InputError("window_parts needs exactly one of edges_s (s) and edges_m (m)")
     edges = np.asarray(edges_s if edges_s is not None else edges_m, dtype=float)
@@ -98,7 +101,8 @@ def window_parts(t_s, Fx_N, x_ship_m=None, *, edges_s=None, edges_m=None, motion
         raise InputError(f"window edges {edges.tolist()} must be two or more increasing values")
     key = "window_s" if edges_s is not None else "window_m"
     return [ice_resistance_from_timeseries(t_s, Fx_N, x_ship_m, motion_direction=motion_direction,
-                                           n_batches=n_batches, confidence=confidence, **{key: (lo, hi)})
+                                           n_batches=n_batches, confidence=confidence,
+                                           warn_short_batches=False, **{key: (lo, hi)})
             for lo, hi in zip(edges[:-1], edges[1:])]
 
 

@@ -231,7 +231,7 @@ def _check_confidence(confidence: float) -> None:
 
 
 def steady_mean(t_s, F_N, *, window_s=None, window_m=None, x_ship_m=None, n_batches: int | None = None,
-                confidence: float = 0.95, signal_name: str = "F_N") -> SteadyMean:
+                confidence: float = 0.95, signal_name: str = "F_N", warn_short_batches: bool = True) -> SteadyMean:
     """Mean of the force record ``F_N(t_s)`` over a steady window with its batch-means confidence interval.
 
     Args:
@@ -243,6 +243,8 @@ def steady_mean(t_s, F_N, *, window_s=None, window_m=None, x_ship_m=None, n_batc
         n_batches: batch count; None chooses it from tau_int (:func:`choose_n_batches`).
         confidence: confidence level of the interval.
         signal_name: name of the signal in error messages.
+        warn_short_batches: log a warning when a given ``n_batches`` makes batches shorter than
+            MIN_BATCH_LENGTH_TAU tau_int (the result's ``interval_too_narrow`` says so either way).
 
     Raises:
         InputError: empty window, window outside the record, too few samples,
@@ -261,7 +263,7 @@ def steady_mean(t_s, F_N, *, window_s=None, window_m=None, x_ship_m=None, n_batc
     else:
         if int(n_batches) != n_batches or n_batches < 2:
             raise InputError(f"n_batches={n_batches!r} must be an integer >= 2")
-        if n // int(n_batches) < MIN_BATCH_LENGTH_TAU * tau:
+        if warn_short_batches and n // int(n_batches) < MIN_BATCH_LENGTH_TAU * tau:
             log.warning(
                 "%s: batches of %d samples are shorter than %.0f tau_int = %.3g samples; "
                 "the interval is likely too narrow", w.label, n // int(n_batches), MIN_BATCH_LENGTH_TAU,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from iceresist.errors import InputError
 from iceresist.io.hdf5 import RunFile
-from iceresist.io.meta import run_meta
+from iceresist.io.meta import leg_meta, run_meta
 from iceresist.scene.load import load_scene, preset_names
 from iceresist.scene.schema import Scene
 from iceresist.simulation import (Checkpointer, FieldWriter, IterationInterval, Simulation, TimeInterval,
@@ -122,8 +122,8 @@ def cmd_run(args) -> int:
     mode = "a" if pickup else "w"
     u = model.units
     with RunFile(h5_path, mode, shape_cells=model.shape_cells, dx_m=u.dx_m) as rf:
+        desc = model.describe()
         if not pickup:
-            desc = model.describe()
             rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"],
                                      precision=desc["precision"], cells=model.cells),
                           scene_name=scene.scene.name, scene_source=scene.source_name,
@@ -136,7 +136,6 @@ def cmd_run(args) -> int:
             log.warning("%s: the wall time up to the checkpoint is not known (%s): its wall_time_s will count from "
                         "the pickup", h5_path, "another checkpoint" if pickup is not True else "an older iceresist "
                         "wrote the file")
-        legs = int(earlier.get("legs", 1)) + 1 if pickup else 1
         sim = build_simulation(scene, model, rf, chk_path, progress=not args.no_progress,
                                wall_before_s=wall_before_s)
         rf.write_meta(finished=False)  # a result being continued is unfinished until this leg completes
@@ -147,7 +146,9 @@ def cmd_run(args) -> int:
         finally:
             # totals over the legs of the run: steps from iteration 0, the wall time of the work kept (a leg
             # killed after its last checkpoint loses the steps and the time after it); mlups: this leg's rate
-            rf.write_meta(iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration), legs=legs,
+            rf.write_meta(**leg_meta(earlier, sim.start_iteration if sim.start_iteration is not None else model.iteration,
+                                   desc["backend"]),
+                          iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
                           wall_time_s=wall_before_s + sim.wall_time_s, step_time_s=sim.step_time_s, mlups=sim.mlups,
                           stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged, finished=sim.completed,
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))

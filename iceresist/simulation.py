@@ -255,6 +255,7 @@ class Simulation:
         self.completed = False
         self.diverged = False
         self.steps_done = 0
+        self.start_iteration: int | None = None  # where the last run() started (after its pickup)
         self.wall_time_s = 0.0
         self.step_time_s = 0.0
         self._chunk_cap = 1
@@ -405,6 +406,7 @@ class Simulation:
         self._start_wall = time.perf_counter()
         if pickup:
             self._pickup(pickup)
+        self.start_iteration = self.model.iteration
         for _, act in self._actions():
             if act.schedule is not None:
                 act.schedule.initialize(self)

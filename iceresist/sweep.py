@@ -83,18 +83,6 @@ def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
     return meta if meta.get("scene_toml") == scene_text else None
 
 
-def _legs_json(earlier: dict | None, leg: int, backend: str) -> str:
-    """The case's legs as JSON, this one appended: where each started (record), when, on which code and
-    backend (a case continued from a checkpoint may span versions of the code and machines)."""
-    from iceresist.io.meta import device_name, git_revision
-
-    history = json.loads(earlier.get("legs_json", "[]")) if earlier is not None else []
-    history.append({"leg": int(leg), "from_iteration": int(earlier.get("checkpoint_iteration", 0)) if earlier else 0,
-                    "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                    "git_revision": git_revision(), "backend": backend, "device": device_name(backend)})
-    return json.dumps(history)
-
-
 def is_finished(path: Path) -> bool:
     """A case file under its final name that records a completed run."""
     if not path.is_file():
@@ -124,7 +112,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     of it from its checkpoint. ``checkpoint_schedule``: when to checkpoint (default every ``CHECKPOINT_WALL_S``
     of wall time)."""
     from iceresist.io.hdf5 import RunFile
-    from iceresist.io.meta import run_meta
+    from iceresist.io.meta import leg_meta, run_meta
     from iceresist.simulation import Callback, IterationInterval, Simulation, TimeSeriesWriter, WallTimeInterval
     from iceresist.tier1 import Tier1Model
     from iceresist.tier2 import Tier2Model
@@ -143,7 +131,6 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     model = (Tier1Model if tier == 1 else Tier2Model)(scene, backend=backend)
     build_s = time.perf_counter() - t_build
     wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0)) if earlier is not None else 0.0
-    legs = int(earlier.get("legs", 1)) + 1 if earlier is not None else 1
     desc = model.describe()
     with RunFile(partial, "a" if earlier is not None else "w", write_xdmf=False) as rf:
         if earlier is None:
@@ -157,7 +144,8 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
             g["hull_vertices_m"] = model.geometry.vertices()
         else:
             g = rf.h5["bodies"]
-        rf.write_meta(legs=legs, legs_json=_legs_json(earlier, legs, desc["backend"]))
+        legs = leg_meta(earlier, int(earlier.get("checkpoint_iteration", 0)) if earlier else 0, desc["backend"])
+        rf.write_meta(**legs)
         sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
         sim.output_writers["checkpointer"] = Checkpointer(
@@ -172,17 +160,20 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
                  model.layout.count, model.dem.n_spheres, scene.run.end_time_s)
         if earlier is not None:
             log.info("case %s: continuing from its checkpoint at record %d (leg %d)", case,
-                     int(earlier.get("checkpoint_iteration", -1)), legs)
+                     int(earlier.get("checkpoint_iteration", -1)), legs["legs"])
         sim.run(pickup=chk if earlier is not None else False)
         if dog.report is not None:
             raise InputError(f"case {case}: stopped by the watchdog: {dog.report.message} "
                              f"(diagnostic in {partial.with_suffix('.watchdog.json').name})")
         if sim.diverged:
             raise InputError(f"case {case}: the DEM run diverged ({sim.stop_reason}); lower contact.dem_safety")
+        if not sim.completed:  # a callback stopped it before its end: the partial file and checkpoint stay
+            raise InputError(f"case {case}: stopped before its end time ({sim.stop_reason}); run the sweep again "
+                             f"to continue it from its checkpoint")
         st = model.ice_state()
         g["final_positions_m"] = st["positions_m"]
         g["final_quaternions"] = st["quaternions"]
-        rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
+        rf.write_meta(finished=sim.completed, iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
                       dem_substeps=int(model.dem.substeps_taken),
                       wall_time_s=wall_before_s + sim.wall_time_s + build_s,
                       build_time_s=build_s, step_time_s=sim.step_time_s,

@@ -217,6 +217,9 @@ def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_p
     assert main(scene, "--output", tmp_path, "--steps", "1500", "--pickup")[0] == 130
     with RunFile(tmp_path / "poiseuille.h5") as rf:
         assert (rf.meta["stop_reason"], rf.meta["legs"], bool(rf.meta["finished"])) == ("interrupted", 3, False)
+        legs = rf.meta_object("legs_json")
+    assert [(g["leg"], g["from_iteration"], g["backend"]) for g in legs] == [(1, 0, "cpu"), (2, 500, "cpu"),
+                                                                             (3, 1200, "cpu")]
 
 
 def test_units_of_the_preset_match_the_scene_doc():

@@ -9,8 +9,8 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.simulation import IterationInterval
-from iceresist.sweep import (TINY_OVERRIDES, analyse_case, case_path, checkpoint_path, ice_free_width_m, run_case,
-                             run_sweep, sweep_table)
+from iceresist.sweep import (TINY_OVERRIDES, analyse_case, case_path, checkpoint_path, ice_free_width_m, is_finished,
+                             run_case, run_sweep, sweep_table)
 
 CASES = ["A-c68-v1.0", "B-c68-v1.0"]
 VARYING = ["wall_time_s"]
@@ -106,6 +106,29 @@ def test_interrupted_sweep_resumes_to_the_same_table(tiny_sweep, tmp_path):
         np.testing.assert_array_equal(h5["timeseries/iteration"][:], np.arange(len(h5["timeseries/iteration"])))
     assert not checkpoint_path(tmp_path, CASES[1]).exists()
     pd.testing.assert_frame_equal(resumed.drop(columns=VARYING), reference.drop(columns=VARYING), check_exact=True)
+
+
+def test_case_stopped_by_a_callback_is_not_finished(tmp_path):
+    """A callback that stops the run at record 30 (before the end time) leaves the case unfinished: a one-line
+    error, no file under the final name, the partial file says finished = False; the next run finishes it."""
+    case = CASES[0]
+
+    def halt(sim):
+        if sim.model.iteration >= 30 and not (tmp_path / "resumed").exists():
+            sim.stop("halted by a test callback")
+
+    with pytest.raises(InputError, match=f"case {case}: stopped before its end time .halted by a test callback."):
+        run_case(case, "quick", 1, tmp_path, backend="cpu", overrides=TINY_OVERRIDES,
+                 callbacks={"halt": (halt, 10)}, checkpoint_schedule=IterationInterval(20))
+    assert not is_finished(case_path(tmp_path, case)) and not case_path(tmp_path, case).exists()
+    with h5py.File(case_path(tmp_path, case).with_name(f"{case}.partial.h5"), "r") as h5:
+        assert not h5["meta"].attrs["finished"] and h5["timeseries/iteration"][-1] == 30
+    (tmp_path / "resumed").touch()
+    path = run_case(case, "quick", 1, tmp_path, backend="cpu", overrides=TINY_OVERRIDES,
+                    callbacks={"halt": (halt, 10)})
+    assert is_finished(path)
+    with h5py.File(path, "r") as h5:
+        assert h5["meta"].attrs["legs"] == 2
 
 
 def test_checkpoint_of_another_scene_is_not_continued(tmp_path):

@@ -78,6 +78,20 @@ def run_meta(*, scene_text: str = "", backend: str = "cpu", precision: str = "fl
     }
 
 
+def leg_meta(earlier: dict | None, from_iteration: int, backend: str) -> dict:
+    """``legs`` and ``legs_json`` of a run continued from a checkpoint (``earlier``: the result's meta before
+    this leg, None for a new run): this leg appended with the iteration it started from, when, and on which
+    code, backend and device (one result may span versions of the code and machines)."""
+    import json
+
+    history = json.loads(earlier.get("legs_json", "[]")) if earlier else []
+    leg = int(earlier.get("legs", 1)) + 1 if earlier else 1
+    history.append({"leg": leg, "from_iteration": int(from_iteration),
+                    "started_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                    "git_revision": git_revision(), "backend": backend, "device": device_name(backend)})
+    return {"legs": leg, "legs_json": json.dumps(history)}
+
+
 def mlups(cells: int, steps: int, seconds: float) -> float:
     """Million lattice-cell updates per second."""
     return cells * steps / seconds / 1e6 if seconds > 0 else 0.0

@@ -189,19 +189,15 @@ RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "c
 
 
 def preset_note(preset: str | None, tier: int) -> str:
-    """What the quick preset trades away, from :mod:`iceresist.ship.presets` (its tier-2 bullet too for a tier-2
-    sweep, with the grid caveat); empty for the paper preset."""
-    from iceresist.ship.presets import __doc__ as doc
+    """What the quick preset trades away (:data:`iceresist.ship.presets.FIDELITY_NOTES`; its tier-2 note too for
+    a tier-2 sweep, with the grid caveat); empty for the paper preset."""
+    from iceresist.ship.presets import FIDELITY_NOTES
 
     if preset != "quick":
         return ""
-
-    def plain(text: str) -> str:
-        return " ".join(text.split()).replace("``", "").replace(":mod:", "")
-
-    note = "Quick preset: " + plain(doc.split("* ``quick``:")[1].split("Tier 2")[0])
+    note = "Quick preset: " + FIDELITY_NOTES[("quick", 1)]
     if tier == 2:
-        note += " Tier 2: " + plain(doc.split("* ``quick`` tier 2:")[1])
+        note += " Tier 2: " + FIDELITY_NOTES[("quick", 2)]
     return note
 
 

@@ -211,6 +211,12 @@ def test_preset_note_names_what_the_quick_tiers_trade_away():
     assert tier2.startswith(tier1) and "3 cells per 41 mm cube" in tier2 and "Not grid-converged" in tier2
     assert "``" not in tier2 and ":mod:" not in tier2 and "  " not in tier2
     assert preset_note("paper", 2) == ""
+    from iceresist.ship.presets import FIDELITIES, TIER2
+
+    # the notes are data beside the presets: they name the presets' own grid and channel
+    assert " x ".join(map(str, TIER2["quick"]["cells"])) + " = " in tier2
+    assert f"1.39 m / {round(1.39 / TIER2['quick']['dx_m'])} = {1e3 * TIER2['quick']['dx_m']:.1f} mm" in tier2
+    assert f"a {FIDELITIES['quick']['channel_length_m']} m long channel" in tier1
 
 
 def test_report_refuses_missing_folder(tmp_path):

@@ -4,43 +4,9 @@ The paper runs seven conditions, one of which is shared: concentration 50 / 68 /
 speed 1 / 1.5 / 2 knots at 68 % with Bow A (68 % at 1 knot is the same run) and Bow B at 68 %, 1 knot: six
 distinct cases. Names: ``<bow>-c<percent>-v<knots>``.
 
-Fidelities (tier 1 = DEM with water models; tier 2 = the coupled LBM-DEM):
-
-* ``paper``: the paper's tank (11.15 x 1.39 x 1.39 m, depth 1.11 m), the full 1.39 x 5.56 m channel, cubes of
-  3 x 3 x 3 surface spheres, hull spheres 20 mm apart, k = 1e4 N/m; the run lasts until the stem reaches the
-  channel end, and the steady window holds the whole waterline inside the channel.
-* ``quick``: a 1.39 m long channel (same width, pitch and concentration: 28 x 28 cubes at 68 %), cubes of 2 x 2 x 2 corner spheres,
-  hull spheres 30 mm apart up to 6 cm above the waterline, a softer contact (k = 5e3 N/m) with a larger
-  sub-step; the ship stops when the stem leaves the channel. It trades away: the parallel middle body never
-  runs fully in ice (the steady window starts once the bow wedge is in, so side friction along the whole
-  body is missing), a short window (about 0.8 m of travel, so a wide confidence interval), rounder cubes
-  and a softer contact. Runs in well under a minute per case on a 2-core x86 VM (tier 1).
-
-Tier 2 (coupled LBM-DEM, :mod:`iceresist.tier2`) changes the tank where the flow field makes it expensive
-(``TIER2``):
-
-* ``paper`` tier 2: the paper's tank and water depth on a uniform grid of 2.715 mm cells (1.39 m / 512; the
-  paper's finest cell is 2.72 mm, with AMR coarsening to 43.4 mm): 4104 x 512 x 512 cells (1.08e9 cells, the
-  paper's AMR grid has 1.6e8), the water's viscosity (cumulant operator without a turbulence model, as the
-  paper), lattice velocity limit 0.1. A job for GPUs, not for a CPU.
-* ``quick`` tier 2: 3 cells per 41 mm cube (dx = 1.39 m / 104 = 13.4 mm), a shorter and shallower tank
-  (5.13 x 1.39 x 1.07 m, 384 x 104 x 80 = 3.19e6 cells): water 0.9 m deep (0.46 m under the keel instead of
-  0.67 m), 0.17 m of air above it (the hull's deck reaches out of the top of the domain, where no fluid is),
-  the channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending 0.34 m after the
-  channel. The depth is set by the tank's blockage (:mod:`iceresist.ship.tank`): the hull fills m = 0.25 of
-  the section, and Schijf's limiting speed is then a depth Froude number of 0.42, against 0.35 at 2 knots (the
-  paper's tank: 0.47 and 0.31). A 0.56 m deep tank (m = 0.40, limit 0.28) put 1.5 and 2 knots above the limit:
-  the ship pushed a bore ahead, the bow wave reached the top of the domain and the 2-knot case went to NaN.
-  Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic density
-  changes by 3 x 0.2^2 = 12 % over the depth, against 3 % at the default 0.1) and a viscosity of 1e-5 m^2/s
-  (tau - 1/2 = 1.5e-4; ten times water) as a stability floor at this resolution. It trades away, beyond the
-  tier-1 quick trades: resolved cubes (3 cells per edge: their wake, the water between them and their
-  buoyancy distribution are coarse), the flow under the keel (a shallower tank, more blockage and squat),
-  the true viscosity, and compressibility (12 % density change). 1 550 (2 knots) to 3 100 (1 knot) LBM steps
-  per case: hours on a 2-core x86 VM (docs/PERFORMANCE.md "Tier 2 ship"); ``TINY_TIER2_OVERRIDES`` of
-  :mod:`iceresist.sweep` is the CI-sized version. Not grid-converged: on 2.1 cells per cube the 68 %, 1-knot ice
-  resistance is 0.3 x that on these 3.1 (docs/SHIP.md, "The cube resolution"), so the quick tier-2 forces are
-  under-resolved and may rise on a finer grid.
+Fidelities (tier 1 = DEM with water models; tier 2 = the coupled LBM-DEM): ``paper`` and ``quick``, each
+described, with what it trades away, in ``FIDELITY_NOTES`` (the report prints the quick ones beside its table).
+Tier 2 (:mod:`iceresist.tier2`) changes the tank where the flow field makes it expensive (``TIER2``).
 """
 
 from __future__ import annotations
@@ -94,6 +60,47 @@ TIER2 = {
               "channel_start_x_m": CHANNEL_START_X_M, "mach": 0.1, "nu_m2_s": 1.0e-6},
     "quick": {"cells": (384, 104, 80), "dx_m": 1.39 / 104, "water_depth_m": 0.9, "channel_start_x_m": 3.4,
               "mach": 0.2, "nu_m2_s": 1.0e-5},
+}
+
+
+#: What each fidelity is and what it trades away, per (fidelity, tier); plain text (the report prints it).
+FIDELITY_NOTES = {
+    ("paper", 1): (
+        "the paper's tank (11.15 x 1.39 x 1.39 m, depth 1.11 m), the full 1.39 x 5.56 m channel, cubes of "
+        "3 x 3 x 3 surface spheres, hull spheres 20 mm apart, k = 1e4 N/m; the run lasts until the stem reaches "
+        "the channel end, and the steady window holds the whole waterline inside the channel."),
+    ("quick", 1): (
+        "a 1.39 m long channel (same width, pitch and concentration: 28 x 28 cubes at 68 %), cubes of 2 x 2 x 2 "
+        "corner spheres, hull spheres 30 mm apart up to 6 cm above the waterline, a softer contact (k = 5e3 N/m) "
+        "with a larger sub-step; the ship stops when the stem leaves the channel. It trades away: the parallel "
+        "middle body never runs fully in ice (the steady window starts once the bow wedge is in, so side "
+        "friction along the whole body is missing), a short window (about 0.8 m of travel, so a wide confidence "
+        "interval), rounder cubes and a softer contact. Runs in well under a minute per case on a 2-core x86 VM "
+        "(tier 1)."),
+    ("paper", 2): (
+        "the paper's tank and water depth on a uniform grid of 2.715 mm cells (1.39 m / 512; the paper's finest "
+        "cell is 2.72 mm, with AMR coarsening to 43.4 mm): 4104 x 512 x 512 cells (1.08e9 cells, the paper's "
+        "AMR grid has 1.6e8), the water's viscosity (cumulant operator without a turbulence model, as the "
+        "paper), lattice velocity limit 0.1. A job for GPUs, not for a CPU."),
+    ("quick", 2): (
+        "3 cells per 41 mm cube (dx = 1.39 m / 104 = 13.4 mm), a shorter and shallower tank (5.13 x 1.39 x "
+        "1.07 m, 384 x 104 x 80 = 3.19e6 cells): water 0.9 m deep (0.46 m under the keel instead of 0.67 m), "
+        "0.17 m of air above it (the hull's deck reaches out of the top of the domain, where no fluid is), the "
+        "channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending 0.34 m after the "
+        "channel. The depth is set by the tank's blockage (iceresist.ship.tank): the hull fills m = 0.25 of the "
+        "section, and Schijf's limiting speed is then a depth Froude number of 0.42, against 0.35 at 2 knots "
+        "(the paper's tank: 0.47 and 0.31). A 0.56 m deep tank (m = 0.40, limit 0.28) put 1.5 and 2 knots above "
+        "the limit: the ship pushed a bore ahead, the bow wave reached the top of the domain and the 2-knot case "
+        "went to NaN. Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic "
+        "density changes by 3 x 0.2^2 = 12 % over the depth, against 3 % at the default 0.1) and a viscosity of "
+        "1e-5 m^2/s (tau - 1/2 = 1.5e-4; ten times water) as a stability floor at this resolution. It trades "
+        "away, beyond the tier-1 quick trades: resolved cubes (3 cells per edge: their wake, the water between "
+        "them and their buoyancy distribution are coarse), the flow under the keel (a shallower tank, more "
+        "blockage and squat), the true viscosity, and compressibility (12 % density change). 1 550 (2 knots) to "
+        "3 100 (1 knot) LBM steps per case: hours on a 2-core x86 VM (docs/PERFORMANCE.md \"Tier 2 ship\"); "
+        "TINY_TIER2_OVERRIDES of iceresist.sweep is the CI-sized version. Not grid-converged: on 2.1 cells per "
+        "cube the 68 %, 1-knot ice resistance is 0.3 x that on these 3.1 (docs/SHIP.md, \"The cube "
+        "resolution\"), so the quick tier-2 forces are under-resolved and may rise on a finer grid."),
 }
 
 

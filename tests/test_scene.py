@@ -172,3 +172,67 @@ def test_every_schema_key_is_documented():
     assert doc == scenes_markdown(), "regenerate: python -m iceresist.scene.docs > docs/SCENES.md"
     full = parse_scene(FULL_EXAMPLE)
     assert isinstance(full, Scene) and full.optional_sections() == ["free_surface", "ship", "ice", "contact"]
+
+
+CASE_SCENE = """
+[case]
+name = "B-c68-v1.0"
+fidelity = "quick"
+tier = 2
+
+[scene]
+name = "finer"
+
+[domain]
+cells = [504, 136, 104]
+dx_m = 0.0102
+
+[ice]
+channel_length_m = 2.78
+"""
+
+
+def test_case_section_starts_from_a_ship_case_and_changes_only_the_keys_given():
+    """A [case] scene is the preset's case with the keys the file names replaced, the others kept: the same
+    Scene as case_scene with those overrides."""
+    from iceresist.ship.presets import case_scene
+
+    scene = parse_scene(CASE_SCENE)
+    ref = case_scene("B-c68-v1.0", "quick", 2, scene={"name": "finer"},
+                     domain={"cells": [504, 136, 104], "dx_m": 0.0102}, ice={"channel_length_m": 2.78})
+    assert scene.model_dump(exclude={"case"}) == ref.model_dump(exclude={"case"})
+    assert (scene.case.name, scene.case.fidelity, scene.case.tier) == ("B-c68-v1.0", "quick", 2)
+    assert scene.ship.bow_angle_deg == 45.0 and scene.ice.concentration == 0.68 and scene.ice.channel_length_m == 2.78
+    assert scene.domain.faces.x_min.kind == "wall" and scene.free_surface.water_depth_m == 0.9  # kept from the case
+    assert scene.scene.description.startswith("B-063 Bow B")
+    assert scene.source_text == CASE_SCENE  # the result file keeps what the user wrote
+    from textwrap import dedent
+
+    from iceresist.scene.docs import INTRO
+
+    example = parse_scene(dedent(INTRO[INTRO.index("    [case]"):INTRO.index("(`validation/scenes/`")]))
+    assert example.domain.cells == (504, 136, 104) and example.ice.concentration == 0.68  # the docs' example
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (('name = "B-c68-v1.0"', 'name = "B-c60-v1.0"'), "case.name: unknown case 'B-c60-v1.0'; known cases: A-c50-v1.0"),
+    (("tier = 2", "tier = 3"), "case.tier: must be one of 1 or 2 (got 3)"),
+    (('fidelity = "quick"', 'fidelity = "fast"'), "case.fidelity: must be one of 'paper' or 'quick' (got \"fast\")"),
+    (("tier = 2", "tier = 2\nbow = \"B\""), "case.bow: unknown key (allowed: name, fidelity, tier)"),
+    (('name = "B-c68-v1.0"\n', ""), "case.name: required key is missing"),
+    (("[ice]\nchannel_length_m = 2.78", "[ice]\nchannel_length_m = -1"), "ice.channel_length_m: must be > 0 (got -1)"),
+])
+def test_case_section_errors_are_one_line_naming_the_key(edit, expected):
+    assert expected in _err(CASE_SCENE.replace(*edit))
+
+
+def test_validation_scenes_load():
+    """The scene files of validation/scenes (resolution and channel-length studies of the quick tier-2 case)
+    still load against the presets they start from."""
+    from pathlib import Path
+
+    files = sorted((Path(__file__).resolve().parents[1] / "validation" / "scenes").glob("*.toml"))
+    assert len(files) >= 4
+    for f in files:
+        scene = load_scene(f)
+        assert scene.case is not None and scene.case.tier == 2 and scene.ship is not None, f.name

@@ -15,6 +15,7 @@ from iceresist.scene.load import preset_text
 
 #: (heading, model, key prefix) for each table, in file order.
 SECTIONS = [
+    ("[case] (optional: start from a ship case)", S.CaseBase, "case"),
     ("[scene]", S.SceneInfo, "scene"),
     ("[domain]", S.Domain, "domain"),
     ("[domain.faces.<face>] (face = x_min, x_max, y_min, y_max, z_min, z_max)", S.Face, "domain.faces.<face>"),
@@ -123,6 +124,27 @@ existing result is never overwritten without `--force`; `--pickup` continues it
 from its checkpoint to the (new) stop criterion. The result's `steps` and
 `wall_time_s` then count the work it kept over all its legs (`legs`), not the
 steps a killed leg did after its last checkpoint.
+
+A ship scene can start from one of the paper's cases instead of spelling out
+every section: a `[case]` table names the case, the fidelity and the tier
+(the scene `iceresist sweep` would run, docs/SHIP.md), and each other section
+of the file changes only the keys it names. A finer grid for the quick tier-2
+68 % case is then
+
+    [case]
+    name = "A-c68-v1.0"
+    fidelity = "quick"
+    tier = 2
+
+    [scene]
+    name = "finer_A-c68"
+
+    [domain]
+    cells = [504, 136, 104]
+    dx_m = 0.010220588235294117
+
+(`validation/scenes/` holds such files). The result file keeps the text as
+written.
 
 ## Rules
 

@@ -12,10 +12,10 @@ import typing
 from importlib import resources
 from pathlib import Path
 
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from iceresist.errors import InputError, StabilityError
-from iceresist.scene.schema import Scene
+from iceresist.scene.schema import CaseBase, Scene
 
 PRESETS_PACKAGE = "iceresist.scene.presets"
 DEFAULT_PRESET = "cavity"
@@ -126,6 +126,30 @@ def format_validation_error(exc: ValidationError, source: str) -> str:
     return f"{source}: {where}: {msg}{more}".replace("\n", " ")
 
 
+class _CaseOnly(BaseModel):
+    """The ``[case]`` table of a scene file, checked before the rest (the other keys wait for the merge)."""
+
+    model_config = ConfigDict(extra="ignore")
+    case: CaseBase
+
+
+def _with_case(data: dict) -> dict:
+    """The scene data with its ``[case]`` (if any) expanded: the case's sections
+    (:func:`iceresist.ship.presets.scene_data`), each changed by the keys the file's section of that name gives."""
+    if "case" not in data:
+        return data
+    from iceresist.ship.presets import scene_data
+
+    case = _CaseOnly.model_validate(data).case
+    merged = scene_data(case.name, case.fidelity, case.tier)
+    for section, values in data.items():
+        if isinstance(values, dict) and isinstance(merged.get(section), dict):
+            merged[section] = {**merged[section], **values}
+        else:
+            merged[section] = values
+    return merged
+
+
 def parse_scene(text: str, source: str = "scene.toml") -> Scene:
     """Parse TOML text into a checked Scene (schema and stability); InputError on any problem."""
     try:
@@ -133,7 +157,7 @@ def parse_scene(text: str, source: str = "scene.toml") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{source}: TOML syntax error: {exc}") from None
     try:
-        scene = Scene.model_validate(data)
+        scene = Scene.model_validate(_with_case(data))
     except ValidationError as exc:
         raise InputError(format_validation_error(exc, source)) from None
     try:

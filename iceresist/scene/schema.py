@@ -40,6 +40,27 @@ def _norm(v) -> float:
 
 
 # ---------------------------------------------------------------------------------------------------------
+class CaseBase(_Section):
+    """``[case]`` (optional): start from a ship case of the paper's sweep matrix (:mod:`iceresist.ship.presets`,
+    docs/SHIP.md) at a fidelity and tier. The file's other sections then change only the keys they name and
+    keep the case's others (e.g. ``[domain] cells``/``dx_m`` for a finer grid, ``[ice] channel_length_m`` for a
+    longer channel); a section the case does not have is added whole."""
+
+    name: str = Field(..., description="Case name `<bow>-c<percent>-v<knots>`: `A-c50-v1.0`, `A-c68-v1.0`, "
+                                       "`A-c88-v1.0`, `A-c68-v1.5`, `A-c68-v2.0`, `B-c68-v1.0`.")
+    fidelity: Literal["paper", "quick"] = Field("quick", description="Preset fidelity (docs/SHIP.md).")
+    tier: Literal[1, 2] = Field(1, description="1 = DEM with water models; 2 = the coupled LBM-DEM.")
+
+    @field_validator("name")
+    @classmethod
+    def _known_case(cls, v):
+        from iceresist.ship.presets import CASES
+
+        if v not in CASES:
+            raise ValueError(f"unknown case {v!r}; known cases: {', '.join(CASES)}")
+        return v
+
+
 class SceneInfo(_Section):
     """``[scene]``: what the case is and which unit system its numbers are in."""
 
@@ -366,6 +387,7 @@ class Scene(_Section):
     ice: Ice | None = Field(None, description="Optional ice field.")
     contact: Contact | None = Field(None, description="Optional DEM contact law (defaults apply where ice is present).")
     bodies: list[Body] = Field([], description="Optional extra rigid bodies.")
+    case: CaseBase | None = Field(None, description="Optional ship case this scene starts from.")
 
     _source_text: str = PrivateAttr("")
     _source_name: str = PrivateAttr("scene.toml")

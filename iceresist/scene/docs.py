@@ -123,7 +123,8 @@ the ship, the ice field, the contact law and extra bodies. Run one with
 existing result is never overwritten without `--force`; `--pickup` continues it
 from its checkpoint to the (new) stop criterion. The result's `steps` and
 `wall_time_s` then count the work it kept over all its legs (`legs`), not the
-steps a killed leg did after its last checkpoint.
+steps a killed leg did after its last checkpoint; `legs_json` lists each leg's
+start iteration, time, code revision, backend and device.
 
 A ship scene can start from one of the paper's cases instead of spelling out
 every section: a `[case]` table names the case, the fidelity and the tier

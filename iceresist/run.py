@@ -146,8 +146,8 @@ def cmd_run(args) -> int:
         finally:
             # totals over the legs of the run: steps from iteration 0, the wall time of the work kept (a leg
             # killed after its last checkpoint loses the steps and the time after it); mlups: this leg's rate
-            rf.write_meta(**leg_meta(earlier, sim.start_iteration if sim.start_iteration is not None else model.iteration,
-                                   desc["backend"]),
+            start = sim.start_iteration if sim.start_iteration is not None else model.iteration
+            rf.write_meta(**leg_meta(earlier, start, desc["backend"]),
                           iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
                           wall_time_s=wall_before_s + sim.wall_time_s, step_time_s=sim.step_time_s, mlups=sim.mlups,
                           stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged, finished=sim.completed,

@@ -99,8 +99,9 @@ FIDELITY_NOTES = {
         "blockage and squat), the true viscosity, and compressibility (12 % density change). 1 550 (2 knots) to "
         "3 100 (1 knot) LBM steps per case: hours on a 2-core x86 VM (docs/PERFORMANCE.md \"Tier 2 ship\"); "
         "TINY_TIER2_OVERRIDES of iceresist.sweep is the CI-sized version. Not grid-converged: on 2.1 cells per "
-        "cube the 68 %, 1-knot ice resistance is 0.3 x that on these 3.1 (docs/SHIP.md, \"The cube "
-        "resolution\"), so the quick tier-2 forces are under-resolved and may rise on a finer grid."),
+        "cube the 68 % and 88 %, 1-knot ice resistances are 0.3-0.4 x those on these 3.1, so they are "
+        "under-resolved and may rise on a finer grid; the 50 % one is the same on both grids and with the "
+        "viscosity of water, a seventh of tier 1's (docs/SHIP.md, \"The cube resolution\")."),
 }
 
 

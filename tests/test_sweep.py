@@ -170,6 +170,30 @@ def test_ice_free_width_reads_the_ice_level_not_the_still_level():
     assert ice_free_width_m(p, (5.0, 5.1), centre, cube, 1.39) == pytest.approx(1.39)
 
 
+def test_finished_case_of_another_preset_version_is_refused(tiny_sweep, tmp_path):
+    """A finished case whose scene is not what the preset gives now (here its stored water depth edited to the
+    0.9 m of an older quick tank) stops the sweep before anything runs: one line naming the file and the first
+    differing line, the case file unchanged, no sweep.json written."""
+    import shutil
+
+    out, _ = tiny_sweep
+    (tmp_path / "cases").mkdir()
+    path = case_path(tmp_path, CASES[0])
+    shutil.copy(case_path(out, CASES[0]), path)
+    with h5py.File(path, "r+") as h5:
+        text = str(h5["meta"].attrs["scene_toml"])
+        depth = next(line for line in text.splitlines() if line.startswith("water_depth_m"))
+        h5["meta"].attrs["scene_toml"] = text.replace(depth, "water_depth_m = 0.9")
+    before = path.read_bytes()
+    with pytest.raises(InputError) as e:
+        run_sweep("quick", 1, tmp_path, CASES, backend="cpu", overrides=TINY_OVERRIDES)
+    msg = str(e.value)
+    assert "\n" not in msg and msg.startswith(f"{path}: finished with another scene than this preset gives now")
+    assert f"'water_depth_m = 0.9' then, '{depth}' now" in msg and "another --output folder" in msg
+    assert path.read_bytes() == before and not (tmp_path / "sweep.json").exists()
+    assert not case_path(tmp_path, CASES[1]).with_name(f"{CASES[1]}.partial.h5").exists()
+
+
 def test_refusals(tmp_path):
     with pytest.raises(InputError, match="unknown case"):
         run_sweep("quick", 1, tmp_path, ["A-c99-v1.0"])

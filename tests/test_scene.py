@@ -184,7 +184,7 @@ tier = 2
 name = "finer"
 
 [domain]
-cells = [504, 136, 136]
+cells = [504, 136, 104]
 dx_m = 0.0102
 
 [ice]
@@ -199,11 +199,11 @@ def test_case_section_starts_from_a_ship_case_and_changes_only_the_keys_given():
 
     scene = parse_scene(CASE_SCENE)
     ref = case_scene("B-c68-v1.0", "quick", 2, scene={"name": "finer"},
-                     domain={"cells": [504, 136, 136], "dx_m": 0.0102}, ice={"channel_length_m": 2.78})
+                     domain={"cells": [504, 136, 104], "dx_m": 0.0102}, ice={"channel_length_m": 2.78})
     assert scene.model_dump(exclude={"case"}) == ref.model_dump(exclude={"case"})
     assert (scene.case.name, scene.case.fidelity, scene.case.tier) == ("B-c68-v1.0", "quick", 2)
     assert scene.ship.bow_angle_deg == 45.0 and scene.ice.concentration == 0.68 and scene.ice.channel_length_m == 2.78
-    assert scene.domain.faces.x_min.kind == "wall" and scene.free_surface.water_depth_m == 1.11  # kept from the case
+    assert scene.domain.faces.x_min.kind == "wall" and scene.free_surface.water_depth_m == 0.9  # kept from the case
     assert scene.scene.description.startswith("B-063 Bow B")
     assert scene.source_text == CASE_SCENE  # the result file keeps what the user wrote
     from textwrap import dedent
@@ -211,7 +211,7 @@ def test_case_section_starts_from_a_ship_case_and_changes_only_the_keys_given():
     from iceresist.scene.docs import INTRO
 
     example = parse_scene(dedent(INTRO[INTRO.index("    [case]"):INTRO.index("(`validation/scenes/`")]))
-    assert example.domain.cells == (504, 136, 136) and example.ice.concentration == 0.68  # the docs' example
+    assert example.domain.cells == (504, 136, 104) and example.ice.concentration == 0.68  # the docs' example
 
 
 @pytest.mark.parametrize("edit, expected", [
@@ -221,8 +221,8 @@ def test_case_section_starts_from_a_ship_case_and_changes_only_the_keys_given():
     (("tier = 2", "tier = 2\nbow = \"B\""), "case.bow: unknown key (allowed: name, fidelity, tier)"),
     (('name = "B-c68-v1.0"\n', ""), "case.name: required key is missing"),
     (("[ice]\nchannel_length_m = 2.78", "[ice]\nchannel_length_m = -1"), "ice.channel_length_m: must be > 0 (got -1)"),
-    (("cells = [504, 136, 136]", "cells = [504, 136, 104]"),  # the case's 1.11 m of water in a 1.06 m tank
-     "free_surface.water_depth_m: 1.11 reaches the top of the domain (1.061 = cells[2] x dx_m); lower the depth "
+    (("cells = [504, 136, 104]", "cells = [504, 136, 80]"),  # the case's 0.9 m of water in a 0.816 m tank
+     "free_surface.water_depth_m: 0.9 reaches the top of the domain (0.816 = cells[2] x dx_m); lower the depth "
      "or add cells in z"),
 ])
 def test_case_section_errors_are_one_line_naming_the_key(edit, expected):

@@ -171,9 +171,9 @@ def test_ice_free_width_reads_the_ice_level_not_the_still_level():
 
 
 def test_finished_case_of_another_preset_version_is_refused(tiny_sweep, tmp_path):
-    """A finished case whose scene is not what the preset gives now (here its stored water depth edited to the
-    0.9 m of an older quick tank) stops the sweep before anything runs: one line naming the file and the first
-    differing line, the case file unchanged, no sweep.json written."""
+    """A finished case whose scene is not what the preset gives now (here its stored water depth edited to
+    0.9 m) stops the sweep before anything runs: one line naming the file and the first differing line, the case
+    file unchanged, no sweep.json written."""
     import shutil
 
     out, _ = tiny_sweep

@@ -35,8 +35,8 @@ def test_quick_tier2_sweep_trends(tmp_path):
     the 68 % tier-2 force settles 0.5 m into the window at 3-7 N and gives 4.25 N, 0.23 x FSICR, against tier
     1's 12.4 N there (docs/SHIP.md, "The long channel at tier 2"); scaled alike the 50 % case would reach only
     about 0.09 x. The quick tier 2 is not grid-converged at 68 and 88 % (on 2.1 cells per cube instead of 3.1
-    the force is 0.3-0.4 x), but the 50 % case is the same on both grids and with the viscosity of water; in the
-    paper's depth (1.11 m of water instead of 0.9 m) it is 2.6 x, 0.15 x FSICR, on the coarse grid (docs/SHIP.md,
-    "The cube resolution at 50 and 88 %"). So this test waits for the quick tier-2 preset in the paper's depth
-    (about 2.5 h a 1-knot case here) and a finer grid for the others."""
+    the force is 0.3-0.4 x), but the 50 % case is the same on both grids and with the viscosity of water. In the
+    paper's depth (1.11 m of water instead of 0.9 m) it is 2.6 x, 0.15 x FSICR, on the coarse grid, but on the
+    preset's grid it stays at 0.95 N, 0.05 x (docs/SHIP.md, "The paper's depth on the quick grid"). So this test
+    waits for a finer grid or a longer channel, both GPU-sized runs."""
     assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

@@ -141,7 +141,7 @@ of the file changes only the keys it names. A finer grid for the quick tier-2
     name = "finer_A-c68"
 
     [domain]
-    cells = [504, 136, 136]
+    cells = [504, 136, 104]
     dx_m = 0.010220588235294117
 
 (`validation/scenes/` holds such files). The result file keeps the text as

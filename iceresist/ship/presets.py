@@ -53,12 +53,12 @@ FIDELITIES = {
 }
 
 
-#: Tier-2 (coupled LBM-DEM) tank and lattice per fidelity (FIDELITY_NOTES): domain cells, cell size, water
+#: Tier-2 (coupled LBM-DEM) tank and lattice per fidelity (module docstring): domain cells, cell size, water
 #: depth, channel start, lattice velocity limit, viscosity (m^2/s; 1e-6 = water).
 TIER2 = {
     "paper": {"cells": (4104, 512, 512), "dx_m": 1.39 / 512, "water_depth_m": WATER_DEPTH_M,
               "channel_start_x_m": CHANNEL_START_X_M, "mach": 0.1, "nu_m2_s": 1.0e-6},
-    "quick": {"cells": (384, 104, 104), "dx_m": 1.39 / 104, "water_depth_m": WATER_DEPTH_M, "channel_start_x_m": 3.4,
+    "quick": {"cells": (384, 104, 80), "dx_m": 1.39 / 104, "water_depth_m": 0.9, "channel_start_x_m": 3.4,
               "mach": 0.2, "nu_m2_s": 1.0e-5},
 }
 
@@ -83,26 +83,27 @@ FIDELITY_NOTES = {
         "AMR grid has 1.6e8), the water's viscosity (cumulant operator without a turbulence model, as the "
         "paper), lattice velocity limit 0.1. A job for GPUs, not for a CPU."),
     ("quick", 2): (
-        "3 cells per 41 mm cube (dx = 1.39 m / 104 = 13.4 mm) in a shorter tank of the paper's height and water "
-        "depth (5.13 x 1.39 x 1.39 m, 384 x 104 x 104 = 4.15e6 cells): water 1.11 m deep (0.67 m under the keel, "
-        "as in the paper), 0.28 m of air above it (the hull's deck reaches out of the top of the domain, where no "
-        "fluid is), the channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending "
-        "0.34 m after the channel. The hull fills m = 0.20 of the tank's section (iceresist.ship.tank), as in the "
-        "paper: Schijf's limiting speed is a depth Froude number of 0.47, against 0.31 at 2 knots. Until "
-        "2026-11-24 this preset's water was 0.9 m deep in a 1.07 m tank (m = 0.25, limit 0.42): on 2.1 cells "
-        "per cube the 50 % and 68 %, 1-knot ice resistances were 2.6-2.7 x lower there than in the paper's depth "
-        "(docs/SHIP.md, \"The cube resolution\"), and a 0.56 m tank (m = 0.40) put 1.5 and 2 knots above the "
-        "limit (the ship pushed a bore ahead and the 2-knot case went to NaN). Lattice velocity limit 0.2 "
-        "against the shallow-water wave speed sqrt(g h) (the hydrostatic density changes by 3 x 0.2^2 = 12 % "
-        "over the depth, against 3 % at the default 0.1) and a viscosity of 1e-5 m^2/s (tau - 1/2 = 1.4e-4; ten "
-        "times water) as a stability floor at this resolution (the water's viscosity did not move the 50 % case "
-        "on 2.1 cells per cube). It trades away, beyond the tier-1 quick trades: resolved cubes (3 cells per "
-        "edge: their wake, the water between them and their buoyancy distribution are coarse), the true "
-        "viscosity, and compressibility (12 % density change). 1 730 (2 knots) to 3 460 (1 knot) LBM steps per "
-        "case: hours on a 2-core x86 VM (docs/PERFORMANCE.md \"Tier 2 ship\"); TINY_TIER2_OVERRIDES of "
-        "iceresist.sweep is the CI-sized version. Not grid-converged: on 2.1 cells per cube the 68 % and 88 %, "
-        "1-knot ice resistances are 0.3-0.4 x those on these 3.1 (in the 0.9 m tank), so they are "
-        "under-resolved and may rise on a finer grid; the 50 % one was the same on both grids."),
+        "3 cells per 41 mm cube (dx = 1.39 m / 104 = 13.4 mm), a shorter and shallower tank (5.13 x 1.39 x "
+        "1.07 m, 384 x 104 x 80 = 3.19e6 cells): water 0.9 m deep (0.46 m under the keel instead of 0.67 m), "
+        "0.17 m of air above it (the hull's deck reaches out of the top of the domain, where no fluid is), the "
+        "channel from x = 3.4 m so that the whole hull starts in the tank, and the tank ending 0.34 m after the "
+        "channel. The depth is set by the tank's blockage (iceresist.ship.tank): the hull fills m = 0.25 of the "
+        "section, and Schijf's limiting speed is then a depth Froude number of 0.42, against 0.35 at 2 knots "
+        "(the paper's tank: 0.47 and 0.31). A 0.56 m deep tank (m = 0.40, limit 0.28) put 1.5 and 2 knots above "
+        "the limit: the ship pushed a bore ahead, the bow wave reached the top of the domain and the 2-knot case "
+        "went to NaN. Lattice velocity limit 0.2 against the shallow-water wave speed sqrt(g h) (the hydrostatic "
+        "density changes by 3 x 0.2^2 = 12 % over the depth, against 3 % at the default 0.1) and a viscosity of "
+        "1e-5 m^2/s (tau - 1/2 = 1.5e-4; ten times water) as a stability floor at this resolution. It trades "
+        "away, beyond the tier-1 quick trades: resolved cubes (3 cells per edge: their wake, the water between "
+        "them and their buoyancy distribution are coarse), the flow under the keel (a shallower tank, more "
+        "blockage and squat), the true viscosity, and compressibility (12 % density change). 1 550 (2 knots) to "
+        "3 100 (1 knot) LBM steps per case: hours on a 2-core x86 VM (docs/PERFORMANCE.md \"Tier 2 ship\"); "
+        "TINY_TIER2_OVERRIDES of iceresist.sweep is the CI-sized version. Not grid-converged: on 2.1 cells per "
+        "cube the 68 % and 88 %, 1-knot ice resistances are 0.3-0.4 x those on these 3.1, so they are "
+        "under-resolved and may rise on a finer grid; the 50 % one is the same on both grids and with the "
+        "viscosity of water, a seventh of tier 1's. The paper's water depth (1.11 m) lifted it 2.6 x on 2.1 "
+        "cells per cube, but not on these 3.1 (0.95 against 1.15 N), so the shallower quick tank is not what "
+        "keeps it low (docs/SHIP.md, \"The paper's depth on the quick grid\")."),
 }
 
 

@@ -38,5 +38,5 @@ def test_quick_tier2_sweep_trends(tmp_path):
     the force is 0.3-0.4 x), but the 50 % case is the same on both grids and with the viscosity of water. In the
     paper's depth (1.11 m of water instead of 0.9 m) it is 2.6 x, 0.15 x FSICR, on the coarse grid, but on the
     preset's grid it stays at 0.95 N, 0.05 x (docs/SHIP.md, "The paper's depth on the quick grid"). So this test
-    waits for a finer grid or a longer channel, both GPU-sized runs."""
+    waits for a finer grid or a longer channel at 50 % (4-5 h each on this VM, or a GPU)."""
     assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

@@ -234,7 +234,8 @@ class Output(_Section):
 class FreeSurface(_Section):
     """``[free_surface]``: phase-field free surface (paper section 2.2, eqs. 4-11)."""
 
-    water_depth_m: float = Field(..., gt=0, description="Still-water depth measured from z = 0 (m).")
+    water_depth_m: float = Field(..., gt=0, description="Still-water depth measured from z = 0 (m), below the top "
+                                                        "of the domain.")
     mobility_lattice: float = Field(0.02, gt=0, description="Interface mobility M in lattice units (eq. 4, 10).")
     interface_width_cells: float = Field(3.0, ge=2, description="Interface thickness W in cells (eq. 4).")
     h_lattice: Literal["D3Q7", "D3Q15", "D3Q19", "D3Q27"] = Field(

@@ -415,12 +415,6 @@ class Scene(_Section):
                                  "fluid.nu_m2_s")
         if self.free_surface is not None and not any(self.fluid.gravity_m_s2):
             raise ValueError("fluid.gravity_m_s2: a free surface needs gravity, e.g. [0, 0, -9.81]")
-        if self.free_surface is not None:
-            dx = self.domain.dx_m if self.domain.dx_m is not None else 1.0
-            top = self.domain.shape_cells()[2] * dx
-            if self.free_surface.water_depth_m >= top:
-                raise ValueError(f"free_surface.water_depth_m: {self.free_surface.water_depth_m:g} reaches the top "
-                                 f"of the domain ({top:.4g} = cells[2] x dx_m); lower the depth or add cells in z")
         if self.ice is not None and self.free_surface is None:
             raise ValueError("free_surface: floating ice needs a [free_surface] section (water depth)")
         names = [b.name for b in self.bodies]

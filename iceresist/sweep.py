@@ -12,7 +12,9 @@ half-finished result under the final name. A running case also writes its whole 
 again, the sweep skips every finished case, continues an unfinished one from its checkpoint (when the
 partial file holds the same scene; otherwise it runs the case from its start) and rebuilds the table from the
 files, so it ends with the table an uninterrupted sweep gives: bit for bit in the tests (tier 1, and the
-CI-sized tier 2), statistically for a long tier-2 case (docs/SHIP.md, "Reproducibility").
+CI-sized tier 2), statistically for a long tier-2 case (docs/SHIP.md, "Reproducibility"). A finished case whose
+scene is not what the preset gives now (the preset has changed since) stops the sweep with a one-line error
+before anything runs, so one table never mixes two versions of a preset.
 """
 
 from __future__ import annotations

@@ -71,40 +71,35 @@ def checkpoint_path(out_dir, case: str) -> Path:
     return Path(out_dir) / "cases" / f"{case}.checkpoint.h5"
 
 
-def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
-    """The meta of ``partial`` when a killed run of the same scene can continue from ``checkpoint``, else None."""
-    if not (partial.is_file() and checkpoint.is_file()):
+def _stored_meta(path: Path) -> dict | None:
+    """The meta attributes of a case file, or None when there is no readable one."""
+    if not path.is_file():
         return None
     from iceresist.io.hdf5 import RunFile
 
     try:
-        with RunFile(partial, "r") as rf:
-            meta = rf.meta
+        with RunFile(path, "r") as rf:
+            return rf.meta
     except (OSError, KeyError):
         return None
-    return meta if meta.get("scene_toml") == scene_text else None
+
+
+def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
+    """The meta of ``partial`` when a killed run of the same scene can continue from ``checkpoint``, else None."""
+    meta = _stored_meta(partial) if checkpoint.is_file() else None
+    return meta if meta is not None and meta.get("scene_toml") == scene_text else None
 
 
 def is_finished(path: Path) -> bool:
     """A case file under its final name that records a completed run."""
-    if not path.is_file():
-        return False
-    import h5py
-
-    try:
-        with h5py.File(path, "r") as h5:
-            return bool(h5["meta"].attrs.get("finished", False))
-    except OSError:
-        return False
+    meta = _stored_meta(path)
+    return bool(meta is not None and meta.get("finished", False))
 
 
 def check_same_scene(path: Path, scene_text: str) -> None:
     """Refuse a finished case file whose scene is not ``scene_text`` (the preset has changed since it ran), so
     that one table never mixes two versions of a preset. Nothing is written or removed."""
-    import h5py
-
-    with h5py.File(path, "r") as h5:
-        old = str(h5["meta"].attrs.get("scene_toml", ""))
+    old = str((_stored_meta(path) or {}).get("scene_toml", ""))
     if old == scene_text:
         return
     a, b = old.splitlines(), scene_text.splitlines()
@@ -225,12 +220,12 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
             raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}: "
                              f"use another --output folder")
         info["cases"] = [c for c in CASES if c in set(old.get("cases", [])) | set(names)]
-    for case in CASES:  # every case the table would read, before anything runs or is written
-        if is_finished(case_path(out, case)):
-            check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)
+    finished = [c for c in CASES if is_finished(case_path(out, c))]  # running one case finishes no other
+    for case in finished:  # every case the table would read, before anything runs or is written
+        check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)
     info_path.write_text(json.dumps(info, indent=1))
     for case in names:
-        if is_finished(case_path(out, case)):
+        if case in finished:
             log.info("case %s: finished earlier, skipped", case)
             continue
         run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,

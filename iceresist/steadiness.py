@@ -138,6 +138,17 @@ def format_steadiness(table: pd.DataFrame) -> str:
     return "\n".join(out)
 
 
+def window_spans(records) -> list[tuple[float, float, int]]:
+    """The distinct steady windows of the cases as (from, to) in metres of stem travel into the channel, each once
+    (to the millimetre) with the index of its first case, so that cases sharing a window shade it once instead
+    of darkening it once per case."""
+    spans: dict[tuple[float, float], int] = {}
+    for i, rec in enumerate(records):
+        key = (round(rec.window_m[0] - rec.channel_start_x_m, 3), round(rec.window_m[1] - rec.channel_start_x_m, 3))
+        spans.setdefault(key, i)
+    return [(lo, hi, i) for (lo, hi), i in spans.items()]
+
+
 def plot_steadiness(table: pd.DataFrame, records, png) -> Path:
     """Force against stem travel into the channel for each case (thin line) with the step means and their
     intervals (bars): where the bars stop rising, the force has settled."""
@@ -155,8 +166,8 @@ def plot_steadiness(table: pd.DataFrame, records, png) -> Path:
             mid = 0.5 * (g.travel_from_m + g.travel_to_m)
             ax.errorbar(mid, g.mean_N, yerr=g.ci95_N, xerr=0.5 * (g.travel_to_m - g.travel_from_m), fmt="o",
                         color=colour, capsize=3, label=label)
-        ax.axvspan(rec.window_m[0] - rec.channel_start_x_m, rec.window_m[1] - rec.channel_start_x_m,
-                   color=colour, alpha=0.06)
+    for lo, hi, i in window_spans(records):
+        ax.axvspan(lo, hi, color=f"C{i}", alpha=0.08)
     ax.set_xlabel("stem travel into the ice channel [m]")
     ax.set_ylabel("ice resistance, model scale [N]")
     ax.set_title("Does the ice force settle? Step means (bars: 95 % interval); shaded: steady window")

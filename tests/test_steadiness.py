@@ -12,7 +12,7 @@ from iceresist.cli import main
 from iceresist.errors import InputError
 from iceresist.io.hdf5 import RunFile
 from iceresist.post import window_parts
-from iceresist.steadiness import format_steadiness, read_case_record, steadiness_table
+from iceresist.steadiness import format_steadiness, read_case_record, steadiness_table, window_spans
 
 R_INF_N, DECAY_M = 14.0, 0.4  # R(s) = R_inf (1 - exp(-s / l)), s the stem travel into the channel
 CHANNEL_X0_M, SPEED_M_S, DT_S = 3.4, 0.514, 0.002
@@ -101,6 +101,16 @@ def test_a_run_result_is_finished_when_its_file_says_so(tmp_path):
     with RunFile(path, "a") as rf:
         rf.write_meta(finished=True, stop_reason="stop time 5.5 s reached")
     assert read_case_record(path).finished
+
+
+def test_cases_sharing_a_window_shade_it_once(tmp_path):
+    """Three cases, two on the same window: two spans, in stem travel into the channel, each with its first case."""
+    paths = [write_case(tmp_path / f"{k}.h5", 1.4, window_m=w) for k, w in
+             (("a", (4.006, 4.786)), ("b", (4.006, 4.786)), ("c", (4.3, 6.18)))]
+    spans = window_spans([read_case_record(p) for p in paths])
+    assert len(spans) == 2
+    assert spans[0] == pytest.approx((4.006 - CHANNEL_X0_M, 4.786 - CHANNEL_X0_M, 0))
+    assert spans[1] == pytest.approx((4.3 - CHANNEL_X0_M, 6.18 - CHANNEL_X0_M, 2))
 
 
 def test_cli_prints_plots_and_leaves_the_case_file_alone(tmp_path, capsys):

@@ -47,6 +47,11 @@ class CaseRecord:
         """Stem travel into the ice channel at each record [m]."""
         return self.x_bow_m - self.channel_start_x_m
 
+    @property
+    def window_travel_m(self) -> tuple[float, float]:
+        """The steady window in stem travel into the ice channel [m]."""
+        return self.window_m[0] - self.channel_start_x_m, self.window_m[1] - self.channel_start_x_m
+
 
 def read_case_record(path) -> CaseRecord:
     """Read a ship case file written by ``iceresist run`` or ``iceresist sweep``. A file still being written
@@ -144,8 +149,7 @@ def window_spans(records) -> list[tuple[float, float, int]]:
     of darkening it once per case."""
     spans: dict[tuple[float, float], int] = {}
     for i, rec in enumerate(records):
-        key = (round(rec.window_m[0] - rec.channel_start_x_m, 3), round(rec.window_m[1] - rec.channel_start_x_m, 3))
-        spans.setdefault(key, i)
+        spans.setdefault(tuple(round(v, 3) for v in rec.window_travel_m), i)
     return [(lo, hi, i) for (lo, hi), i in spans.items()]
 
 

@@ -40,5 +40,7 @@ def test_quick_tier2_sweep_trends(tmp_path):
     preset's grid it stays at 0.95 N, 0.05 x (docs/SHIP.md, "The paper's depth on the quick grid"). Nor is it a thin
     sample that another run would lift: with the cubes jittered off their rows the coarse 50 % force falls 2.5-4 x,
     three seeds alike, while tier 1 moves under 3 % ("The ice arrangement at 50 %"). So this test waits for a finer
-    grid or a longer channel at 50 % (4-5 h each on this VM, or a GPU)."""
+    grid or a longer channel at 50 % (about 3.2 h each alone on this VM, or a GPU). A partial run on 4 cells per
+    cube (validation/scenes/quick_t2_fine_c50.toml, lost at record 531 of 679) gave about 2.1 N, 0.11 x, over the
+    first 0.47 m of the window ("The ice arrangement at 50 %")."""
     assert_paper_trends(run_sweep("quick", 2, tmp_path, None), fsicr_factor=ORDER_OF_MAGNITUDE)

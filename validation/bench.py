@@ -72,7 +72,7 @@ def main(argv=None):
             print(json.dumps(r))
     else:
         print(format_table(rows))
-    return 0
+    return getattr(args, "exit_status", 0)
 
 
 if __name__ == "__main__":

@@ -10,6 +10,10 @@ factory and compiled for a :class:`Target`:
 Precision is a value ``real`` (``np.float32`` or ``np.float64``); builders type
 their constants with it (``real(0.5)``) so fp32 kernels never compute in fp64.
 
+Arrays cross between host and device only through the target (:meth:`Target.to_device`,
+:meth:`Target.to_host`), so the GPU build check (:mod:`iceresist.backends.buildcheck`) can stand host arrays
+in for device arrays on a machine without a GPU, and a transfer count sees every copy.
+
 NUMBA_ENABLE_CUDASIM must be set before numba is first imported for the CUDA
 simulator; tests set it in ``tests/conftest.py``.
 """
@@ -52,14 +56,63 @@ class Target:
         return self.name == "cuda"
 
     def kernel(self, fn=None, **kw):
-        """Compile a launcher body: ``njit(parallel=True)`` on the CPU, ``cuda.jit`` on the GPU."""
+        """Compile a launcher body: ``njit(parallel=True)`` on the CPU, ``cuda.jit`` on the GPU for blocks of at
+        most ``threads`` threads (named by ``fn.__name__``; :func:`iceresist.backends.launch.cuda_kernel`)."""
         if fn is None:
             return lambda f: self.kernel(f, **kw)
         if self.is_cuda:
+            from iceresist.backends.launch import cuda_kernel
+
+            kw.pop("parallel", None)
+            kw.pop("error_model", None)
+            return cuda_kernel(fn, fn.__name__, kw.pop("threads", CUDA_BLOCK_CELLS), **kw)
+        kw.pop("threads", None)
+        return numba.njit(fn, parallel=kw.pop("parallel", True), fastmath=set(CPU_FASTMATH), cache=kw.pop("cache", False), **kw)
+
+    # ------------------------------------------------------------------ host <-> device
+    def to_device(self, a):
+        """``a`` (a NumPy array) where the target's kernels read it: a device copy on CUDA, ``a`` itself (made
+        C-contiguous) on the CPU."""
+        a = np.ascontiguousarray(a)
+        if not self.is_cuda:
+            return a
+        if _HOST_STAND_IN:
+            return a.copy().view(HostStandIn)
+        from numba import cuda as _cuda
+
+        return _cuda.to_device(a)
+
+    def to_host(self, a, copy: bool = True) -> np.ndarray:
+        """A NumPy array of the target array ``a``: a device-to-host copy on CUDA; on the CPU a copy, or ``a``
+        itself with ``copy=False``."""
+        if self.is_cuda:
+            return a.copy_to_host()
+        return np.array(a) if copy else a
+
+    def synchronize(self):
+        """Wait for the device (CUDA); a no-op on the CPU."""
+        if self.is_cuda and not _HOST_STAND_IN:
             from numba import cuda as _cuda
 
-            return _cuda.jit(fn, **kw)
-        return numba.njit(fn, parallel=kw.pop("parallel", True), fastmath=set(CPU_FASTMATH), cache=kw.pop("cache", False), **kw)
+            _cuda.synchronize()
+
+
+#: Set by the GPU build check: CUDA "device arrays" are host arrays (:class:`HostStandIn`) and nothing runs.
+_HOST_STAND_IN = False
+
+
+class HostStandIn(np.ndarray):
+    """A NumPy array with the two methods of a numba-cuda device array the engine calls, standing in for one
+    while the GPU build check traces a step on a machine without a GPU."""
+
+    def copy_to_host(self, ary=None, stream=0):
+        if ary is None:
+            return np.array(self)
+        ary[...] = self
+        return ary
+
+    def copy_to_device(self, ary, stream=0):
+        self[...] = ary
 
 
 def _cpu_device(fn):
@@ -97,7 +150,7 @@ def resolve_backend(name: str) -> Target:
     if name == "cpu":
         return cpu
     if name == "cuda":
-        if not cuda_available():
+        if not (cuda_available() or _HOST_STAND_IN):
             raise RuntimeError("backend 'cuda' asked for but no CUDA GPU is visible; use --backend cpu or auto")
         return cuda()
     if name == "auto":

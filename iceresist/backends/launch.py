@@ -9,6 +9,11 @@ A per-cell update ``cell(b, c, *args)`` is written once; the launcher maps it:
 
 Launchers are generated with named arguments (numba's CUDA kernels take no
 ``*args``) and live outside the kernels, so the same cell function serves both.
+
+Every CUDA kernel of the engine is compiled by :func:`cuda_kernel` (which names it) and launched by
+:func:`cuda_launch`: the one place a launch happens, so the GPU build check
+(:mod:`iceresist.backends.buildcheck`) can record each kernel's argument types, launches of no items
+included, instead of running it.
 """
 
 from __future__ import annotations
@@ -33,15 +38,51 @@ def copy_into(dst, host):
         dst[...] = host
 
 
-def jit_generated(target, src: str, name: str, namespace: dict):
+#: Set by the GPU build check: ``recorder(kernel, threads, args)`` is called instead of each CUDA launch.
+_RECORDER = None
+
+
+def cuda_kernel(fn, name: str, threads: int, **options):
+    """``numba.cuda.jit(fn, launch_bounds=threads, **options)``, tagged ``kernel_name = name`` (what the build
+    check and docs/PERFORMANCE.md call it) and ``kernel_threads = threads``.
+
+    The launch bound tells ptxas the largest block the kernel is launched with, so it keeps registers x threads
+    within the register file (spilling if it must) and the kernel always launches; without it ptxas assumes
+    1024 threads or none and may hand out more registers than a 512-thread block can hold."""
+    from numba import config, cuda
+
+    if not config.ENABLE_CUDASIM:  # the simulator takes no launch bounds
+        options["launch_bounds"] = threads
+    kern = cuda.jit(fn, **options)
+    kern.kernel_name = name
+    kern.kernel_threads = threads
+    return kern
+
+
+def cuda_launch(kernel, grid: int, threads: int, *args):
+    """Launch ``kernel[grid, threads](*args)``; a grid of no blocks launches nothing."""
+    if _RECORDER is not None:
+        _RECORDER(kernel, threads, args)
+    elif grid:
+        kernel[grid, threads](*args)
+
+
+def device_name(fn) -> str:
+    """The Python name of a device function (a numba dispatcher or a plain function)."""
+    return getattr(getattr(fn, "py_func", fn), "__name__", "kernel")
+
+
+def jit_generated(target, src: str, name: str, namespace: dict, label: str | None = None,
+                  threads: int = CUDA_BLOCK_CELLS):
     """Compile the generated launcher ``name`` defined by ``src`` (the names it calls in ``namespace``): a CUDA
-    kernel, or a parallel njit with the project's fast-math flags on the CPU."""
+    kernel named ``label`` (default ``name``) for blocks of at most ``threads`` threads, or a parallel njit with
+    the project's fast-math flags on the CPU."""
     if target.is_cuda:
         from numba import cuda
 
         ns = {"cuda": cuda, **namespace}
         exec(compile(src, f"<iceresist {name} cuda>", "exec"), ns)
-        return cuda.jit(ns[name])
+        return cuda_kernel(ns[name], label or name, threads)
     ns = {"prange": numba.prange, **namespace}
     exec(compile(src, f"<iceresist {name} cpu>", "exec"), ns)
     return numba.njit(ns[name], parallel=True, fastmath=set(CPU_FASTMATH))
@@ -53,20 +94,20 @@ class _GeneratedLauncher:
 
     name = ""
     fn_name = ""
+    threads = CUDA_BLOCK_CELLS
 
     def __init__(self, target, fn, argnames, **options):
         self.target = target
         self.argnames = tuple(argnames)
         self.source = self._source(target.is_cuda, ", ".join(self.argnames), **options)
-        self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn})
+        self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn},
+                                     label=f"{self.name}:{device_name(fn)}", threads=self.threads)
 
     def __call__(self, n, *args):
-        if n == 0:
-            return
         if self.target.is_cuda:
             grid, threads, lead = self._cuda_launch(n)
-            self._kernel[grid, threads](*lead, *args)
-        else:
+            cuda_launch(self._kernel, grid, threads, *lead, *args)
+        elif n:
             self._kernel(n, *args)
 
 
@@ -107,6 +148,7 @@ class BlockLauncher(_GeneratedLauncher):
     """
 
     name, fn_name = "launch_blocks", "block"
+    threads = CUDA_BLOCK_THREADS
 
     @staticmethod
     def _source(cuda: bool, sig: str) -> str:

@@ -218,14 +218,10 @@ class FluidStructureCoupling:
 
     # ------------------------------------------------------------------ device helpers
     def _dev(self, a):
-        if self.target.is_cuda:
-            from numba import cuda
-
-            return cuda.to_device(np.ascontiguousarray(a))
-        return np.ascontiguousarray(a)
+        return self.target.to_device(a)
 
     def _host(self, a):
-        return a.copy_to_host() if self.target.is_cuda else a
+        return self.target.to_host(a, copy=False)
 
     # ------------------------------------------------------------------ body state
     def _body_arrays(self):

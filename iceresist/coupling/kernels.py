@@ -54,7 +54,7 @@ import math
 import numpy as np
 
 from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
-from iceresist.backends.launch import jit_generated
+from iceresist.backends.launch import cuda_launch, device_name, jit_generated
 from iceresist.coupling.geometry import BOX, SPHERE
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
@@ -486,6 +486,10 @@ def _cpu_kernel(loop_name, loop_src, launch_name, launch_src, visit, variant):
     return numba.njit(ns[launch_name], parallel=True, fastmath=set(CPU_FASTMATH))
 
 
+#: Threads per CUDA block of a per-body launch (:class:`BodyLauncher`): they stride over the body's cell box.
+BODY_THREADS = 128
+
+
 class BodyLauncher:
     """``launcher(nbodies, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over every cell of the cell
     box ``bint[k, 3:9]`` of every body k: CPU prange over bodies; CUDA one thread block per body, threads
@@ -502,7 +506,8 @@ class BodyLauncher:
                    "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
                    "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
                    f"        visit(k, gx, gy, gz, {sig})\n")
-            self._kernel = jit_generated(target, src, "launch_bodies", {"visit": visit})
+            self._kernel = jit_generated(target, src, "launch_bodies", {"visit": visit},
+                                         label=f"{name}:{device_name(visit)}", threads=BODY_THREADS)
         else:
             # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
             loop = (f"def body_loop(k, {sig}):\n"
@@ -516,11 +521,9 @@ class BodyLauncher:
             self._kernel = _cpu_kernel("body_loop", loop, name, src, visit, variant)
 
     def __call__(self, nbodies, *args):
-        if nbodies == 0:
-            return
         if self.target.is_cuda:
-            self._kernel[nbodies, 128](*args)
-        else:
+            cuda_launch(self._kernel, nbodies, BODY_THREADS, *args)
+        elif nbodies:
             self._kernel(nbodies, *args)
 
 
@@ -533,14 +536,11 @@ class ActiveLauncher:
         rest = ", ".join(argnames[1:])
         sig = ", ".join(argnames)
         if target.is_cuda:
-            from numba import cuda
-
             src = (f"def launch_active({sig}):\n"
                    "    b = active[cuda.blockIdx.x]\n"
                    f"    visit(b, cuda.threadIdx.x, {rest})\n")
-            ns = {"cuda": cuda, "visit": visit}
-            exec(compile(src, "<iceresist active launcher cuda>", "exec"), ns)
-            self._kernel = cuda.jit(ns["launch_active"])
+            self._kernel = jit_generated(target, src, "launch_active", {"visit": visit},
+                                         label=f"{name}:{device_name(visit)}")
         else:
             loop = (f"def block_loop(b, {rest}):\n"
                     f"    for c in range({CUDA_BLOCK_CELLS}):\n"
@@ -551,11 +551,9 @@ class ActiveLauncher:
             self._kernel = _cpu_kernel("block_loop", loop, name, src, visit, variant)
 
     def __call__(self, nactive, *args):
-        if nactive == 0:
-            return
         if self.target.is_cuda:
-            self._kernel[nactive, CUDA_BLOCK_CELLS](*args)
-        else:
+            cuda_launch(self._kernel, nactive, CUDA_BLOCK_CELLS, *args)
+        elif nactive:
             self._kernel(nactive, *args)
 
 

@@ -23,11 +23,12 @@ import math
 
 import numba
 
+from iceresist.backends.launch import cuda_launch
 from iceresist.dem import kcache
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
-from iceresist.dem.search import THREADS, build_cell_hash, build_grid_sort
+from iceresist.dem.search import THREADS, build_cell_hash, build_cell_index, build_grid_sort
 
 DRIFT_ARGS = ["h", "pos", "vel", "vpred", "quat", "angmom", "omega", "inertia", "inv_meff", "kin", "pvel",
               "pomega", "force", "torque"]
@@ -45,11 +46,12 @@ GATHER_ARGS = ["h", "do_kick", "bfirst", "bcount", "sforce", "storque", "mass", 
 def build_items(target, real):
     """Per-item device functions ``drift``, ``place``, ``contact``, ``gather`` for a target and precision."""
     zero, half, one = real(0), real(0.5), real(1)
-    floor, sqrt = math.floor, math.sqrt
+    sqrt = math.sqrt
     rotate, rotate_inv, mul, free_rotor, spin_world, omega_world = build_quaternion(target, real)
     contact_force = build_contact_force(target, real)
     hydro_force = build_hydro_force(target, real, rotate)
     cell_hash = build_cell_hash(target)
+    cell_index = build_cell_index(target)
 
     @target.device
     def drift(b, h, pos, vel, vpred, quat, angmom, omega, inertia, inv_meff, kin, pvel, pomega, force, torque):
@@ -101,7 +103,7 @@ def build_items(target, real):
         xs[i, 0] = x
         xs[i, 1] = y
         xs[i, 2] = z
-        key[i] = cell_hash(floor(x * inv_cell), floor(y * inv_cell), floor(z * inv_cell), mask)
+        key[i] = cell_hash(cell_index(x, inv_cell), cell_index(y, inv_cell), cell_index(z, inv_cell), mask)
 
     @target.device
     def point_velocity(b, pos, vel, omega, px, py, pz):
@@ -129,9 +131,9 @@ def build_items(target, real):
         yi = xs[i, 1]
         zi = xs[i, 2]
         ri = srad[i]
-        cx = floor(xi * inv_cell)
-        cy = floor(yi * inv_cell)
-        cz = floor(zi * inv_cell)
+        cx = cell_index(xi, inv_cell)
+        cy = cell_index(yi, inv_cell)
+        cz = cell_index(zi, inv_cell)
         cap = hp_new.shape[1]
         nn = 0
         fx = zero
@@ -157,7 +159,7 @@ def build_items(target, real):
                         xj = xs[j, 0]
                         yj = xs[j, 1]
                         zj = xs[j, 2]
-                        if floor(xj * inv_cell) != ccx or floor(yj * inv_cell) != ccy or floor(zj * inv_cell) != ccz:
+                        if cell_index(xj, inv_cell) != ccx or cell_index(yj, inv_cell) != ccy or cell_index(zj, inv_cell) != ccz:
                             continue
                         rsum = ri + srad[j]
                         ex = xj - xi
@@ -370,11 +372,10 @@ def make_launcher(target, item, argnames, name, kind, key=None):
         src = f"def {name}(n, {args}):\n    i = cuda.grid(1)\n    if i < n:\n        item(i, {args})\n"
         ns = {"cuda": cuda, "item": item}
         exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-        kern = target.kernel(ns[name])
+        kern = target.kernel(ns[name], threads=THREADS)
 
         def launch(n, *a):
-            if n:
-                kern[(n + THREADS - 1) // THREADS, THREADS](n, *a)
+            cuda_launch(kern, (n + THREADS - 1) // THREADS, THREADS, n, *a)
     else:
         kern = kcache.cpu_launcher(name, argnames, item, key) if key is not None else None
         if kern is None:

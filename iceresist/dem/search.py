@@ -18,6 +18,7 @@ import numpy as np
 from numba import cuda  # cuda.grid / cuda.atomic inside kernels (module global for the simulator)
 
 from iceresist.backends.jit import Target
+from iceresist.backends.launch import cuda_launch
 from iceresist.dem import kcache
 
 P1, P2, P3 = 73856093, 19349663, 83492791
@@ -31,11 +32,25 @@ def table_size(n_spheres: int) -> int:
 
 
 def build_cell_hash(target: Target):
+    """``cell_hash(cx, cy, cz, mask)``: the bucket of integer cell (cx, cy, cz) (int64 arguments)."""
     @target.device
     def cell_hash(cx, cy, cz, mask):
         return ((cx * P1) ^ (cy * P2) ^ (cz * P3)) & mask
 
     return cell_hash
+
+
+def build_cell_index(target: Target):
+    """``cell_index(x, inv_cell)``: the int64 index of the grid cell holding coordinate ``x`` (floor of
+    ``x * inv_cell``). ``math.floor`` of a float is an integer on the CPU but a float under numba-cuda, and a
+    float cell index cannot be hashed with ``xor`` (the DEM then did not compile for a real GPU)."""
+    int64 = np.int64
+
+    @target.device
+    def cell_index(x, inv_cell):
+        return int64(math.floor(x * inv_cell))
+
+    return cell_index
 
 
 def sort_cpu(n, key, start, count, cursor, order):
@@ -59,20 +74,20 @@ def build_grid_sort(target: Target):
     if not target.is_cuda:
         return kcache.cpu_function(sort_cpu)
 
-    @target.kernel
+    @target.kernel(threads=THREADS)
     def zero2(nb, a, b):
         i = cuda.grid(1)
         if i < nb:
             a[i] = 0
             b[i] = 0
 
-    @target.kernel
+    @target.kernel(threads=THREADS)
     def count_k(n, key, count):
         i = cuda.grid(1)
         if i < n:
             cuda.atomic.add(count, key[i], 1)
 
-    @target.kernel
+    @target.kernel(threads=THREADS)
     def chunk_sum(nchunk, count, sums):
         c = cuda.grid(1)
         if c < nchunk:
@@ -81,7 +96,7 @@ def build_grid_sort(target: Target):
                 s += count[b]
             sums[c] = s
 
-    @target.kernel
+    @target.kernel(threads=THREADS)
     def scan_sums(nchunk, sums):
         if cuda.grid(1) == 0:
             run = 0
@@ -90,7 +105,7 @@ def build_grid_sort(target: Target):
                 sums[c] = run
                 run += s
 
-    @target.kernel
+    @target.kernel(threads=THREADS)
     def chunk_scan(nchunk, count, sums, start):
         c = cuda.grid(1)
         if c < nchunk:
@@ -99,7 +114,7 @@ def build_grid_sort(target: Target):
                 start[b] = run
                 run += count[b]
 
-    @target.kernel
+    @target.kernel(threads=THREADS)
     def scatter(n, key, start, cursor, order):
         i = cuda.grid(1)
         if i < n:
@@ -116,15 +131,13 @@ def build_grid_sort(target: Target):
         nb = count.shape[0]
         nchunk = (nb + SCAN_CHUNK - 1) // SCAN_CHUNK
         if nchunk not in sums_cache:
-            sums_cache[nchunk] = cuda.device_array(nchunk, dtype=np.int32)
+            sums_cache[nchunk] = target.to_device(np.zeros(nchunk, dtype=np.int32))
         sums = sums_cache[nchunk]
-        zero2[grid(nb)](nb, count, cursor)
-        if n:
-            count_k[grid(n)](n, key, count)
-        chunk_sum[grid(nchunk)](nchunk, count, sums)
-        scan_sums[1, 1](nchunk, sums)
-        chunk_scan[grid(nchunk)](nchunk, count, sums, start)
-        if n:
-            scatter[grid(n)](n, key, start, cursor, order)
+        cuda_launch(zero2, *grid(nb), nb, count, cursor)
+        cuda_launch(count_k, *grid(n), n, key, count)
+        cuda_launch(chunk_sum, *grid(nchunk), nchunk, count, sums)
+        cuda_launch(scan_sums, 1, 1, nchunk, sums)
+        cuda_launch(chunk_scan, *grid(nchunk), nchunk, count, sums, start)
+        cuda_launch(scatter, *grid(n), n, key, start, cursor, order)
 
     return sort_cuda

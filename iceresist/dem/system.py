@@ -223,12 +223,7 @@ class DEMSystem:
         self._h = h
         self._inv_cell = 1.0 / (2.0 * float(h["srad"].max()))
         self._cur = "a"
-        if self.target.is_cuda:
-            from numba import cuda
-
-            self._d = {k: cuda.to_device(v) for k, v in h.items()}
-        else:
-            self._d = h
+        self._d = {k: self.target.to_device(v) for k, v in h.items()} if self.target.is_cuda else h
         self._k = _launchers(self.target, self.real)
         self._dt_crit = self._critical_step()
         self._built = True

@@ -58,7 +58,8 @@ def build_surface_cells(target, real):
       of the link density in :func:`iceresist.lbm.stream.stream_collide_source`).
     """
     neighbour, _ = build_neighbour(target)
-    cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
+    cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))  # int64: neighbour offsets
+    ex, ey, ez = (np.ascontiguousarray(L.C[:, a].astype(real)) for a in range(3))  # real: c_q . (...) sums
     w = L.W.astype(real)
     zero, one, half, two, c3, c45, c15 = (real(v) for v in (0.0, 1.0, 0.5, 2.0, 3.0, 4.5, 1.5))
     tclip = real(TANH_CLIP)
@@ -79,9 +80,9 @@ def build_surface_cells(target, real):
             for q in range(27):
                 fq = f[s, q, c]
                 rho += fq
-                jx += cx[q] * fq
-                jy += cy[q] * fq
-                jz += cz[q] * fq
+                jx += ex[q] * fq
+                jy += ey[q] * fq
+                jz += ez[q] * fq
             u[b, 0, c] = jx / rho - half * gx
             u[b, 1, c] = jy / rho - half * gy
             u[b, 2, c] = jz / rho - half * gz
@@ -112,7 +113,7 @@ def build_surface_cells(target, real):
             t = min(two * phi[b, c] - one, tclip)
             drho = c3 * g * half_width * math.atanh(t)
             for q in range(27):
-                cu = cx[q] * ux + cy[q] * uy + cz[q] * uz
+                cu = ex[q] * ux + ey[q] * uy + ez[q] * uz
                 f[s, q, c] = w[q] * (drho + (one + drho) * (c3 * cu + c45 * cu * cu - c15 * uu))
         z = c // 64
         y = (c // 8) % 8
@@ -177,14 +178,10 @@ class FreeSurfaceFluid:
         self.iteration = 0
 
     def _to_target(self, a):
-        if self.target.is_cuda:
-            from numba import cuda
-
-            return cuda.to_device(a)
-        return a
+        return self.target.to_device(a)
 
     def _host(self, a) -> np.ndarray:
-        return a.copy_to_host() if self.target.is_cuda else np.array(a)
+        return self.target.to_host(a)
 
     # ------------------------------------------------------------------ state
     def initialize(self, surface=None, u=(0.0, 0.0, 0.0)):

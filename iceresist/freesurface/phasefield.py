@@ -69,10 +69,12 @@ def _stencils(real, lat: HLattice):
 
 def build_normal(target, real):
     """Compile ``normal(phi, nbr, b, x, y, z) -> (nx, ny, nz)``: n = grad phi / |grad phi| by the isotropic D3Q27
-    stencil, walls clamped (zero normal gradient); the sums run in float64 (integer c_q times phi). Its
-    last step, ``unit(gx, gy, gz)``, is returned too: ``(normal, unit)``."""
+    stencil, walls clamped (zero normal gradient); the sums run in the precision ``real`` (c_q as ``real``, so a
+    float32 build holds no float64 arithmetic). Its last step, ``unit(gx, gy, gz)``, is returned too:
+    ``(normal, unit)``."""
     _, neighbour_clamped = build_neighbour(target)
     gcx, gcy, gcz, gw = _gradient_stencil(real)
+    gex, gey, gez = (a.astype(real) for a in (gcx, gcy, gcz))
     zero, one = real(0.0), real(1.0)
     tiny = real(1e-24) if real == np.float64 else real(1e-18)
     dev = target.device
@@ -93,9 +95,9 @@ def build_normal(target, real):
         for q in range(1, 27):
             bn, cn_ = neighbour_clamped(nbr, b, x, y, z, gcx[q], gcy[q], gcz[q])
             pn = gw[q] * phi[bn, cn_]
-            gx += gcx[q] * pn
-            gy += gcy[q] * pn
-            gz += gcz[q] * pn
+            gx += gex[q] * pn
+            gy += gey[q] * pn
+            gz += gez[q] * pn
         return unit(gx, gy, gz)
 
     return normal, unit
@@ -115,6 +117,7 @@ def build_phase_cells(target, real, lat: HLattice):
     """
     neighbour, _ = build_neighbour(target)
     nq, hcx, hcy, hcz, hw, hopp, *_ = _stencils(real, lat)
+    hex_, hey, hez = (a.astype(real) for a in (hcx, hcy, hcz))  # c_k in the arithmetic precision
     zero, one, half, four = real(0.0), real(1.0), real(0.5), real(4.0)
     cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
     dev = target.device
@@ -134,8 +137,8 @@ def build_phase_cells(target, real, lat: HLattice):
     @dev
     def h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu):
         """h_k^eq = phi Gamma_k(u) + theta w_k c_k . n (eqs. 7-8)."""
-        cu = hcx[k] * ux + hcy[k] * uy + hcz[k] * uz
-        cn = hcx[k] * nx + hcy[k] * ny + hcz[k] * nz
+        cu = hex_[k] * ux + hey[k] * uy + hez[k] * uz
+        cn = hex_[k] * nx + hey[k] * ny + hez[k] * nz
         return hw[k] * (p * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu)) + th * cn)
 
     @dev
@@ -444,14 +447,10 @@ class PhaseField:
         return self.real(self.mobility / (self.lat.cs2 * self.width))
 
     def _to_target(self, a):
-        if self.target.is_cuda:
-            from numba import cuda
-
-            return cuda.to_device(a)
-        return a
+        return self.target.to_device(a)
 
     def _host(self, a) -> np.ndarray:
-        return a.copy_to_host() if self.target.is_cuda else np.array(a)
+        return self.target.to_host(a)
 
     def _u(self, u):
         u = self._to_target(np.ascontiguousarray(u, dtype=self.real)) if isinstance(u, np.ndarray) else u

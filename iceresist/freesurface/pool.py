@@ -63,7 +63,7 @@ def build_pool_cells(target, real):
     * ``fill_cell(i, c, blocks, fslot, fa, fb, u)``: both buffers of block ``blocks[i]`` get
       f - w = f^eq(1, u) - w (eq. 12 at rho0 = 1, ``u[block, 3, cell]``).
     """
-    cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
+    cx, cy, cz = (np.ascontiguousarray(L.C[:, a].astype(real)) for a in range(3))  # real: no float64 in fp32
     w = L.W.astype(real)
     half, c3, c45, c15 = (real(v) for v in (0.5, 3.0, 4.5, 1.5))
     int8, int64 = np.int8, np.int64
@@ -232,14 +232,10 @@ class PooledLBM:
         self._f = [self._to_device(np.zeros((self.pool.capacity, L.Q, CELLS), real)) for _ in range(2)]
 
     def _to_device(self, a):
-        if self.target.is_cuda:
-            from numba import cuda
-
-            return cuda.to_device(a)
-        return a
+        return self.target.to_device(a)
 
     def _host(self, a) -> np.ndarray:
-        return a.copy_to_host() if self.target.is_cuda else np.array(a)
+        return self.target.to_host(a)
 
     @property
     def state(self):
@@ -329,10 +325,7 @@ class PooledLBM:
 
     def synchronize(self):
         """Wait for the device (CUDA); a no-op on the CPU."""
-        if self.target.is_cuda:
-            from numba import cuda
-
-            cuda.synchronize()
+        self.target.synchronize()
 
     def populations(self) -> np.ndarray:
         """Host copy of f - w per block, (nblocks, 27, 512) float64, 0 in blocks without a row."""

@@ -134,19 +134,14 @@ class FluidProbe:
         self.target = target
         self._launch = probe_launcher(target)
         rows = np.zeros((forest.nblocks, len(COLUMNS)), np.float64)
-        if target.is_cuda:
-            from numba import cuda
-
-            self._out = cuda.to_device(rows)
-        else:
-            self._out = rows
+        self._out = target.to_device(rows)
         self._origin = forest.origin * BLOCK
 
     def rows(self, f, fslot, flags, u, phi, full: bool, half_g: float) -> np.ndarray:
         """The (nblocks, 12) rows of :data:`COLUMNS`, on the host."""
         self._launch(self.forest.nblocks, f, fslot, flags, u, phi, np.int64(bool(full)), np.float64(half_g),
                      self._out)
-        return self._out.copy_to_host() if self.target.is_cuda else self._out.copy()
+        return self.target.to_host(self._out)
 
     def _dense_index(self, blocks, cells):
         """[i, j, k] of (block, in-block cell) pairs and their flat index in the dense (nx, ny, nz) array."""

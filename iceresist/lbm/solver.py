@@ -115,11 +115,7 @@ class LBMSolver:
                  precision, target.name)
 
     def _to_device(self, a):
-        if self.target.is_cuda:
-            from numba import cuda
-
-            return cuda.to_device(a)
-        return a
+        return self.target.to_device(a)
 
     @property
     def state(self):
@@ -133,8 +129,7 @@ class LBMSolver:
         return self._tables["flags"]
 
     def _host_f(self) -> np.ndarray:
-        f = self._f[0]
-        return f.copy_to_host() if self.target.is_cuda else f
+        return self.target.to_host(self._f[0], copy=False)
 
     # ------------------------------------------------------------------ state
     def initialize(self, rho=1.0, u=(0.0, 0.0, 0.0)):
@@ -175,10 +170,7 @@ class LBMSolver:
 
     def synchronize(self):
         """Wait for the device (CUDA); a no-op on the CPU."""
-        if self.target.is_cuda:
-            from numba import cuda
-
-            cuda.synchronize()
+        self.target.synchronize()
 
     # ------------------------------------------------------------------ diagnostics
     def populations(self) -> np.ndarray:

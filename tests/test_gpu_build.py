@@ -1,0 +1,83 @@
+"""The GPU build check (issue: a GPU path that compiles for a real device): every CUDA kernel that tiers 1 and 2
+launch, and the plain fused LBM step, compiled by numba-cuda's NVVM to PTX and by ptxas to an sm_90 cubin on
+this machine, with no GPU. The CUDA simulator that the other tests use runs kernels as Python and cannot see what
+the GPU compiler refuses, so the check runs in a process of its own with the simulator off."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
+
+#: Kernels that must be in the check: each part of a tier-2 step and of tier 1 (LBM, free surface, coupling, DEM).
+EXPECTED = {
+    "launch_cells:stream_collide_cell",  # the pooled fused f update and the h stream-collide
+    "launch_cells:velocity_cell", "launch_cells:reflag_cell", "launch_cells:extend_cell", "launch_cells:phi_cell",
+    "launch_cells:init_cell", "launch_cells:wet_cell", "launch_cells:fill_cell", "launch_blocks:volume_block",
+    "launch_blocks:probe_block", "launch_mark:mark", "launch_links:links", "launch_mirror:mirror",
+    "launch_refill_fs:classify_refill_fs", "launch_redistribute_fs:redistribute_fs",
+    "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero2", "count_k", "chunk_sum", "scan_sums",
+    "chunk_scan", "scatter",
+}
+
+
+@pytest.fixture(scope="module")
+def builds():
+    """One run of ``python -m validation.bench gpu_build --json`` (about 1.5 min on a 2-core x86 VM)."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    res = subprocess.run([sys.executable, "-m", "validation.bench", "gpu_build", "--json"], capture_output=True,
+                         text=True, env=env, timeout=1200)
+    rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+    assert rows, res.stderr[-3000:]
+    return rows, res.returncode
+
+
+def test_every_kernel_is_traced(builds):
+    rows, _ = builds
+    names = {r["name"] for r in rows}
+    assert EXPECTED <= names, sorted(EXPECTED - names)
+    scenes = {s for r in rows for s in r["scenes"].split(",")}
+    assert {"tier1", "tier2-float32", "tier2-float64", "lbm-float32", "lbm-float64"} <= scenes
+
+
+def test_every_kernel_compiles_for_sm90_and_launches(builds):
+    rows, status = builds
+    bad = [(r["name"], r["scenes"], r["error"] or f"{r['registers']} registers x {r['threads']} threads")
+           for r in rows if not r["launchable"]]
+    assert not bad, bad
+    assert status == 0
+    for r in rows:
+        assert 0 < r["registers"] <= 255 and r["registers"] * r["threads"] <= REGISTER_FILE
+
+
+def test_float32_kernels_compute_in_float32(builds):
+    """A bare int64 lattice constant times a float32 value promotes the product to float64 (half-rate or worse on
+    a GPU): the float32 kernels of the tier-2 step hold no float64 instruction."""
+    rows, _ = builds
+    f64 = [(r["name"], r["float64_ops"]) for r in rows if r["float32"] and r["float64_ops"]]
+    assert not f64, f64
+
+
+def test_fused_f_update_does_not_spill(builds):
+    rows, _ = builds
+    fused = [r for r in rows if r["name"] == "launch_cells:stream_collide_cell" and r["registers"] > 100]
+    assert {s for r in fused for s in r["scenes"].split(",")} >= {"tier2-float32", "tier2-float64"}
+    tier2 = [r for r in fused if "tier2" in r["scenes"]]
+    assert tier2 and all(r["spill_stores_bytes"] == 0 and r["spill_loads_bytes"] == 0 for r in tier2), tier2
+
+
+def test_float64_ops_counts_arithmetic_not_data_movement():
+    ptx = """
+    ld.global.f64 %fd1, [%rd1];
+    st.global.f64 [%rd2], %fd1;
+    add.rn.f32 %f1, %f2, %f3;
+    fma.rn.f64 %fd2, %fd1, %fd1, %fd1;
+    cvt.f64.f32 %fd3, %f1;
+    cvt.rn.f32.f64 %f4, %fd3;
+    @%p1 mul.f64 %fd4, %fd2, %fd3;
+    setp.lt.f64 %p2, %fd4, %fd1;
+    """
+    assert float64_ops(ptx) == 5

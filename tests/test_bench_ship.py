@@ -48,3 +48,22 @@ def test_measure_projects_its_own_rate_on_the_ci_sized_case():
     assert row["mlups"] == pytest.approx(row["cells"] * row["steps"] / row["seconds"] / 1e6, rel=1e-12)
     per, fixed = bytes_per_cell({"lbm": 1000, "phase_field": 500, "coupling": 100, "dem": 7}, 10)
     assert (per, fixed) == (160.0, 7)
+
+
+def test_compare_pure_splits_the_coupled_step_into_its_kernels():
+    """``--compare-pure`` on the CI-sized case: the parts and the rest add up to the coupled step, every part of
+    a tier-2 step is timed under its own label, and the ratio is the coupled step over the pure LBM step."""
+    from validation.bench_ship import compare_pure
+
+    scene = case_scene(CASE, "quick", 2, **TINY_TIER2_OVERRIDES)
+    rows = {r["name"]: r for r in compare_pure(scene, "cpu", 1)}
+    coupled, pure = rows["coupled step"], rows["pure fused LBM step"]
+    parts = [r for n, r in rows.items() if n.startswith("part: ")]
+    assert sum(r["s_per_step"] for r in parts) == pytest.approx(coupled["s_per_step"], rel=1e-9)
+    labels = {lab for r in parts for lab in r.get("labels", "").split()}
+    assert {"f_update", "h_stream_collide", "phi", "velocity", "reflag", "extension", "links", "mark",
+            "dem_contact", "dem_drift"} <= labels
+    fu = rows["part: free-surface fused f update"]
+    assert fu["launches_per_step"] == 1.0 and 0 < fu["share"] < 1
+    assert rows["ratio coupled / pure"]["ratio"] == pytest.approx(coupled["s_per_step"] / pure["s_per_step"])
+    assert pure["cells"] == coupled["cells"] == 64 * 16 * 16

@@ -116,3 +116,31 @@ def test_thread_count_does_not_change_the_result(monkeypatch):
     assert out[0]["forces"].any()
     for name in out[0]:
         np.testing.assert_array_equal(out[0][name], out[1][name], err_msg=name)
+
+
+def test_external_loads_of_all_bodies_at_once_act_as_per_body_ones():
+    """``set_external_all`` (one upload per coupled step) moves the bodies as ``set_external`` body by body did,
+    bit for bit, before and after the build; a table of the wrong shape is refused naming the shape."""
+    rng = np.random.default_rng(5)
+    force0, torque0 = rng.normal(0, 0.05, (9, 3)), rng.normal(0, 1e-3, (9, 3))
+    runs = []
+    for batched in (False, True):
+        s = _heap()
+        for step in range(4):
+            # loads that change after the build, as the coupling's do every step
+            force, torque = (force0, torque0) if step < 2 else (-force0, 2 * torque0)
+            if batched:
+                s.set_external_all(force, torque)
+            else:
+                for b in range(9):
+                    s.set_external(b, force_N=force[b], torque_N_m=torque[b])
+            s.step(2e-3)
+        runs.append(_final(s))
+    for key in runs[0]:
+        assert np.array_equal(runs[0][key], runs[1][key]), key
+    free = _heap()
+    for _ in range(4):
+        free.step(2e-3)
+    assert not np.array_equal(runs[1]["positions"], free.positions)  # the loads moved the bodies
+    with pytest.raises(InputError, match=r"\(9, 3\)"):
+        s.set_external_all(force[:3], torque)

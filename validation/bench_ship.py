@@ -13,6 +13,12 @@ seconds per record, MLUPS, the records the case needs (its ``run.end_time_s`` ov
 the projected hours to finish it at the measured rate. ``--records 0`` prints the ``--fit-gib`` row alone
 (a machine without the memory can say what a device with it would hold). The preset's precision (float32) is used; the common
 ``--precision`` flag is ignored.
+
+``--compare-pure`` (the cost of the coupling, issue "tier 2 at the pace of the LBM kernel"): in the same process,
+the coupled LBM step of the case timed part by part (every kernel launch under its label,
+:func:`iceresist.backends.launch.profiling`; what is left is host NumPy and Python between launches), then the
+pure fused cumulant LBM step (:class:`~iceresist.lbm.solver.LBMSolver`, no free surface, no bodies) on a box of
+the same cells, and the ratio of the two: ``python -m validation.bench ship --preset quick --compare-pure``.
 """
 
 from __future__ import annotations
@@ -34,6 +40,8 @@ def add_arguments(parser):
                         help="cells across of the build that measures the bytes per cell for --fit-gib")
     parser.add_argument("--records", type=int, default=3,
                         help="timed records after one of warm-up (0: only the --fit-gib row, nothing timed)")
+    parser.add_argument("--compare-pure", action="store_true",
+                        help="time the coupled step part by part beside the pure fused LBM step on as many cells")
 
 
 def scaled_scene(case: str, preset: str, across: int, **overrides):
@@ -93,6 +101,87 @@ def measure(scene, backend: str, records: int) -> dict:
             "finite": bool(model.is_finite())}
 
 
+#: The parts of a coupled step in the words of docs/PERFORMANCE.md, by launcher label.
+PARTS = {
+    "links": "link pass (q, eq. 16, eq. 17)",
+    "f_update": "free-surface fused f update",
+    "h_stream_collide": "phase field h stream-collide",
+    "reflag": "reflag",
+    "extension": "velocity extension",
+    "phi": "phase field phi pass",
+    "velocity": "velocity",
+    "mark": "redistribute / mirror / refill / mark", "mirror": "redistribute / mirror / refill / mark",
+    "refill_fs": "redistribute / mirror / refill / mark", "redistribute_fs": "redistribute / mirror / refill / mark",
+}
+
+
+def part_of(label: str) -> str:
+    """The part of the coupled step a launcher label belongs to (DEM kernels together, the rest by name)."""
+    if label.startswith("dem_"):
+        return "DEM kernels"
+    return PARTS.get(label, label)
+
+
+def pure_step_seconds(shape_cells, tau: float, operator: str, precision: str, target, min_seconds: float = 2.0):
+    """Seconds per step of the pure fused LBM (periodic box of ``shape_cells``), after one warm-up step, timed
+    over at least ``min_seconds``."""
+    from iceresist.grid import BlockForest
+    from iceresist.lbm.solver import LBMSolver
+
+    solver = LBMSolver(BlockForest.uniform(tuple(shape_cells)), tau=tau, operator=operator, precision=precision,
+                       target=target)
+    solver.initialize()
+    solver.step(1)
+    solver.synchronize()
+    steps, seconds = 0, 0.0
+    t0 = time.perf_counter()
+    while seconds < min_seconds or steps < 3:
+        solver.step(1)
+        solver.synchronize()
+        steps += 1
+        seconds = time.perf_counter() - t0
+    return seconds / steps
+
+
+def compare_pure(scene, backend: str, records: int) -> list[dict]:
+    """Rows: each part of the coupled LBM step (seconds per step and share), the rest (host NumPy, Python), the
+    whole coupled step, the pure fused LBM step on as many cells, and their ratio."""
+    from iceresist.backends.launch import profiling
+    from iceresist.tier2 import Tier2Model
+
+    model = Tier2Model(scene, backend=backend)
+    model.step(1)  # warm-up: compiles, and the first record's start transient
+    fluid = model.fb.fluid.fluid
+    fluid.synchronize()
+    with profiling(model.target) as prof:
+        t0 = time.perf_counter()
+        model.step(records)
+        fluid.synchronize()
+        total = time.perf_counter() - t0
+    steps = records * model.lbm_steps_per_record
+    common = {"backend": model.target.name, "precision": model.precision, "cells": model.cells, "steps": steps}
+    parts: dict = {}
+    for label, (sec, n) in prof.items():
+        p = parts.setdefault(part_of(label), [0.0, 0, []])
+        p[0] += sec
+        p[1] += n
+        p[2].append(label)
+    rows = [{"name": f"part: {name}", **common, "s_per_step": sec / steps, "share": sec / total,
+             "launches_per_step": n / steps, "labels": " ".join(sorted(labels))}
+            for name, (sec, n, labels) in sorted(parts.items(), key=lambda kv: -kv[1][0])]
+    rest = total - sum(p[0] for p in parts.values())
+    rows.append({"name": "part: host NumPy and Python between launches", **common, "s_per_step": rest / steps,
+                 "share": rest / total})
+    coupled = total / steps
+    rows.append({"name": "coupled step", **common, "seconds": total, "s_per_step": coupled, "share": 1.0,
+                 "mlups": model.cells / coupled / 1e6})
+    pure = pure_step_seconds(model.shape_cells, fluid.tau, fluid.operator, model.precision, model.target)
+    rows.append({"name": "pure fused LBM step", **common, "s_per_step": pure, "mlups": model.cells / pure / 1e6,
+                 "shape": "x".join(str(n) for n in model.shape_cells)})
+    rows.append({"name": "ratio coupled / pure", **common, "ratio": coupled / pure})
+    return rows
+
+
 def run(args):
     from iceresist.errors import InputError
     from iceresist.ship.presets import FIDELITIES, TIER2
@@ -123,5 +212,9 @@ def run(args):
     if not acrosses and not args.fit_gib:
         acrosses = [TIER2[args.preset]["cells"][1]]
     for n in acrosses if args.records else []:
-        rows.append(measure(scaled_scene(args.case, args.preset, n), args.backend, args.records))
+        scene = scaled_scene(args.case, args.preset, n)
+        if args.compare_pure:
+            rows.extend(compare_pure(scene, args.backend, args.records))
+        else:
+            rows.append(measure(scene, args.backend, args.records))
     return rows

@@ -14,9 +14,15 @@ Every CUDA kernel of the engine is compiled by :func:`cuda_kernel` (which names 
 :func:`cuda_launch`: the one place a launch happens, so the GPU build check
 (:mod:`iceresist.backends.buildcheck`) can record each kernel's argument types, launches of no items
 included, instead of running it.
+
+Every launcher has a ``label`` (``"f_update"``, ``"links"``, ``"dem_contact"``, ...), the same on both targets;
+within :func:`profiling` each launch is timed under it (the coupled-step benchmark's parts).
 """
 
 from __future__ import annotations
+
+import contextlib
+import time
 
 import numba
 import numpy as np
@@ -67,6 +73,44 @@ def cuda_launch(kernel, grid: int, threads: int, *args):
         kernel[grid, threads](*args)
 
 
+#: Set by :func:`profiling`: ``{label: [seconds, launches]}``, and the device synchronisation after each launch.
+_PROFILE = None
+_SYNC = None
+
+
+@contextlib.contextmanager
+def profiling(target):
+    """Within: every launch made through a launcher (:func:`profiled`) is timed, wall clock, into the yielded
+    ``{label: [seconds, launches]}``; on CUDA the device is synchronised after each launch so that the time is the
+    kernel's own. Meant for benchmarks: the synchronisation serialises the device."""
+    global _PROFILE, _SYNC
+    saved = (_PROFILE, _SYNC)
+    _PROFILE, _SYNC = {}, (target.synchronize if target.is_cuda else None)
+    try:
+        yield _PROFILE
+    finally:
+        _PROFILE, _SYNC = saved
+
+
+def profiled(label: str, call):
+    """``call`` (a launch function) timed under ``label`` within :func:`profiling`; the same call otherwise."""
+    def launch(*args):
+        if _PROFILE is None:
+            return call(*args)
+        t0 = time.perf_counter()
+        out = call(*args)
+        if _SYNC is not None:
+            _SYNC()
+        entry = _PROFILE.setdefault(label, [0.0, 0])
+        entry[0] += time.perf_counter() - t0
+        entry[1] += 1
+        return out
+
+    launch.label = label
+    launch.__name__ = label
+    return launch
+
+
 def device_name(fn) -> str:
     """The Python name of a device function (a numba dispatcher or a plain function)."""
     return getattr(getattr(fn, "py_func", fn), "__name__", "kernel")
@@ -96,14 +140,19 @@ class _GeneratedLauncher:
     fn_name = ""
     threads = CUDA_BLOCK_CELLS
 
-    def __init__(self, target, fn, argnames, **options):
+    def __init__(self, target, fn, argnames, label: str | None = None, **options):
         self.target = target
         self.argnames = tuple(argnames)
+        self.label = label or device_name(fn)
         self.source = self._source(target.is_cuda, ", ".join(self.argnames), **options)
-        self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn},
-                                     label=f"{self.name}:{device_name(fn)}", threads=self.threads)
+        self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn}, label=self.label,
+                                     threads=self.threads)
+        self._call = profiled(self.label, self._launch)
 
     def __call__(self, n, *args):
+        self._call(n, *args)
+
+    def _launch(self, n, *args):
         if self.target.is_cuda:
             grid, threads, lead = self._cuda_launch(n)
             cuda_launch(self._kernel, grid, threads, *lead, *args)
@@ -117,8 +166,8 @@ class CellLauncher(_GeneratedLauncher):
 
     name, fn_name = "launch_cells", "cell"
 
-    def __init__(self, target, cell, argnames, per_block: bool = False):
-        super().__init__(target, cell, argnames, per_block=per_block)
+    def __init__(self, target, cell, argnames, per_block: bool = False, label: str | None = None):
+        super().__init__(target, cell, argnames, label=label, per_block=per_block)
 
     @staticmethod
     def _source(cuda: bool, sig: str, per_block: bool) -> str:

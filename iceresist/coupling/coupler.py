@@ -365,8 +365,7 @@ class FluidStructureCoupling:
             ext = self.fluid_force_N.copy()
             if self.buoyancy:
                 ext -= u.rho_kg_m3 * self._volume_m3[:, None] * g[None, :]
-            for b in range(self.n):
-                self.dem.set_external(b, force_N=ext[b], torque_N_m=self.fluid_torque_N_m[b])
+            self.dem.set_external_all(ext, self.fluid_torque_N_m)
             self.dem.step(u.dt_s)
             self.iteration += 1
 

@@ -54,7 +54,7 @@ import math
 import numpy as np
 
 from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
-from iceresist.backends.launch import cuda_launch, device_name, jit_generated
+from iceresist.backends.launch import cuda_launch, jit_generated, profiled
 from iceresist.coupling.geometry import BOX, SPHERE
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
@@ -497,6 +497,8 @@ class BodyLauncher:
 
     def __init__(self, target, visit, argnames, name="launch_bodies", variant=""):
         self.target = target
+        self.label = name.removeprefix("launch_")
+        self._call = profiled(self.label, self._launch)
         sig = ", ".join(argnames)
         if target.is_cuda:
             src = (f"def launch_bodies({sig}):\n"
@@ -506,8 +508,8 @@ class BodyLauncher:
                    "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
                    "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
                    f"        visit(k, gx, gy, gz, {sig})\n")
-            self._kernel = jit_generated(target, src, "launch_bodies", {"visit": visit},
-                                         label=f"{name}:{device_name(visit)}", threads=BODY_THREADS)
+            self._kernel = jit_generated(target, src, "launch_bodies", {"visit": visit}, label=self.label,
+                                         threads=BODY_THREADS)
         else:
             # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
             loop = (f"def body_loop(k, {sig}):\n"
@@ -521,6 +523,9 @@ class BodyLauncher:
             self._kernel = _cpu_kernel("body_loop", loop, name, src, visit, variant)
 
     def __call__(self, nbodies, *args):
+        self._call(nbodies, *args)
+
+    def _launch(self, nbodies, *args):
         if self.target.is_cuda:
             cuda_launch(self._kernel, nbodies, BODY_THREADS, *args)
         elif nbodies:
@@ -533,14 +538,15 @@ class ActiveLauncher:
 
     def __init__(self, target, visit, argnames, name="launch_active", variant=""):
         self.target = target
+        self.label = name.removeprefix("launch_")
+        self._call = profiled(self.label, self._launch)
         rest = ", ".join(argnames[1:])
         sig = ", ".join(argnames)
         if target.is_cuda:
             src = (f"def launch_active({sig}):\n"
                    "    b = active[cuda.blockIdx.x]\n"
                    f"    visit(b, cuda.threadIdx.x, {rest})\n")
-            self._kernel = jit_generated(target, src, "launch_active", {"visit": visit},
-                                         label=f"{name}:{device_name(visit)}")
+            self._kernel = jit_generated(target, src, "launch_active", {"visit": visit}, label=self.label)
         else:
             loop = (f"def block_loop(b, {rest}):\n"
                     f"    for c in range({CUDA_BLOCK_CELLS}):\n"
@@ -551,6 +557,9 @@ class ActiveLauncher:
             self._kernel = _cpu_kernel("block_loop", loop, name, src, visit, variant)
 
     def __call__(self, nactive, *args):
+        self._call(nactive, *args)
+
+    def _launch(self, nactive, *args):
         if self.target.is_cuda:
             cuda_launch(self._kernel, nactive, CUDA_BLOCK_CELLS, *args)
         elif nactive:

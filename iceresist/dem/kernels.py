@@ -23,7 +23,7 @@ import math
 
 import numba
 
-from iceresist.backends.launch import cuda_launch
+from iceresist.backends.launch import cuda_launch, profiled
 from iceresist.dem import kcache
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
@@ -398,8 +398,10 @@ def make_launcher(target, item, argnames, name, kind, key=None):
                 numba.set_num_threads(threads)
 
         launch.kernel = kern
-    launch.__name__ = name
-    return launch
+    timed = profiled(name, launch)
+    timed.__dict__.update(launch.__dict__)  # ``kernel``: the compiled CPU launcher (its cache statistics)
+    timed.__name__ = name
+    return timed
 
 
 def build_launchers(target, real):
@@ -411,5 +413,5 @@ def build_launchers(target, real):
         "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place", key),
         "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact", "contact", key),
         "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather", "gather", key),
-        "sort": build_grid_sort(target),
+        "sort": profiled("dem_sort", build_grid_sort(target)),
     }

@@ -140,6 +140,22 @@ class DEMSystem:
             if torque_N_m is not None:
                 self._bodies[body].ext_torque = np.asarray(torque_N_m, dtype=float)
 
+    def set_external_all(self, force_N, torque_N_m):
+        """Hold F_fluid and M_fluid (paper eqs. 13-14, arrays (n_bodies, 3), N and N m) on every body at once over
+        the sub-steps of the following steps: one upload, where a call of :meth:`set_external` per body uploads
+        the whole table each time."""
+        force_N, torque_N_m = np.asarray(force_N, dtype=float), np.asarray(torque_N_m, dtype=float)
+        n = self.n_bodies
+        if force_N.shape != (n, 3) or torque_N_m.shape != (n, 3):
+            raise InputError(f"set_external_all: force and torque of shape ({n}, 3) expected, got "
+                             f"{force_N.shape} and {torque_N_m.shape}")
+        if not self._built:
+            for b, body in enumerate(self._bodies):
+                body.ext_force, body.ext_torque = force_N[b].copy(), torque_N_m[b].copy()
+            return
+        self._put("ext", np.concatenate([force_N, torque_N_m], axis=1))
+        self._dirty = True
+
     # ------------------------------------------------------------------ build
     @property
     def n_bodies(self) -> int:

@@ -95,7 +95,7 @@ def build_extension_cell(target, real):
 @lru_cache(maxsize=None)
 def extension_launcher(target, precision: str) -> CellLauncher:
     cell = build_extension_cell(target, jit.real_type(precision))
-    return CellLauncher(target, cell, ("phi", "u", "dist", "nbr", "layer"))
+    return CellLauncher(target, cell, ("phi", "u", "dist", "nbr", "layer"), label="extension")
 
 
 def extend_velocity(launch: CellLauncher, nblocks: int, phi, u, dist, nbr, layers: int = 3) -> None:

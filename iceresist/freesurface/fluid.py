@@ -135,8 +135,9 @@ def build_surface_cells(target, real):
 @lru_cache(maxsize=None)
 def surface_launchers(target, precision: str):
     vel, reflag = build_surface_cells(target, jit.real_type(precision))
-    return (CellLauncher(target, vel, ("f", "fslot", "flags", "u", "gx", "gy", "gz")),
-            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width")))
+    return (CellLauncher(target, vel, ("f", "fslot", "flags", "u", "gx", "gy", "gz"), label="velocity"),
+            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width"),
+                         label="reflag"))
 
 
 class FreeSurfaceFluid:

@@ -374,12 +374,13 @@ def phase_launchers(target, precision: str, lattice_name: str, vector: bool = Tr
     real, lat = jit.real_type(precision), lookup_h_lattice(lattice_name)
     phi_cell, sc_cell, init_cell = build_phase_cells(target, real, lat)
     phi_args, sc_args = ("h_in", "phi", "nbr", "solid"), ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa", "solid")
-    init = CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa"))
+    init = CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa"), label="h_init")
     if target.is_cuda or not vector:
-        return CellLauncher(target, phi_cell, phi_args), CellLauncher(target, sc_cell, sc_args), init
+        return (CellLauncher(target, phi_cell, phi_args, label="phi"),
+                CellLauncher(target, sc_cell, sc_args, label="h_stream_collide"), init)
     phi_block, sc_block = build_phase_blocks(real, lat)
-    return (CellLauncher(target, phi_block, phi_args, per_block=True),
-            CellLauncher(target, sc_block, sc_args, per_block=True), init)
+    return (CellLauncher(target, phi_block, phi_args, per_block=True, label="phi"),
+            CellLauncher(target, sc_block, sc_args, per_block=True, label="h_stream_collide"), init)
 
 
 @lru_cache(maxsize=None)
@@ -397,7 +398,7 @@ def volume_launcher(target, lattice_name: str) -> BlockLauncher:
                     acc += f64(h[b, k, c])
         out[b] = acc
 
-    return BlockLauncher(target, target.device(volume_block), ("h", "solid", "out"))
+    return BlockLauncher(target, target.device(volume_block), ("h", "solid", "out"), label="water_volume")
 
 
 class PhaseField:

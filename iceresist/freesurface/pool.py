@@ -50,10 +50,10 @@ def pooled_fused_launcher(target, precision: str, operator: str) -> CellLauncher
     if target.is_cuda:
         fn = compile_source(pooled_source(stream_collide_source(free_surface=True)), "stream_collide_cell", ns,
                             cell_device(target))
-        return CellLauncher(target, fn, POOL_ARGS)
+        return CellLauncher(target, fn, POOL_ARGS, label="f_update")
     fn = compile_source(pooled_source(stream_collide_source(loop_cells=True, free_surface=True)),
                         "stream_collide_block", ns, cell_device(target))
-    return CellLauncher(target, fn, POOL_ARGS, per_block=True)
+    return CellLauncher(target, fn, POOL_ARGS, per_block=True, label="f_update")
 
 
 def build_pool_cells(target, real):
@@ -94,8 +94,8 @@ def build_pool_cells(target, real):
 @lru_cache(maxsize=None)
 def pool_launchers(target, precision: str):
     wet, fill = build_pool_cells(target, jit.real_type(precision))
-    return (CellLauncher(target, wet, ("phi", "wet")),
-            CellLauncher(target, fill, ("blocks", "fslot", "fa", "fb", "u")))
+    return (CellLauncher(target, wet, ("phi", "wet"), label="pool_wet"),
+            CellLauncher(target, fill, ("blocks", "fslot", "fa", "fb", "u"), label="pool_fill"))
 
 
 def needed_blocks(wet: np.ndarray, nbr: np.ndarray) -> np.ndarray:

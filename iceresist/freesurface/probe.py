@@ -121,7 +121,7 @@ def probe_launcher(target) -> BlockLauncher:
         out[b, 11] = ke
 
     return BlockLauncher(target, target.device(probe_block),
-                         ("f", "fslot", "flags", "u", "phi", "full", "half_g", "out"))
+                         ("f", "fslot", "flags", "u", "phi", "full", "half_g", "out"), label="probe")
 
 
 class FluidProbe:

@@ -62,9 +62,10 @@ def fused_launcher(target, precision: str, operator: str, free_surface: bool = F
     real = jit.real_type(precision)
     collide = collide_builder(operator)(target, real)
     if target.is_cuda:
-        return CellLauncher(target, build_stream_collide(target, real, collide, free_surface), ARGS)
+        return CellLauncher(target, build_stream_collide(target, real, collide, free_surface), ARGS,
+                            label="lbm_stream_collide")
     return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface=free_surface), ARGS,
-                        per_block=True)
+                        per_block=True, label="lbm_stream_collide")
 
 
 def _equilibrium_minus_w(rho, ux, uy, uz):

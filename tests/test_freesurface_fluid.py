@@ -159,3 +159,55 @@ def test_surface_height_is_nan_in_a_column_without_a_surface():
         over = fs.surface_height(covered_as_water=True)
     assert np.isnan(over[2, 5]) and np.isfinite(np.delete(over.ravel(), 2 * 8 + 5)).all()
     assert np.allclose(np.delete(over.ravel(), 2 * 8 + 5), DEPTH, atol=1e-12)
+
+
+def test_surface_passes_skip_blocks_far_from_the_surface_without_changing_a_bit(monkeypatch):
+    """Reflag and the velocity extension skip the blocks with no gas (or no liquid) in reach
+    (``build_block_phases``): on a 5-block-tall tank whose tilted surface rises through a block face (cells turn
+    from gas to liquid), 12 steps give the same populations, phi, velocity and flags, bit for bit, as visiting
+    every block; and blocks of both kinds were skipped."""
+    fo = BlockForest.uniform((16, 16, 40), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+    x = np.arange(16) + 0.5
+    surface = np.broadcast_to((23.0 + 1.5 * (x - 8.0) / 8.0)[:, None], (16, 16))  # crosses z = 24 at x = 8
+    seen = []
+
+    def run():
+        fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=1e-3, depth_cells=23.0, operator="bgk",
+                              precision="float64")
+        fs.initialize(surface=surface, u=(0.0, 0.0, 0.03))
+        for _ in range(12):
+            fs.step(1)
+            seen.append(np.array(fs._near))
+        return (fs.fluid.populations(), fs.phase.phi_host(), np.array(fs._u), np.array(fs.fluid.flags))
+
+    fast = run()
+    near = np.array(seen)
+    assert (near == 2).any() and (near == 1).any() and (near == 3).any()  # liquid-only, gas-only and mixed
+    every = np.full(fo.nblocks, 3, np.int8)
+    monkeypatch.setattr(FreeSurfaceFluid, "_block_phases", lambda self, phi: every)
+    full = run()
+    for a, b, name in zip(fast, full, ("f", "phi", "u", "flags")):
+        assert np.array_equal(a, b), name
+
+
+def test_block_phases_see_gas_flags_and_reach_the_neighbour_blocks():
+    """The block summary behind the skip: a block whose cells all hold water but one still flagged GAS (a bubble
+    that has just closed: the cell must get populations at the next reflag) counts as having gas, and ``near``
+    carries each block's bits to its 26 neighbours, nothing further."""
+    from iceresist.freesurface.fluid import HAS_GAS, HAS_LIQUID, block_phase_launchers
+
+    fo = BlockForest.uniform((32, 8, 8))  # four blocks in a row
+    phases_launch, near_launch = block_phase_launchers(jit.cpu, "float64")
+    phi = np.ones((4, 512))
+    flags = np.full((4, 512), FL.FLUID, np.uint8)
+    flags[0, 17] |= FL.GAS  # block 0: water everywhere, one cell still flagged gas
+    phi[3, :] = 0.0         # block 3: air
+    phases, near = np.zeros(4, np.int8), np.zeros(4, np.int8)
+    phases_launch(4, phi, flags, phases)
+    near_launch(4, phases, fo.nbr.astype(np.int64), near)
+    assert list(phases) == [HAS_GAS | HAS_LIQUID, HAS_LIQUID, HAS_LIQUID, HAS_GAS]
+    assert list(near) == [3, 3, 3, 3]
+    flags[0, 17] = FL.FLUID
+    phases_launch(4, phi, flags, phases)
+    near_launch(4, phases, fo.nbr.astype(np.int64), near)
+    assert list(near) == [HAS_LIQUID, HAS_LIQUID, 3, 3]

@@ -36,7 +36,11 @@ UNFILLED = 127
 
 
 def build_extension_cell(target, real):
-    """``extend_cell(b, c, phi, u, dist, nbr, layer)``; layer 0 marks liquid (dist 0) and clears gas velocity."""
+    """``extend_cell(b, c, phi, u, dist, nbr, layer, near)``; layer 0 marks liquid (dist 0) and clears gas velocity.
+
+    ``near[b]``: the phase bits of block b and its neighbours (:func:`iceresist.freesurface.fluid.build_block_phases`).
+    Layers 1-3 fill gas cells at most 3 cells from the liquid, so only blocks with both gas and liquid in reach
+    (``near[b] == 3``) can change in them: the others return at once."""
     neighbour, _ = build_neighbour(target)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
     w = L.W.astype(real)
@@ -45,7 +49,7 @@ def build_extension_cell(target, real):
     unfilled = UNFILLED
 
     @target.device
-    def extend_cell(b, c, phi, u, dist, nbr, layer):
+    def extend_cell(b, c, phi, u, dist, nbr, layer, near):
         b = int64(b)
         if layer == 0:
             if phi[b, c] >= half:
@@ -56,7 +60,7 @@ def build_extension_cell(target, real):
                 u[b, 1, c] = zero
                 u[b, 2, c] = zero
             return
-        if dist[b, c] <= layer - 1:
+        if near[b] != 3 or dist[b, c] <= layer - 1:
             return
         z = c // 64
         y = (c // 8) % 8
@@ -95,14 +99,16 @@ def build_extension_cell(target, real):
 @lru_cache(maxsize=None)
 def extension_launcher(target, precision: str) -> CellLauncher:
     cell = build_extension_cell(target, jit.real_type(precision))
-    return CellLauncher(target, cell, ("phi", "u", "dist", "nbr", "layer"), label="extension")
+    return CellLauncher(target, cell, ("phi", "u", "dist", "nbr", "layer", "near"), label="extension")
 
 
-def extend_velocity(launch: CellLauncher, nblocks: int, phi, u, dist, nbr, layers: int = 3) -> None:
+def extend_velocity(launch: CellLauncher, nblocks: int, phi, u, dist, nbr, layers: int = 3, near=None) -> None:
     """Overwrite ``u[block, 3, cell]`` in the gas (phi < 1/2) with the velocity extended from the liquid.
 
     ``dist[block, cell]`` (int8 work array) ends as the pass that filled each cell (0 liquid,
-    127 beyond ``layers``).
+    127 beyond ``layers``). ``near`` (int8 per block, see :func:`build_extension_cell`): None visits every block.
     """
+    if near is None:
+        near = np.full(nblocks, 3, np.int8)
     for layer in range(layers + 1):
-        launch(nblocks, phi, u, dist, nbr, np.int64(layer))
+        launch(nblocks, phi, u, dist, nbr, np.int64(layer), near)

@@ -32,7 +32,7 @@ import numpy as np
 
 from iceresist import lattice as L
 from iceresist.backends import jit
-from iceresist.backends.launch import CellLauncher, copy_into
+from iceresist.backends.launch import BlockLauncher, CellLauncher, copy_into
 from iceresist.errors import InputError
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
 from iceresist.freesurface.layout import build_neighbour
@@ -52,8 +52,10 @@ def build_surface_cells(target, real):
     * ``velocity_cell(b, c, f, fslot, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
       populations f - w (pool row ``fslot[b]``) with the half-force shift of the force rho g removed;
       0 elsewhere;
-    * ``reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width)``: the flags of step 5 (module
-      docstring), GHOST cells left as they are; a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
+    * ``reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width, near)``: the flags of step 5 (module
+      docstring), GHOST cells left as they are; in a block with no gas in reach (``near[b]`` without
+      :data:`HAS_GAS`, :func:`build_block_phases`) a liquid cell has no gas neighbour and was not gas, so it
+      takes its base flags without looking at its neighbours; a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
       rho = 1 + 3 g s, s = (W / 2) artanh(2 phi - 1) its depth below the phi = 1/2 surface (the rule
       of the link density in :func:`iceresist.lbm.stream.stream_collide_source`).
     """
@@ -66,6 +68,7 @@ def build_surface_cells(target, real):
     fluid, gas, near_surface, ghost = (np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE),
                                        np.uint8(FL.GHOST))
     int64 = np.int64
+    has_gas = np.int8(HAS_GAS)
     dev = target.device
 
     @dev
@@ -92,12 +95,12 @@ def build_surface_cells(target, real):
             u[b, 2, c] = zero
 
     @dev
-    def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width):
+    def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width, near):
         b = int64(b)
         if flags[b, c] & ghost:
             return  # covered by a body: the coupling owns the cell (it is not water whatever phi says)
         bf = base[b, c]
-        if (bf & fluid) == 0:
+        if (bf & fluid) == 0 or (near[b] & has_gas) == 0:
             flags[b, c] = bf
             return
         if phi[b, c] < half:
@@ -132,12 +135,61 @@ def build_surface_cells(target, real):
     return velocity_cell, reflag_cell
 
 
+#: Bits of a block's phase summary (:func:`build_block_phases`).
+HAS_GAS, HAS_LIQUID = 1, 2
+
+
+def build_block_phases(target, real):
+    """Compile ``(phases_block, near_block)``, per-block passes that let the surface passes skip the blocks far
+    from the surface (71 % of the blocks of the quick tier-2 case lie wholly in the water):
+
+    * ``phases_block(b, phi, flags, phases)``: ``phases[b]`` = :data:`HAS_GAS` if a cell of b has phi < 1/2 or
+      the GAS flag, | :data:`HAS_LIQUID` if a cell has phi >= 1/2;
+    * ``near_block(b, phases, nbr, near)``: ``near[b]`` = the bits of b and of its 26 neighbour blocks (every
+      cell a surface pass of b reads, at most 3 cells away, lies in them).
+    """
+    half = real(0.5)
+    gas = np.uint8(FL.GAS)
+    has_gas, has_liquid, none = np.int8(HAS_GAS), np.int8(HAS_LIQUID), np.int8(0)
+    int64 = np.int64
+
+    def phases_block(b, phi, flags, phases):
+        b = int64(b)
+        m = none
+        for c in range(CELLS):
+            if phi[b, c] >= half:
+                m |= has_liquid
+            else:
+                m |= has_gas
+            if flags[b, c] & gas:
+                m |= has_gas
+        phases[b] = m
+
+    def near_block(b, phases, nbr, near):
+        b = int64(b)
+        m = phases[b]
+        for q in range(1, 27):
+            bn = nbr[b, q]
+            if bn >= 0:
+                m |= phases[bn]
+        near[b] = m
+
+    return target.device(phases_block), target.device(near_block)
+
+
+@lru_cache(maxsize=None)
+def block_phase_launchers(target, precision: str):
+    phases, near = build_block_phases(target, jit.real_type(precision))
+    return (BlockLauncher(target, phases, ("phi", "flags", "phases"), label="block_phases"),
+            BlockLauncher(target, near, ("phases", "nbr", "near"), label="block_phases_near"))
+
+
 @lru_cache(maxsize=None)
 def surface_launchers(target, precision: str):
     vel, reflag = build_surface_cells(target, jit.real_type(precision))
     return (CellLauncher(target, vel, ("f", "fslot", "flags", "u", "gx", "gy", "gz"), label="velocity"),
-            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width"),
-                         label="reflag"))
+            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width",
+                                          "near"), label="reflag"))
 
 
 class FreeSurfaceFluid:
@@ -175,6 +227,9 @@ class FreeSurfaceFluid:
         self._base = self._to_target(np.ascontiguousarray(forest.flags.astype(np.uint8)))
         self._u = self._to_target(np.zeros((self.nblocks, 3, CELLS), self.real))
         self._dist = self._to_target(np.zeros((self.nblocks, CELLS), np.int8))
+        self._phases_launch, self._near_launch = block_phase_launchers(target, precision)
+        self._phases = self._to_target(np.zeros(self.nblocks, np.int8))
+        self._near = self._to_target(np.zeros(self.nblocks, np.int8))
         self._probe = None  # the watchdog's FluidProbe, made at the first probe()
         self.iteration = 0
 
@@ -204,8 +259,9 @@ class FreeSurfaceFluid:
         phi_b = np.ascontiguousarray(self.forest.from_dense(phi), dtype=self.real)
         self.fluid.initialize(rho, tuple(float(v) for v in u), wet=(phi_b >= self.real(0.5)).any(axis=1))
         # flags from phi (the forest's flags carry no GAS bit yet: no cell counts as newly liquid)
-        self._reflag(self.nblocks, self._to_target(phi_b), self._base, self.fluid.flags, self.fluid.state,
-                     self.fluid.fslot, self._u, self.phase.nbr, *self._surface_scalars())
+        phi_t = self._to_target(phi_b)
+        self._reflag(self.nblocks, phi_t, self._base, self.fluid.flags, self.fluid.state, self.fluid.fslot, self._u,
+                     self.phase.nbr, *self._surface_scalars(), self._block_phases(phi_t))
         self._velocity()
         self.phase.initialize(phi_b, self._u)
         self.iteration = 0
@@ -214,7 +270,14 @@ class FreeSurfaceFluid:
         g = self.real(self.g)
         zero = self.real(0.0)
         self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
-        extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr)
+        extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr,
+                        near=self._block_phases(self.phase.phi))
+
+    def _block_phases(self, phi):
+        """``near`` per block (:func:`build_block_phases`) from ``phi`` and the current flags, on the target."""
+        self._phases_launch(self.nblocks, phi, self.fluid.flags, self._phases)
+        self._near_launch(self.nblocks, self._phases, self.phase.nbr, self._near)
+        return self._near
 
     def _surface_scalars(self):
         """(g, W / 2) in the real type: the inputs of the sub-cell surface density."""
@@ -232,7 +295,8 @@ class FreeSurfaceFluid:
             self.phase.step(self._u)
             self.fluid.update_rows(self.phase.phi, self._u)
             self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state,
-                         self.fluid.fslot, self._u, self.phase.nbr, *self._surface_scalars())
+                         self.fluid.fslot, self._u, self.phase.nbr, *self._surface_scalars(),
+                         self._block_phases(self.phase.phi))
             self.iteration += 1
 
     # ------------------------------------------------------------------ diagnostics

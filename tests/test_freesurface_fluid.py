@@ -196,7 +196,7 @@ def test_block_phases_see_gas_flags_and_reach_the_neighbour_blocks():
     carries each block's bits to its 26 neighbours, nothing further."""
     from iceresist.freesurface.fluid import HAS_GAS, HAS_LIQUID, block_phase_launchers
 
-    fo = BlockForest.uniform((32, 8, 8))  # four blocks in a row
+    fo = BlockForest.uniform((32, 8, 8), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})  # 4 blocks
     phases_launch, near_launch = block_phase_launchers(jit.cpu, "float64")
     phi = np.ones((4, 512))
     flags = np.full((4, 512), FL.FLUID, np.uint8)

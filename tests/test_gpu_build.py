@@ -1,4 +1,4 @@
-"""The GPU build check (issue: a GPU path that compiles for a real device): every CUDA kernel that tiers 1 and 2
+"""The GPU build check (a GPU path that compiles for a real device): every CUDA kernel that tiers 1 and 2
 launch, and the plain fused LBM step, compiled by numba-cuda's NVVM to PTX and by ptxas to an sm_90 cubin on
 this machine, with no GPU. The CUDA simulator that the other tests use runs kernels as Python and cannot see what
 the GPU compiler refuses, so the check runs in a process of its own with the simulator off."""

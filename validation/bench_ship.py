@@ -14,7 +14,7 @@ the projected hours to finish it at the measured rate. ``--records 0`` prints th
 (a machine without the memory can say what a device with it would hold). The preset's precision (float32) is used; the common
 ``--precision`` flag is ignored.
 
-``--compare-pure`` (the cost of the coupling, issue "tier 2 at the pace of the LBM kernel"): in the same process,
+``--compare-pure`` (what the coupling costs; target: the coupled step at most 3x the pure one): in the same process,
 the coupled LBM step of the case timed part by part (every kernel launch under its label,
 :func:`iceresist.backends.launch.profiling`; what is left is host NumPy and Python between launches), then the
 pure fused cumulant LBM step (:class:`~iceresist.lbm.solver.LBMSolver`, no free surface, no bodies) on a box of

@@ -82,9 +82,9 @@ class KernelBuild:
 
 
 # ---------------------------------------------------------------------------------------------- tools
-def toolkit() -> tuple[Path, Path]:
-    """``(libnvvm, ptxas)`` of the CUDA 12 packages installed beside numba-cuda; a missing one is named with the
-    command that installs it."""
+def toolkit() -> Path:
+    """ptxas of the CUDA 12 packages installed beside numba-cuda (which finds their NVVM itself); a missing NVVM
+    or ptxas is named with the command that installs it."""
     try:
         import nvidia.cuda_nvcc as nvcc  # noqa: F401 - the CUDA 12 nvcc package carries NVVM and ptxas
     except ImportError:
@@ -95,7 +95,7 @@ def toolkit() -> tuple[Path, Path]:
     ptxas = root / "bin" / "ptxas"
     if nvvm is None or not ptxas.is_file():
         raise RuntimeError(f"no libnvvm or ptxas under {root}: pip install -e '.[gpu]'")
-    return nvvm, ptxas
+    return ptxas
 
 
 def _simulator_on() -> bool:
@@ -112,26 +112,38 @@ class _FixedDevice:
 
 
 @contextlib.contextmanager
+def _fixed_compute_capability():
+    """Within: numba-cuda compiles device functions for :data:`CC` instead of asking a device for it."""
+    from numba.cuda import dispatcher
+
+    saved = dispatcher.get_current_device
+    dispatcher.get_current_device = _FixedDevice
+    try:
+        yield
+    finally:
+        dispatcher.get_current_device = saved
+
+
+@contextlib.contextmanager
 def tracing():
     """Within: CUDA arrays are host stand-ins and each launch appends ``(kernel, threads, argtypes)`` to the
     yielded list instead of running; device functions compile for :data:`CC`."""
     if _simulator_on():
         raise RuntimeError("the GPU build check needs NUMBA_ENABLE_CUDASIM=0 in its own process")
     from numba import typeof
-    from numba.cuda import dispatcher
 
     launches = []
 
     def record(kernel, threads, args):
         launches.append((kernel, int(threads), tuple(typeof(a) for a in args)))
 
-    saved = (jit._HOST_STAND_IN, launch._RECORDER, dispatcher.get_current_device)
+    saved = (jit._HOST_STAND_IN, launch._RECORDER)
     jit._HOST_STAND_IN, launch._RECORDER = True, record
-    dispatcher.get_current_device = _FixedDevice
     try:
-        yield launches
+        with _fixed_compute_capability():
+            yield launches
     finally:
-        jit._HOST_STAND_IN, launch._RECORDER, dispatcher.get_current_device = saved
+        jit._HOST_STAND_IN, launch._RECORDER = saved
 
 
 def check_scenes():
@@ -230,7 +242,7 @@ def compile_kernel(kernel, threads: int, argtypes, ptxas: Path, keep: Path | Non
     t0 = time.perf_counter()
     opts = kernel.targetoptions
     try:
-        with tracing():
+        with _fixed_compute_capability():
             ptx, _ = cuda.compile_ptx(kernel.py_func, argtypes, cc=CC, fastmath=bool(opts.get("fastmath")),
                                       opt=True, launch_bounds=opts.get("launch_bounds"))
     except Exception as exc:  # the compiler's own message is the finding
@@ -261,7 +273,7 @@ def compile_kernel(kernel, threads: int, argtypes, ptxas: Path, keep: Path | Non
 
 def run_check(keep: Path | None = None, progress=None) -> list[KernelBuild]:
     """Trace, then compile every kernel and signature seen; one :class:`KernelBuild` each, in launch order."""
-    _, ptxas = toolkit()
+    ptxas = toolkit()
     seen = trace()
     builds = []
     items = list(seen.items())

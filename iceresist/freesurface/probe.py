@@ -28,7 +28,7 @@ import numpy as np
 from iceresist import lattice as L
 from iceresist.backends.launch import BlockLauncher
 from iceresist.grid import flags as FL
-from iceresist.grid.forest import BLOCK, CELLS
+from iceresist.grid.forest import BLOCK
 
 #: Columns of a block's row: counts, values and the in-block cell index (-1: none) of each.
 COLUMNS = ("n_liquid", "n_bad", "bad_cell", "n_bad_phi", "bad_phi_cell", "speed2_max", "speed2_cell",

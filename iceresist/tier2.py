@@ -230,19 +230,17 @@ class Tier2Model:
         and the mean fluid force on the hull over the interval."""
         hb = self.hull_body
         for _ in range(int(n)):
-            contact = np.zeros(3)
-            fluid = np.zeros(3)
+            self.dem.reset_contact_sums()
+            self.fb.coupling.reset_fluid_load_sum()
             subs = 0
             for _ in range(self.lbm_steps_per_record):
-                self.fb.step(1)
-                k = self.dem.last_substeps
-                contact += self.dem.mean_contact_force_on(hb) * k
-                fluid += self.fb.fluid_force_N[hb]
-                subs += k
+                self.fb.step(1, accumulate_contacts=True)
+                subs += self.dem.last_substeps
             self.iteration += 1
             self.lbm_steps += self.lbm_steps_per_record
-            self._force_mean = contact / max(subs, 1)
-            self._fluid_mean = fluid / self.lbm_steps_per_record
+            # the sums stay on the target over the interval: one read each per record
+            self._force_mean = self.dem.contact_sum_on(hb)[:3] / max(subs, 1)
+            self._fluid_mean = self.fb.coupling.take_fluid_load_sum()[hb, :3] / self.lbm_steps_per_record
         self._force_last = self.dem.ice_force_on(hb)
 
     def fields(self) -> dict:

@@ -5,7 +5,6 @@ import pytest
 
 from iceresist.backends import jit
 from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, LatticeUnits, Sphere
-from iceresist.coupling.coupler import quaternion_matrices
 from iceresist.dem import DEMSystem, box, sphere
 from iceresist.grid.forest import BlockForest
 from iceresist.lattice import C
@@ -13,6 +12,19 @@ from iceresist.lbm.solver import LBMSolver
 from tests.conftest import SIMULATED
 
 UNITS = LatticeUnits(dx_m=1.0, dt_s=1.0, rho_kg_m3=1.0)     # lattice units throughout
+
+
+def quaternion_matrices(q: np.ndarray) -> np.ndarray:
+    """Rotation matrices (n, 3, 3), body -> world, of unit quaternions (n, 4) (w, x, y, z): the host reference
+    for the rotation the coupling computes on the target (iceresist.coupling.bodystate)."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+    ], axis=1)
 
 
 def _setup(shape, geometry, shape_dem, position, velocity=(0, 0, 0), omega=(0, 0, 0), u_fluid=(0, 0, 0),
@@ -170,25 +182,36 @@ def test_cpu_and_cuda_simulator_agree_for_a_moving_rotating_box():
                        res["cuda"][0][np.broadcast_to(fluid[:, None, :], res["cuda"][0].shape)], atol=1e-14)
 
 
-def test_tile_bodies_partitions_each_box_into_z_slabs():
-    from iceresist.coupling.coupler import slab_counts, tile_bodies
+def test_launch_rows_partition_each_box_into_z_slabs():
+    from iceresist.coupling.coupler import slab_counts, tile_rows
 
-    body = np.arange(2 * 21, dtype=float).reshape(2, 21)
     bint = np.array([[1, 0, 6, 0, 0, 0, 3, 3, 3],            # 64 cells: stays one row
                      [1, 6, 6, -2, 5, 1, 9, 12, 10]], np.int32)  # 12 x 8 x 10 = 960 cells: 10 slabs of 1 z-plane
-    b, t, rows = tile_bodies(body, bint, slab_counts(bint, 100))
-    assert rows.tolist() == [1] * 5 + [0] + [1] * 5            # the slabs spread around the small body
-    one = rows == 1
-    assert (b[one] == body[1]).all() and (t[one, :5] == bint[1, :5]).all() and (t[one, 6:8] == bint[1, 6:8]).all()
-    assert (b[~one] == body[0]).all() and (t[~one] == bint[0]).all()
-    z = np.concatenate([np.arange(lo, hi + 1) for lo, hi in t[one][:, [5, 8]]])
-    assert z.tolist() == list(range(1, 11))                    # every plane of the box once
-    b, t, rows = tile_bodies(body, bint, slab_counts(bint, 300))       # 4 slabs of 2 or 3 planes
-    assert rows.tolist() == [1, 1, 0, 1, 1] and (t[rows == 1, 8] - t[rows == 1, 5] + 1).tolist() == [2, 3, 2, 3]
-    assert tile_bodies(body, bint, slab_counts(bint, 10 ** 6))[2] is None
     assert slab_counts(bint, 100).tolist() == [1, 10] and slab_counts(bint, 1).tolist() == [4, 10]
-    b, t, rows = tile_bodies(body, bint, [1, 12])              # more slabs than planes: two stay empty
-    assert ((t[rows == 1, 8] - t[rows == 1, 5] + 1) >= 0).all() and (t[rows == 1, 8] - t[rows == 1, 5] + 1).sum() == 10
+    assert slab_counts(bint, 300).tolist() == [1, 4] and slab_counts(bint, 10 ** 6).tolist() == [1, 1]
+    rows = tile_rows(slab_counts(bint, 100))
+    assert rows[:, 0].tolist() == [1] * 5 + [0] + [1] * 5           # the slabs spread around the small body
+    assert sorted(rows[rows[:, 0] == 1, 1].tolist()) == list(range(10)) and (rows[rows[:, 0] == 1, 2] == 10).all()
+    assert rows[rows[:, 0] == 0].tolist() == [[0, 0, 1]]
+    assert tile_rows([1, 4])[:, 0].tolist() == [1, 1, 0, 1, 1]
+
+
+@pytest.mark.parametrize("slabs", [4, 12])
+def test_slabs_cut_the_cell_box_of_a_body_into_its_z_planes(slabs):
+    """The rows of a body split into ``slabs`` slabs cover the z-planes of its box once each, in x and y the whole
+    box: 4 slabs of 2 or 3 of its 10 planes, or 12 slabs of which two stay empty (fewer planes than slabs); the
+    boxes come from the body state on the target (iceresist.coupling.bodystate)."""
+    _, dem, cp = _setup((16, 16, 16), Box((4.0, 5.0, 6.0)), box((4.0, 5.0, 6.0), 900.0), (8.2, 7.7, 8.4))
+    cp._slabs = np.array([slabs])
+    cp.update_boundaries()
+    whole = cp._host(cp._d["box"])[0]
+    assert (whole[5] - whole[2] + 1) == 10
+    bint = cp._host(cp._d["bint"])
+    assert len(bint) == slabs and (bint[:, 3:5] == whole[:2]).all() and (bint[:, 6:8] == whole[3:5]).all()
+    planes = np.concatenate([np.arange(lo, hi + 1) for lo, hi in bint[:, [5, 8]]])
+    assert sorted(planes.tolist()) == list(range(whole[2], whole[5] + 1))
+    sizes = np.sort(bint[:, 8] - bint[:, 5] + 1)
+    assert sizes.tolist() == ([2, 2, 3, 3] if slabs == 4 else [0, 0] + [1] * 10)
 
 
 def _two_moving_boxes(target, tile_cells, steps, recount=False):
@@ -208,7 +231,7 @@ def _two_moving_boxes(target, tile_cells, steps, recount=False):
     rows = set()
     for _ in range(steps):
         if recount:
-            cp._slabs = None
+            cp.tile_cells = tile_cells
         cp.step(1)
         rows.add(None if cp._tile_body is None else tuple(cp._tile_body))
     return (solver.populations(), cp.force_lattice.copy(), cp.torque_lattice.copy(), cp.owners(), cp.links.copy(),

@@ -16,7 +16,8 @@ from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
 EXPECTED = {
     "f_update", "h_stream_collide", "phi", "h_init", "velocity", "reflag", "extension", "water_volume", "probe",
     "pool_wet", "pool_fill", "lbm_stream_collide", "block_phases", "block_phases_near",
-    "mark", "links", "mirror", "refill_fs", "redistribute_fs",
+    "mark", "links", "mirror", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
+    "near_events", "fill",
     "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero2", "count_k", "chunk_sum", "scan_sums",
     "chunk_scan", "scatter",
 }
@@ -78,3 +79,17 @@ def test_float64_ops_counts_arithmetic_not_data_movement():
     setp.lt.f64 %p2, %fd4, %fd1;
     """
     assert float64_ops(ptx) == 5
+
+
+def test_a_tier2_record_reads_its_mean_loads_and_copies_nothing_else():
+    """Two records (4 coupled LBM steps each) of the CI-sized tier-2 case on the cuda target, traced in a process of
+    its own: no upload and no host array handed to a kernel; per record at most three small reads (the mean ice
+    and fluid loads summed on the device, and the ice force at the end of the model's step), none per LBM step."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    code = "import json; from iceresist.backends.buildcheck import record_transfers; print(json.dumps(record_transfers()))"
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["lbm_steps"] >= 2 * out["records"]
+    assert set(out["counts"]) <= {"download"}, out["sites"]
+    assert out["counts"].get("download", 0) <= 3 * out["records"], out["sites"]

@@ -89,6 +89,23 @@ class Target:
             return a.copy_to_host()
         return np.array(a) if copy else a
 
+    def fill(self, a, value):
+        """Set every element of the target array ``a`` to ``value`` where it lives: no host array crosses over (on
+        CUDA a kernel, :func:`iceresist.backends.launch.fill`)."""
+        if self.is_cuda:
+            from iceresist.backends.launch import fill
+
+            fill(self, a, value)
+        else:
+            a[...] = value
+
+    def copy(self, dst, src):
+        """Copy the target array ``src`` into ``dst`` (same shape) on the target: device to device on CUDA."""
+        if self.is_cuda:
+            dst.copy_to_device(src)
+        else:
+            dst[...] = src
+
     def synchronize(self):
         """Wait for the device (CUDA); a no-op on the CPU."""
         if self.is_cuda and not _HOST_STAND_IN:
@@ -113,6 +130,11 @@ class HostStandIn(np.ndarray):
 
     def copy_to_device(self, ary, stream=0):
         self[...] = ary
+
+
+def is_host_array(a) -> bool:
+    """``a`` is a NumPy array in host memory, not a CUDA device array (nor a build-check stand-in for one)."""
+    return isinstance(a, np.ndarray) and not isinstance(a, HostStandIn)
 
 
 def _cpu_device(fn):

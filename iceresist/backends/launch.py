@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from functools import lru_cache
 
 import numba
 import numpy as np
@@ -65,8 +66,14 @@ def cuda_kernel(fn, name: str, threads: int, **options):
     return kern
 
 
+#: Set by :func:`iceresist.backends.transfers.counting`: ``watch(args)`` sees the arguments of each CUDA launch.
+_ARG_WATCH = None
+
+
 def cuda_launch(kernel, grid: int, threads: int, *args):
     """Launch ``kernel[grid, threads](*args)``; a grid of no blocks launches nothing."""
+    if _ARG_WATCH is not None:
+        _ARG_WATCH(args)
     if _RECORDER is not None:
         _RECORDER(kernel, threads, args)
     elif grid:
@@ -209,3 +216,19 @@ class BlockLauncher(_GeneratedLauncher):
     @staticmethod
     def _cuda_launch(n):
         return (n + CUDA_BLOCK_THREADS - 1) // CUDA_BLOCK_THREADS, CUDA_BLOCK_THREADS, (np.int64(n),)
+
+
+def _fill_item(i, a, value):
+    a[i] = value
+
+
+@lru_cache(maxsize=None)
+def _filler(target):
+    return BlockLauncher(target, target.device(_fill_item), ("a", "value"), label="fill")
+
+
+def fill(target, a, value):
+    """Set every element of the contiguous target array ``a`` to ``value`` with a kernel over its elements (a
+    reset inside a step that uploads nothing: :meth:`iceresist.backends.jit.Target.fill`)."""
+    flat = a.reshape(a.size)
+    _filler(target)(int(a.size), flat, a.dtype.type(value))

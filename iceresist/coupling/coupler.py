@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceresist.backends.launch import copy_into
+from iceresist.coupling.bodystate import body_state_launchers
 from iceresist.coupling.geometry import pack
 from iceresist.coupling.kernels import coupling_launchers
 from iceresist.errors import InputError, StabilityError
@@ -61,33 +62,25 @@ def slab_counts(bint, tile_cells: int = TILE_CELLS) -> np.ndarray:
     return np.maximum(np.minimum(-(-ext.prod(axis=1) // int(tile_cells)), ext[:, 2]), 1)
 
 
-def tile_bodies(body, bint, slabs):
-    """Split each body's cell box into ``slabs[k]`` slabs along z: ``(body_t, bint_t, tile_body)``.
+def tile_rows(slabs) -> np.ndarray:
+    """The launch rows ``(rows, 3)`` int64 of bodies split into ``slabs[k]`` slabs along z: (body, slab, slabs).
 
-    Each slab is a row of ``body_t``/``bint_t``: a copy of its body's row whose cell box (``bint[:, 3:9]``) is
-    a z-range of the body's. The slabs of a body partition its box, so every cell is visited once and the
-    kernels, which index everything by the row (shape, state, owner, force row), run unchanged: the owner of a
-    covered cell is its slab's row and the force rows of a body's slabs add up to the body's force.
-    ``tile_body[row]`` is the body of a row; None where no body is split (rows are bodies). The rows depend on
-    ``slabs`` alone, so a coupling that keeps ``slabs`` keeps the body of every row from step to step (the refill
-    reads the velocity of the body that uncovered a cell from the row that covered it a step earlier).
+    Each row is a slab of its body's cell box (:func:`iceresist.coupling.bodystate.build_body_state` cuts the
+    box's z-range into ``slabs`` parts); the slabs of a body partition its box, so every cell is visited once and
+    the kernels, which index everything by the row (shape, state, owner, force row), run unchanged: the owner of a
+    covered cell is its slab's row and the force rows of a body's slabs add up to the body's force. The rows depend
+    on ``slabs`` alone, so a coupling that keeps ``slabs`` keeps the body of every row from step to step (the
+    refill reads the velocity of the body that uncovered a cell from the row that covered it a step earlier).
 
     The CPU launcher hands each thread a contiguous range of rows (numba's static prange schedule), so the rows
     are ordered by (slab number + 1/2) / slabs of their body: a body's slabs spread evenly over the range and
     every thread gets its share of the large body.
     """
     m = np.asarray(slabs, dtype=np.int64)
-    if (m == 1).all():
-        return body, bint, None
-    tile_body = np.repeat(np.arange(len(m)), m)
-    j = np.arange(len(tile_body)) - np.repeat(np.cumsum(m) - m, m)          # slab number within its body
-    nz = (bint[:, 8].astype(np.int64) - bint[:, 5] + 1)[tile_body]
-    mt, lo = m[tile_body], bint[tile_body, 5].astype(np.int64)
-    bint_t = bint[tile_body].copy()
-    bint_t[:, 5] = lo + (j * nz) // mt                   # a slab is empty (z1 < z0) where the box has fewer planes
-    bint_t[:, 8] = lo + ((j + 1) * nz) // mt - 1
-    order = np.argsort((j + 0.5) / mt, kind="stable")
-    return np.ascontiguousarray(body[tile_body[order]]), bint_t[order], tile_body[order]
+    body = np.repeat(np.arange(len(m)), m)
+    j = np.arange(len(body)) - np.repeat(np.cumsum(m) - m, m)          # slab number within its body
+    order = np.argsort((j + 0.5) / m[body], kind="stable")
+    return np.ascontiguousarray(np.stack([body[order], j[order], m[body[order]]], axis=1), dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -113,18 +106,6 @@ class LatticeUnits:
     @property
     def velocity_m_s(self) -> float:
         return self.dx_m / self.dt_s
-
-
-def quaternion_matrices(q: np.ndarray) -> np.ndarray:
-    """Rotation matrices (n, 3, 3), body -> world, of unit quaternions (n, 4) (w, x, y, z)."""
-    q = np.asarray(q, dtype=float)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
-    ], axis=1)
 
 
 class FluidStructureCoupling:
@@ -171,43 +152,51 @@ class FluidStructureCoupling:
         nbx, nby, nbz = fo.shape_blocks
         block_map = np.full((nbx, nby, nbz), -1, dtype=np.int32)
         block_map[fo.origin[:, 0], fo.origin[:, 1], fo.origin[:, 2]] = np.arange(fo.nblocks, dtype=np.int32)
-        self._block_map_host = block_map
         self._periodic = np.array([fo.faces[a + "-"].kind == "periodic" for a in "xyz"])
         grid = np.array([*fo.shape_cells, *self._periodic.astype(int)], dtype=np.int64)
-        self._shape = np.array(fo.shape_cells)
         flags0 = np.ascontiguousarray(fo.flags.astype(np.uint8))
         owner = np.full((fo.nblocks, BLOCK ** 3), -1, dtype=np.int32)
+        g = np.asarray(dem.gravity, dtype=float)
+        buoy = units.rho_kg_m3 * self._volume_m3[:, None] * g[None, :] if self.buoyancy else np.zeros((self.n, 3))
+        n, nb = self.n, fo.nblocks
         dev = self._dev
         self._d = {"grid": dev(grid), "block_map": dev(block_map), "flags0": dev(flags0),
                    "borigin": dev(np.ascontiguousarray(fo.origin.astype(np.int64))),
                    "planes": dev(np.ascontiguousarray(planes.astype(self.real))),
-                   "owner": dev(owner), "owner_prev": dev(owner.copy())}
-        if self.target.is_cuda:
-            self._minus_one = dev(owner.copy())
+                   "owner": dev(owner), "owner_prev": dev(owner.copy()),
+                   # body state (module bodystate): per-body constants, boxes, loads
+                   "shape_int": dev(np.stack([kinds, first, count], axis=1).astype(np.int32)),
+                   "par_lat": dev(np.ascontiguousarray(self._par_lat, dtype=np.float64)),
+                   "half_lat": dev(np.ascontiguousarray(self._half_lat, dtype=np.float64)),
+                   "conv": dev(np.array([*np.asarray(units.origin_m, dtype=float), dx, units.dt_s / dx,
+                                         units.dt_s], dtype=np.float64)),
+                   "nblocks3": dev(np.array([nbx, nby, nbz], dtype=np.int64)),
+                   "nbr": dev(np.ascontiguousarray(fo.nbr)),
+                   "load_scale": dev(np.array([units.force_N, dx], dtype=np.float64)),
+                   "buoy": dev(np.ascontiguousarray(buoy, dtype=np.float64)),
+                   "box": dev(np.zeros((n, 6), np.int64)), "box_prev": dev(np.zeros((n, 6), np.int64)),
+                   "now": dev(np.zeros((n, 6))), "fprev": dev(np.zeros((n, 6))), "fluid": dev(np.zeros((n, 6))),
+                   "fluid_sum": dev(np.zeros((n, 6))), "links": dev(np.zeros(n, np.int64)),
+                   "active": dev(np.zeros(nb, np.int8)), "evt": dev(np.zeros(nb, np.int32)),
+                   "near": dev(np.zeros(nb, np.int32))}
         self._k = coupling_launchers(self.target, self.real,
                                      None if self.surface is None else self.surface.phase.lat)
+        self._s = body_state_launchers(self.target, self.real)
         self.contact_film = bool(contact_film)
         g_lat, level = (0.0, 0.0) if self.surface is None else (self.surface.g, self.surface.depth)
         self._d["film"] = dev(np.array([1.0 if self.contact_film else 0.0, g_lat, level], dtype=self.real))
         self._tile_cells = TILE_CELLS
         self._slabs = None
-        self._tile_body = None
+        self._rows = None           # host copy of the launch rows (tile_rows); None: to be laid out
         self._placed = self.surface is None
-        self._prev_boxes = None
-        self._force_prev = None
-        self.force_lattice = np.zeros((self.n, 3))
-        self.torque_lattice = np.zeros((self.n, 3))
-        self.links = np.zeros(self.n, dtype=np.int64)
-        self.fluid_force_N = np.zeros((self.n, 3))
-        self.fluid_torque_N_m = np.zeros((self.n, 3))
-        self.active_blocks = 0
-        self.event_blocks = 0
+        self._boxes_valid = False   # box holds the cell boxes of a step taken (the active blocks of the next)
+        self._fprev_valid = False   # fprev holds F_s, M_s of a step taken (eqs. 20-21)
         self.iteration = 0
         log.info("coupling: %d bodies on %d blocks, buoyancy %s", self.n, fo.nblocks, self.buoyancy)
 
     @property
     def tile_cells(self) -> int:
-        """Cells of a body's cell box per launch row (:func:`tile_bodies`). The slabs of each body are counted
+        """Cells of a body's cell box per launch row (:func:`tile_rows`). The slabs of each body are counted
         from its box at the first step after this is set and then kept."""
         return self._tile_cells
 
@@ -215,6 +204,7 @@ class FluidStructureCoupling:
     def tile_cells(self, value: int):
         self._tile_cells = int(value)
         self._slabs = None
+        self._rows = None
 
     # ------------------------------------------------------------------ device helpers
     def _dev(self, a):
@@ -223,165 +213,171 @@ class FluidStructureCoupling:
     def _host(self, a):
         return self.target.to_host(a, copy=False)
 
-    # ------------------------------------------------------------------ body state
-    def _body_arrays(self):
-        """``body`` (n, 21) and ``bint`` (n, 10) in lattice units from the DEM state."""
-        u = self.units
-        pos = (self.dem.positions - np.asarray(u.origin_m)) / u.dx_m
-        R = quaternion_matrices(self.dem.quaternions)
-        body = np.empty((self.n, 21))
-        body[:, 0:3] = pos
-        body[:, 3:12] = R.reshape(self.n, 9)
-        body[:, 12:15] = self.dem.velocities * (u.dt_s / u.dx_m)
-        body[:, 15:18] = self.dem.angular_velocities * u.dt_s
-        body[:, 18:21] = self._par_lat
-        ext = np.einsum("nij,nj->ni", np.abs(R), self._half_lat)
-        lo = np.floor(pos - ext - 0.5).astype(np.int64) - 1
-        hi = np.ceil(pos + ext - 0.5).astype(np.int64) + 1
-        n = self._shape
-        per = self._periodic
-        lo = np.where(per, lo, np.maximum(lo, 0))
-        hi = np.where(per, np.minimum(hi, lo + n - 1), np.minimum(hi, n - 1))
-        bint = np.empty((self.n, 10), dtype=np.int32)
-        bint[:, 0], bint[:, 1], bint[:, 2] = self._kinds, self._first, self._count
-        bint[:, 3:6], bint[:, 6:9] = lo, hi
-        bint[:, 9] = np.arange(self.n)
-        return body.astype(self.real), bint
+    # ------------------------------------------------------------------ launch rows
+    @property
+    def _tile_body(self):
+        """The body of each launch row, or None where every body is one row."""
+        if self._rows is None or self._rows.shape[0] == self.n:
+            return None
+        return self._rows[:, 0]
 
-    def _active(self, bint):
-        """Blocks the cell boxes of this and the previous step touch, dilated by one cell."""
-        boxes = bint[:, 3:9].astype(np.int64)
-        if self._prev_boxes is not None:
-            boxes = np.concatenate([boxes, self._prev_boxes])
-        self._prev_boxes = bint[:, 3:9].astype(np.int64)
-        blo = (boxes[:, :3] - 1) >> 3
-        bhi = (boxes[:, 3:] + 1) >> 3
-        span = bhi - blo + 1
-        nb = np.array(self.forest.shape_blocks)
-        out = []
-        small = (span <= 4).all(axis=1)
-        groups = [(blo[small], bhi[small], 4)] + [(blo[i:i + 1], bhi[i:i + 1], int(span[i].max()))
-                                                 for i in np.flatnonzero(~small)]
-        for lo, hi, s in groups:
-            if len(lo) == 0:
-                continue
-            off = np.stack(np.meshgrid(*(np.arange(s),) * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-            cand = lo[:, None, :] + off[None]
-            ok = (cand <= hi[:, None, :]).all(axis=2)
-            cand = cand[ok]
-            for a in range(3):
-                if self._periodic[a]:
-                    cand[:, a] %= nb[a]
-            inside = ((cand >= 0) & (cand < nb)).all(axis=1)
-            cand = cand[inside]
-            out.append(self._block_map_host[cand[:, 0], cand[:, 1], cand[:, 2]])
-        blocks = np.unique(np.concatenate(out)) if out else np.zeros(0, dtype=np.int32)
-        return blocks[blocks >= 0].astype(np.int32)
+    def _body_rows(self, rows_d, nrows, body, bint, box):
+        dem, d = self.dem, self._d
+        self._s["body_rows"](nrows, rows_d, dem.device("pos"), dem.device("quat"), dem.device("vel"),
+                             dem.device("omega"), d["shape_int"], d["par_lat"], d["half_lat"], d["conv"], d["grid"],
+                             body, bint, box)
 
-    def _near_events(self, evt):
-        """Blocks with a covered or uncovered cell in their own or a neighbour block."""
-        hit = np.flatnonzero(evt)
-        if len(hit) == 0:
-            return np.zeros(0, dtype=np.int32)
-        nb = self.forest.nbr[hit].ravel()
-        blocks = np.unique(np.concatenate([hit, nb[nb >= 0]]))
-        return blocks.astype(np.int32)
+    def _lay_out_rows(self):
+        """The launch rows and the arrays sized by them; the slabs per body (where not set) from the cell boxes
+        of the bodies now (one read of the boxes, at the first step or after :attr:`tile_cells` changed)."""
+        n, dev, real = self.n, self._dev, self.real
+        if self._slabs is None:
+            ident = dev(tile_rows(np.ones(n, np.int64)))
+            bint = dev(np.zeros((n, 10), np.int32))
+            self._body_rows(ident, n, dev(np.zeros((n, 21), real)), bint, dev(np.zeros((n, 6), np.int64)))
+            self._slabs = slab_counts(self._host(bint), self._tile_cells)
+        rows = tile_rows(self._slabs)
+        r = len(rows)
+        order = np.argsort(rows[:, 0], kind="stable")
+        ptr = np.zeros(n + 1, np.int64)
+        ptr[1:] = np.cumsum(np.bincount(rows[:, 0], minlength=n))
+        d = self._d
+        d["rows"], d["row_ptr"], d["row_idx"] = dev(rows), dev(ptr), dev(order.astype(np.int64))
+        d["body"], d["bint"] = dev(np.zeros((r, 21), real)), dev(np.zeros((r, 10), np.int32))
+        d["bforce"], d["btorque"] = dev(np.zeros((r, 3))), dev(np.zeros((r, 3)))
+        d["nlinks"] = dev(np.zeros((r, 1), np.int64))
+        self._rows = rows
 
     # ------------------------------------------------------------------ the step
     def update_boundaries(self):
         """Passes 1-4 of a coupling step (module docstring): cells, refill, mass, links and F_s(t), M_s(t)."""
-        d, k, real = self._d, self._k, self.real
-        body_h, bint_h = self._body_arrays()
-        active_h = self._active(bint_h)
-        self.active_blocks = len(active_h)
-        if self._slabs is None:
-            self._slabs = slab_counts(bint_h, self._tile_cells)
-        body_h, bint_h, self._tile_body = tile_bodies(body_h, bint_h, self._slabs)
-        rows = len(bint_h)
-        body, bint, active = self._dev(body_h), self._dev(bint_h), self._dev(active_h)
+        d, k, s, real, t = self._d, self._k, self._s, self.real, self.target
+        if self._rows is None:
+            self._lay_out_rows()
+        rows, nb = len(self._rows), self.forest.nblocks
+        d["box"], d["box_prev"] = d["box_prev"], d["box"]
+        self._body_rows(d["rows"], rows, d["body"], d["bint"], d["box"])
+        t.fill(d["active"], 0)
+        s["active_rows"](rows, d["rows"], d["bint"], d["box_prev"], np.int64(self._boxes_valid), d["grid"],
+                         d["nblocks3"], d["block_map"], d["active"])
+        self._boxes_valid = True
+        body, bint, active = d["body"], d["bint"], d["active"]
         d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]
-        if self.target.is_cuda:
-            d["owner"].copy_to_device(self._minus_one)
-        else:
-            d["owner"].fill(-1)
+        t.fill(d["owner"], -1)
         f, flags = self.solver.state, self.solver.flags
         k["mark"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
         if not self._placed:        # first step with a free surface: the bodies are placed, not moved in
-            d["owner_prev"] = self._dev(self._host(d["owner"]).copy())
+            t.copy(d["owner_prev"], d["owner"])
             self._placed = True
         Fx, Fy, Fz = (real(v) for v in self.solver.force)
-        na = len(active_h)
-        evt = self._dev(np.zeros(self.forest.nblocks, dtype=np.int32))
+        evt = d["evt"]
+        t.fill(evt, 0)
         if self.surface is None:
-            k["refill"](na, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+            k["refill"](nb, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
                         d["owner_prev"], f, evt, Fx, Fy, Fz)
         else:
             phase = self.surface.phase
             phase.solid = d["owner"]
-            k["refill"](na, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+            k["refill"](nb, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
                         d["owner_prev"], f, evt, Fx, Fy, Fz, phase.phi, phase.h)
-        near = self._near_events(self._host(evt))
-        self.event_blocks = len(near)
+        s["near_events"](nb, evt, d["nbr"], d["near"])
         if self.surface is None:
-            k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"],
-                              d["owner"], d["owner_prev"], f)
+            k["redistribute"](nb, d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"], d["owner"],
+                              d["owner_prev"], f)
         else:
-            k["redistribute"](len(near), self._dev(near), d["borigin"], d["grid"], d["block_map"], d["flags0"],
-                              flags, d["owner"], d["owner_prev"], f, phase.phi, phase.h)
+            k["redistribute"](nb, d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+                              d["owner_prev"], f, phase.phi, phase.h)
             k["mirror"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"],
                         phase.phi)
         if self.debug:
-            k["poison"](na, active, d["flags0"], d["owner"], d["owner_prev"], f)
-        bforce = self._dev(np.zeros((rows, 3)))
-        btorque = self._dev(np.zeros((rows, 3)))
-        nlinks = self._dev(np.zeros((rows, 1), dtype=np.int64))
+            k["poison"](nb, active, d["flags0"], d["owner"], d["owner_prev"], f)
         k["links"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
-                   bforce, btorque, nlinks, flags, d["film"])
-        self.force_lattice = self._per_body(self._host(bforce))
-        self.torque_lattice = self._per_body(self._host(btorque))
-        self.links = self._per_body(self._host(nlinks))[:, 0]
+                   d["bforce"], d["btorque"], d["nlinks"], flags, d["film"])
+        s["row_sums"](self.n, d["row_ptr"], d["row_idx"], d["bforce"], d["btorque"], d["nlinks"], d["now"],
+                      d["links"])
 
-    def _per_body(self, rows: np.ndarray) -> np.ndarray:
-        """Sums over the launch rows of each body (:func:`tile_bodies`), as a new array."""
-        if self._tile_body is None:
-            return rows.copy()
-        out = np.zeros((self.n, rows.shape[1]), dtype=rows.dtype)
-        np.add.at(out, self._tile_body, rows)
-        return out
+    def step(self, n: int = 1, accumulate_contacts: bool = False):
+        """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21);
+        ``accumulate_contacts`` is handed to :meth:`DEMSystem.step` (``accumulate``).
 
-    def step(self, n: int = 1):
-        """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21)."""
-        u = self.units
-        g = np.asarray(self.dem.gravity, dtype=float)
+        The body state, the loads and the flags of the blocks to visit stay on the target: a step moves no array
+        between host and device."""
+        d, dem = self._d, self.dem
         for _ in range(int(n)):
             self.update_boundaries()
             (self.solver if self.surface is None else self.surface).step(1)
-            f_now = np.concatenate([self.force_lattice, self.torque_lattice], axis=1)
-            prev = f_now if self._force_prev is None else self._force_prev
-            avg = 0.5 * (f_now + prev)
-            self._force_prev = f_now
-            self.fluid_force_N = avg[:, :3] * u.force_N
-            self.fluid_torque_N_m = avg[:, 3:] * u.force_N * u.dx_m
-            ext = self.fluid_force_N.copy()
-            if self.buoyancy:
-                ext -= u.rho_kg_m3 * self._volume_m3[:, None] * g[None, :]
-            self.dem.set_external_all(ext, self.fluid_torque_N_m)
-            self.dem.step(u.dt_s)
+            self._s["fluid_loads"](self.n, d["now"], np.int64(self._fprev_valid), d["fprev"], d["load_scale"],
+                                   d["buoy"], dem.device("ext"), d["fluid"], d["fluid_sum"])
+            self._fprev_valid = True
+            dem.external_loads_changed()
+            dem.step(self.units.dt_s, accumulate=accumulate_contacts)
             self.iteration += 1
+
+    # ------------------------------------------------------------------ results (host copies)
+    def _read(self, name) -> np.ndarray:
+        return np.array(self._host(self._d[name]), dtype=float)
+
+    @property
+    def force_lattice(self) -> np.ndarray:
+        """F_s(t) of each body (n, 3) from the last links pass (eq. 18), lattice units."""
+        return self._read("now")[:, :3]
+
+    @property
+    def torque_lattice(self) -> np.ndarray:
+        """M_s(t) of each body (n, 3) about its centre of mass (eq. 19), lattice units."""
+        return self._read("now")[:, 3:]
+
+    @property
+    def links(self) -> np.ndarray:
+        """Boundary links of each body (n,) in the last links pass."""
+        return np.array(self._host(self._d["links"]), dtype=np.int64)
+
+    @property
+    def fluid_force_N(self) -> np.ndarray:
+        """F_fluid of each body (n, 3), N: the mean of F_s over the last two steps (eq. 20). With gravity in the fluid the
+        hydrostatic buoyancy is part of it; the -rho_f V g added otherwise (``buoyancy``) is not."""
+        return self._read("fluid")[:, :3] if self._fprev_valid else np.zeros((self.n, 3))
+
+    @property
+    def fluid_torque_N_m(self) -> np.ndarray:
+        """M_fluid of each body (n, 3), N m, about its centre of mass (eq. 21)."""
+        return self._read("fluid")[:, 3:] if self._fprev_valid else np.zeros((self.n, 3))
+
+    def reset_fluid_load_sum(self):
+        """Start the sum of :meth:`take_fluid_load_sum` anew, on the target."""
+        self.target.fill(self._d["fluid_sum"], 0.0)
+
+    def take_fluid_load_sum(self) -> np.ndarray:
+        """F_fluid and M_fluid (n, 6), N and N m, summed over the steps since the last call, and the sum restarted
+        (a record's mean with one read per record)."""
+        out = self._read("fluid_sum")
+        self.reset_fluid_load_sum()
+        return out
+
+    @property
+    def active_blocks(self) -> int:
+        """Blocks the cell boxes of the last step and the one before touch (the refill's blocks)."""
+        return int(np.count_nonzero(self._host(self._d["active"])))
+
+    @property
+    def event_blocks(self) -> int:
+        """Blocks with a cell covered or uncovered in the last step in their own or a neighbour block."""
+        return int(np.count_nonzero(self._host(self._d["near"])))
 
     # ------------------------------------------------------------------ checkpoints
     def state(self) -> dict:
         """What a bit-for-bit restart of the coupling needs between two steps: the covering rows of every cell
         now and a step earlier, the slabs per body (so the rows mean the same bodies), the cell boxes of the last
         step (the active blocks), F_s and M_s of the last step (eqs. 20-21) and the step count."""
-        n = self.n
-        return {"owner": self._host(self._d["owner"]).copy(), "owner_prev": self._host(self._d["owner_prev"]).copy(),
+        d, n = self._d, self.n
+        now, fluid = self._read("now"), self._read("fluid")
+        return {"owner": self._host(d["owner"]).copy(), "owner_prev": self._host(d["owner_prev"]).copy(),
                 "slabs": np.zeros(0, np.int64) if self._slabs is None else np.asarray(self._slabs, np.int64),
-                "prev_boxes": np.zeros((0, 6), np.int64) if self._prev_boxes is None else self._prev_boxes.copy(),
-                "force_prev": np.zeros((0, 6)) if self._force_prev is None else self._force_prev.copy(),
-                "force_lattice": self.force_lattice.reshape(n, 3).copy(),
-                "torque_lattice": self.torque_lattice.reshape(n, 3).copy(),
-                "fluid_force_N": self.fluid_force_N.copy(), "fluid_torque_N_m": self.fluid_torque_N_m.copy(),
+                "prev_boxes": (np.array(self._host(d["box"]), np.int64) if self._boxes_valid
+                               else np.zeros((0, 6), np.int64)),
+                "force_prev": self._read("fprev") if self._fprev_valid else np.zeros((0, 6)),
+                "force_lattice": now[:, :3].reshape(n, 3).copy(), "torque_lattice": now[:, 3:].reshape(n, 3).copy(),
+                "fluid_force_N": fluid[:, :3].copy(), "fluid_torque_N_m": fluid[:, 3:].copy(),
                 "placed": np.int8(self._placed), "iteration": np.int64(self.iteration)}
 
     def load_state(self, state: dict):
@@ -390,19 +386,28 @@ class FluidStructureCoupling:
         if missing:
             raise InputError(f"coupling state lacks {', '.join(missing)}: it was not written by "
                              "FluidStructureCoupling.state()")
-        copy_into(self._d["owner"], np.asarray(state["owner"], dtype=np.int32))
-        copy_into(self._d["owner_prev"], np.asarray(state["owner_prev"], dtype=np.int32))
+        d = self._d
+        copy_into(d["owner"], np.asarray(state["owner"], dtype=np.int32))
+        copy_into(d["owner_prev"], np.asarray(state["owner_prev"], dtype=np.int32))
         slabs = np.asarray(state["slabs"], dtype=np.int64)
         if slabs.size not in (0, self.n):
             raise InputError(f"coupling state has slabs for {slabs.size} bodies, this scene has {self.n}: "
                              "it belongs to another scene")
         self._slabs = slabs if slabs.size else None
+        self._rows = None
         boxes, fprev = np.asarray(state["prev_boxes"], np.int64), np.asarray(state["force_prev"], float)
-        self._prev_boxes = boxes if boxes.size else None
-        self._force_prev = fprev if fprev.size else None
-        for key in ("force_lattice", "torque_lattice", "fluid_force_N", "fluid_torque_N_m"):
-            if key in state:
-                setattr(self, key, np.asarray(state[key], dtype=float).copy())
+        self._boxes_valid = bool(boxes.size)
+        if boxes.size:
+            copy_into(d["box"], boxes)
+        self._fprev_valid = bool(fprev.size)
+        if fprev.size:
+            copy_into(d["fprev"], fprev)
+        if "force_lattice" in state and "torque_lattice" in state:
+            copy_into(d["now"], np.concatenate([np.asarray(state["force_lattice"], float).reshape(self.n, 3),
+                                                np.asarray(state["torque_lattice"], float).reshape(self.n, 3)], axis=1))
+        if "fluid_force_N" in state and "fluid_torque_N_m" in state:
+            copy_into(d["fluid"], np.concatenate([np.asarray(state["fluid_force_N"], float),
+                                                  np.asarray(state["fluid_torque_N_m"], float)], axis=1))
         self._placed = bool(state["placed"])
         self.iteration = int(state["iteration"])
 

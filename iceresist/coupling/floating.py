@@ -75,8 +75,8 @@ class FloatingBodies:
         self.fluid = FreeSurfaceFluid(self.forest, tau=tau, gravity_lattice=g_lattice, depth_cells=self.depth_cells,
                                       mobility=mobility, width=width, operator=operator, precision=precision,
                                       target=target, f_pool_margin=None)
-        if dem is None:
-            dem = DEMSystem(gravity_m_s2=(0.0, 0.0, -GRAVITY_M_S2))
+        if dem is None:     # on the fluid's target, so that the coupling reads and writes the bodies there
+            dem = DEMSystem(backend="cuda" if target.is_cuda else "cpu", gravity_m_s2=(0.0, 0.0, -GRAVITY_M_S2))
             dem.add_wall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
         self.dem = dem
         self.contact_film = bool(contact_film)
@@ -113,11 +113,12 @@ class FloatingBodies:
                  self.forest.cells, self.dx_m, self.dt_s, self.viscosity_m2_s)
 
     # ------------------------------------------------------------------ time stepping
-    def step(self, n: int = 1):
-        """``n`` coupled steps of dt (boundaries, free-surface LBM step, DEM over dt with the fluid loads)."""
+    def step(self, n: int = 1, accumulate_contacts: bool = False):
+        """``n`` coupled steps of dt (boundaries, free-surface LBM step, DEM over dt with the fluid loads);
+        ``accumulate_contacts``: the DEM adds the contact loads to its sums (:meth:`DEMSystem.contact_sum_on`)."""
         if self.coupling is None:
             self.start()
-        self.coupling.step(n)
+        self.coupling.step(n, accumulate_contacts=accumulate_contacts)
 
     @property
     def time_s(self) -> float:
@@ -126,7 +127,8 @@ class FloatingBodies:
     # ------------------------------------------------------------------ results
     @property
     def fluid_force_N(self) -> np.ndarray:
-        """Fluid force on each body (n, 3), newtons, averaged over two steps (eq. 20); buoyancy included."""
+        """Fluid force on each body (n, 3), newtons, averaged over two steps (eq. 20); the hydrostatic buoyancy
+        included (gravity acts in the fluid)."""
         return self.coupling.fluid_force_N
 
     @property

@@ -79,7 +79,7 @@ MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner",
 #: cell outside reaches only covered cells within sqrt(3) of the surface.
 MIRROR_DEPTH = 2.0
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
-#: the links pass skips the contact-film test there.
+#: the links pass skips them (no link, no contact film).
 FILM_DEPTH = 2.0
 
 
@@ -312,8 +312,11 @@ def build_visits(target, real, free_surface: bool = False):
             return
         yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
         s_in = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
-        # a cell deeper than sqrt(3) inside its body has no neighbour outside it, so it touches nothing
-        near = film[0] != zero and s_in > -fdepth
+        # a cell deeper than FILM_DEPTH (> sqrt(3), the longest link) inside its convex body has every neighbour
+        # inside it too (the signed distance changes by at most the link length): no link and no film there
+        if s_in <= -fdepth:
+            return
+        near = film[0] != zero
         nfilm = 0
         for q in range(1, nq):
             hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
@@ -533,8 +536,10 @@ class BodyLauncher:
 
 
 class ActiveLauncher:
-    """``launcher(nactive, active, *rest)`` runs ``visit(b, c, *rest)`` for the 512 cells of each block
-    ``active[i]``: CPU prange over the list; CUDA one thread per cell."""
+    """``launcher(nblocks, active, *rest)`` runs ``visit(b, c, *rest)`` for the 512 cells of each block b with
+    ``active[b] != 0`` (a flag per forest block, set on the target): on the CPU a prange over the list of those
+    blocks (a host-side scan of the flags, which live in host memory there); on CUDA one thread per cell of every
+    block, the blocks without the flag returning at once (the flags never leave the device)."""
 
     def __init__(self, target, visit, argnames, name="launch_active", variant=""):
         self.target = target
@@ -544,8 +549,9 @@ class ActiveLauncher:
         sig = ", ".join(argnames)
         if target.is_cuda:
             src = (f"def launch_active({sig}):\n"
-                   "    b = active[cuda.blockIdx.x]\n"
-                   f"    visit(b, cuda.threadIdx.x, {rest})\n")
+                   "    b = cuda.blockIdx.x\n"
+                   "    if active[b] != 0:\n"
+                   f"        visit(b, cuda.threadIdx.x, {rest})\n")
             self._kernel = jit_generated(target, src, "launch_active", {"visit": visit}, label=self.label)
         else:
             loop = (f"def block_loop(b, {rest}):\n"
@@ -556,14 +562,16 @@ class ActiveLauncher:
                    f"        block_loop_jit(active[i], {rest})\n")
             self._kernel = _cpu_kernel("block_loop", loop, name, src, visit, variant)
 
-    def __call__(self, nactive, *args):
-        self._call(nactive, *args)
+    def __call__(self, nblocks, active, *args):
+        self._call(nblocks, active, *args)
 
-    def _launch(self, nactive, *args):
+    def _launch(self, nblocks, active, *args):
         if self.target.is_cuda:
-            cuda_launch(self._kernel, nactive, CUDA_BLOCK_CELLS, *args)
-        elif nactive:
-            self._kernel(nactive, *args)
+            cuda_launch(self._kernel, nblocks, CUDA_BLOCK_CELLS, active, *args)
+            return
+        blocks = np.flatnonzero(active).astype(np.int32)
+        if len(blocks):
+            self._kernel(len(blocks), blocks, *args)
 
 
 _CACHE: dict = {}

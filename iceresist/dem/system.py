@@ -127,7 +127,7 @@ class DEMSystem:
     def set_external(self, body: int, force_N=None, torque_N_m=None):
         """Hold F_fluid and M_fluid (paper eqs. 13-14) on a body over the sub-steps of the following steps."""
         if self._built:
-            ext = self._h["ext"].copy()
+            ext = self._get("ext").copy()
             if force_N is not None:
                 ext[body, :3] = force_N
             if torque_N_m is not None:
@@ -154,6 +154,19 @@ class DEMSystem:
                 body.ext_force, body.ext_torque = force_N[b].copy(), torque_N_m[b].copy()
             return
         self._put("ext", np.concatenate([force_N, torque_N_m], axis=1))
+        self._dirty = True
+
+    def device(self, name: str):
+        """The target array ``name`` of the system (``pos``, ``quat``, ``vel``, ``omega``, ``ext``, ...; shapes as
+        in :meth:`state`), for a coupling that reads the body state and writes the external loads on the target.
+        After writing ``ext`` call :meth:`external_loads_changed`."""
+        if not self._built:
+            self._build()
+        return self._d[name]
+
+    def external_loads_changed(self):
+        """The external loads (``device("ext")``) were written on the target: the next step re-evaluates the
+        forces before its first kick."""
         self._dirty = True
 
     # ------------------------------------------------------------------ build
@@ -330,10 +343,13 @@ class DEMSystem:
         self._forces(0.0, 0)
         self._dirty = False
 
-    def step(self, dt_s: float, substeps: int | None = None) -> int:
+    def step(self, dt_s: float, substeps: int | None = None, accumulate: bool = False) -> int:
         """Advance by ``dt_s`` seconds in sub-steps (automatic from the stiffness, or ``substeps`` forced).
 
-        Returns the number of sub-steps. A forced sub-step above the critical step raises StabilityError."""
+        Returns the number of sub-steps. A forced sub-step above the critical step raises StabilityError.
+        ``accumulate``: add this step's sub-step contact loads to the sums of the steps before
+        (:meth:`contact_sum_on`) instead of starting them anew (a caller averaging over several steps reads them
+        once)."""
         if not (dt_s > 0 and math.isfinite(dt_s)):
             raise InputError(f"DEM step dt_s must be a positive number of seconds, got {dt_s}")
         if not self._built:
@@ -354,20 +370,14 @@ class DEMSystem:
         if self._dirty:
             self.prime()
         h = dt_s / n
-        self._zero("bcsum")
+        if not accumulate:
+            self.target.fill(self._d["bcsum"], 0)
         for _ in range(n):
             self._substep(h)
         self.time_s += dt_s
         self.substeps_taken += n
         self.last_substeps = n
         return n
-
-    def _zero(self, name):
-        if self.target.is_cuda:
-            self._h[name][...] = 0
-            self._d[name].copy_to_device(self._h[name])
-        else:
-            self._h[name][...] = 0
 
     # ------------------------------------------------------------------ checkpoint
     #: Arrays that change while stepping (or through set_external / set_water); everything else follows from
@@ -492,6 +502,17 @@ class DEMSystem:
         if self.last_substeps == 0:
             return self.contact_force_on(body)
         return self._get("bcsum")[body, :3].astype(float) / self.last_substeps
+
+    def reset_contact_sums(self):
+        """Start the contact sums (:meth:`contact_sum_on`) anew, on the target."""
+        if not self._built:
+            self._build()
+        self.target.fill(self._d["bcsum"], 0)
+
+    def contact_sum_on(self, body: int) -> np.ndarray:
+        """Contact force and torque on a body (6,), N and N m, summed over the sub-steps since the last :meth:`step`
+        without ``accumulate`` (or :meth:`reset_contact_sums`)."""
+        return self._get("bcsum")[body].astype(float)
 
     def mean_contact_torque_on(self, body: int) -> np.ndarray:
         """Contact torque about the body's centre (N m) averaged like :meth:`mean_contact_force_on`."""

@@ -454,8 +454,9 @@ class PhaseField:
         return self.target.to_host(a)
 
     def _u(self, u):
-        u = self._to_target(np.ascontiguousarray(u, dtype=self.real)) if isinstance(u, np.ndarray) else u
-        return u
+        """The velocity ``u`` where the kernels read it: a host array is copied over (in the working precision),
+        a target array is used as it is."""
+        return self._to_target(np.ascontiguousarray(u, dtype=self.real)) if jit.is_host_array(u) else u
 
     def initialize(self, phi0: np.ndarray, u: np.ndarray) -> None:
         """Set phi (``[block, cell]``) and h = h^eq(phi, u, n)."""

@@ -1,0 +1,196 @@
+"""The body state between the DEM and the lattice, on the target (paper section 2.4, steps 1 and 5).
+
+Four per-item passes keep a coupled step on the device: nothing per body crosses between host and device.
+
+* ``body_row(r, ...)`` (one item per launch row): the row's body in lattice units from the DEM state, the
+  ``body``/``bint`` rows of :mod:`iceresist.coupling.kernels` (centre (x - origin) / dx, rotation of the unit
+  quaternion, velocity v dt / dx, angular velocity omega dt, shape parameters; the cell box
+  floor(x - e - 1/2) - 1 .. ceil(x + e - 1/2) + 1 with e = |R| h the half extents of the rotated bounding box,
+  clipped to the domain on walled axes, at most one period long on periodic ones), and of a body split into
+  slabs its z-range ``slab_z`` of the box. The first slab of a body writes the whole box to ``box[body]``.
+* ``active_row(r, ...)``: flags ``active[block] = 1`` for every block the row's cell box of this step and of the
+  previous one touch, dilated by one cell (the blocks where cells may be covered or uncovered).
+* ``row_sums(k, ...)`` (one item per body): F_s(t), M_s(t) (eqs. 18-19, lattice units) and the link count of
+  body k summed over its rows into ``now[k]``, ``links[k]``; the rows are zeroed for the next links pass;
+* ``fluid_loads(k, ...)`` (one item per body): F_fluid = (F_s(t) + F_s(t - dt)) / 2 and M_fluid likewise
+  (eqs. 20-21) in newtons and newton metres into ``fluid[k]``, added to ``fluid_sum[k]`` (records average it),
+  and written as the DEM's external load (eqs. 13-14) less the buoyancy ``buoy[k]`` = rho_f V g (zero where the
+  fluid carries the hydrostatic pressure); ``fprev[k]`` keeps F_s(t) for the next step.
+
+``rows[r] = (body, slab, slabs)`` lists the launch rows (:func:`iceresist.coupling.coupler.tile_rows`).
+``conv`` (float64): origin x, y, z (m), dx (m), dt / dx (s/m), dt (s). ``grid`` (int64): nx, ny, nz, and 1 for
+periodic axes. ``load_scale`` (float64): the lattice force and torque units, F dt^2 / (rho dx^4) -> N and N m.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+BODY_ROW_ARGS = ("rows", "pos", "quat", "vel", "omega", "shape_int", "par_lat", "half_lat", "conv", "grid", "body",
+                 "bint", "box")
+ACTIVE_ROW_ARGS = ("rows", "bint", "box_prev", "has_prev", "grid", "nblocks3", "block_map", "active")
+ROW_SUMS_ARGS = ("row_ptr", "row_idx", "bforce", "btorque", "nlinks", "now", "links")
+FLUID_LOADS_ARGS = ("now", "has_prev", "fprev", "load_scale", "buoy", "ext", "fluid", "fluid_sum")
+
+
+def build_body_state(target, real):
+    """Compile the device functions ``(body_row, active_row, row_sums, fluid_loads)`` (module docstring)."""
+    int64, int32, f64 = np.int64, np.int32, np.float64
+
+    def slab_z(lo, hi, j, m):
+        """z-range (z0, z1) of slab j of m of the planes lo..hi (empty, z1 < z0, where there are fewer planes)."""
+        nz = hi - lo + 1
+        return lo + (j * nz) // m, lo + ((j + 1) * nz) // m - 1
+
+    slab_z = target.device(slab_z)
+
+    def body_row(r, rows, pos, quat, vel, omega, shape_int, par_lat, half_lat, conv, grid, body, bint, box):
+        r = int64(r)
+        k = rows[r, 0]
+        j = rows[r, 1]
+        m = rows[r, 2]
+        qw = f64(quat[k, 0])
+        qx = f64(quat[k, 1])
+        qy = f64(quat[k, 2])
+        qz = f64(quat[k, 3])
+        qn = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+        w = qw / qn
+        x = qx / qn
+        y = qy / qn
+        z = qz / qn
+        rot = (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+               2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+               2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y))
+        for i in range(9):
+            body[r, 3 + i] = rot[i]
+        for a in range(3):
+            p = (f64(pos[k, a]) - conv[a]) / conv[3]
+            body[r, a] = p
+            body[r, 12 + a] = f64(vel[k, a]) * conv[4]
+            body[r, 15 + a] = f64(omega[k, a]) * conv[5]
+            body[r, 18 + a] = par_lat[k, a]
+            e = (abs(rot[3 * a]) * half_lat[k, 0] + abs(rot[3 * a + 1]) * half_lat[k, 1]
+                 + abs(rot[3 * a + 2]) * half_lat[k, 2])
+            lo = int64(math.floor(p - e - 0.5)) - 1
+            hi = int64(math.ceil(p + e - 0.5)) + 1
+            n = grid[a]
+            if grid[3 + a] != 0:
+                hi = min(hi, lo + n - 1)
+            else:
+                lo = max(lo, int64(0))
+                hi = min(hi, n - 1)
+            if j == 0:
+                box[k, a] = lo
+                box[k, 3 + a] = hi
+            if a == 2:
+                lo, hi = slab_z(lo, hi, j, m)
+            bint[r, 3 + a] = int32(lo)
+            bint[r, 6 + a] = int32(hi)
+        bint[r, 0] = shape_int[k, 0]
+        bint[r, 1] = shape_int[k, 1]
+        bint[r, 2] = shape_int[k, 2]
+        bint[r, 9] = int32(k)
+
+    def block_coord(i, n, periodic):
+        """Block coordinate i on an axis of n blocks: wrapped where periodic, -1 outside a walled axis."""
+        if periodic != 0:
+            return i % n
+        return i if 0 <= i < n else int64(-1)
+
+    block_coord = target.device(block_coord)
+
+    def mark_blocks(lx, ly, lz, hx, hy, hz, grid, nblocks3, block_map, active):
+        """active = 1 on the blocks the cells lx..hx, ly..hy, lz..hz dilated by one cell touch."""
+        for bz in range((lz - 1) >> 3, ((hz + 1) >> 3) + 1):
+            cz = block_coord(bz, nblocks3[2], grid[5])
+            for by in range((ly - 1) >> 3, ((hy + 1) >> 3) + 1):
+                cy = block_coord(by, nblocks3[1], grid[4])
+                for bx in range((lx - 1) >> 3, ((hx + 1) >> 3) + 1):
+                    cx = block_coord(bx, nblocks3[0], grid[3])
+                    if cx < 0 or cy < 0 or cz < 0:
+                        continue
+                    b = block_map[cx, cy, cz]
+                    if b >= 0:
+                        active[b] = 1
+
+    mark_blocks = target.device(mark_blocks)
+
+    def active_row(r, rows, bint, box_prev, has_prev, grid, nblocks3, block_map, active):
+        r = int64(r)
+        mark_blocks(int64(bint[r, 3]), int64(bint[r, 4]), int64(bint[r, 5]), int64(bint[r, 6]), int64(bint[r, 7]),
+                    int64(bint[r, 8]), grid, nblocks3, block_map, active)
+        if has_prev != 0:
+            k = rows[r, 0]
+            z0, z1 = slab_z(box_prev[k, 2], box_prev[k, 5], rows[r, 1], rows[r, 2])
+            if z1 >= z0:
+                mark_blocks(box_prev[k, 0], box_prev[k, 1], z0, box_prev[k, 3], box_prev[k, 4], z1, grid, nblocks3,
+                            block_map, active)
+
+    def row_sums(k, row_ptr, row_idx, bforce, btorque, nlinks, now, links):
+        k = int64(k)
+        fx, fy, fz, mx, my, mz = f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0)
+        nl = int64(0)
+        for i in range(row_ptr[k], row_ptr[k + 1]):
+            r = row_idx[i]
+            fx += bforce[r, 0]
+            fy += bforce[r, 1]
+            fz += bforce[r, 2]
+            mx += btorque[r, 0]
+            my += btorque[r, 1]
+            mz += btorque[r, 2]
+            nl += nlinks[r, 0]
+            for a in range(3):
+                bforce[r, a] = 0.0
+                btorque[r, a] = 0.0
+            nlinks[r, 0] = 0
+        now[k, 0] = fx
+        now[k, 1] = fy
+        now[k, 2] = fz
+        now[k, 3] = mx
+        now[k, 4] = my
+        now[k, 5] = mz
+        links[k] = nl
+
+    def fluid_loads(k, now, has_prev, fprev, load_scale, buoy, ext, fluid, fluid_sum):
+        k = int64(k)
+        for a in range(6):
+            v = now[k, a]
+            avg = 0.5 * (v + fprev[k, a]) if has_prev != 0 else v
+            fprev[k, a] = v
+            if a < 3:
+                load = avg * load_scale[0]
+                ext[k, a] = load - buoy[k, a]
+            else:
+                load = avg * load_scale[0] * load_scale[1]
+                ext[k, a] = load
+            fluid[k, a] = load
+            fluid_sum[k, a] += load
+
+    return (target.device(body_row), target.device(active_row), target.device(row_sums),
+            target.device(fluid_loads))
+
+
+_LAUNCHERS: dict = {}
+
+
+def body_state_launchers(target, real) -> dict:
+    """``{"body_rows", "active_rows", "row_sums", "fluid_loads", "near_events"}``: launchers over launch rows,
+    launch rows, bodies, bodies and forest blocks, cached per target and precision. ``near_events`` ORs each
+    block's event flag with its 26 neighbours' (the blocks a redistribution reaches)."""
+    key = (target.name, target.simulator, np.dtype(real).name)
+    if key not in _LAUNCHERS:
+        from iceresist.backends.launch import BlockLauncher
+        from iceresist.freesurface.fluid import build_block_phases
+
+        body_row, active_row, row_sums, fluid_loads = build_body_state(target, real)
+        near = build_block_phases(target, real)[1]
+        _LAUNCHERS[key] = {
+            "body_rows": BlockLauncher(target, body_row, BODY_ROW_ARGS, label="body_rows"),
+            "active_rows": BlockLauncher(target, active_row, ACTIVE_ROW_ARGS, label="active_rows"),
+            "row_sums": BlockLauncher(target, row_sums, ROW_SUMS_ARGS, label="row_sums"),
+            "fluid_loads": BlockLauncher(target, fluid_loads, FLUID_LOADS_ARGS, label="fluid_loads"),
+            "near_events": BlockLauncher(target, near, ("phases", "nbr", "near"), label="near_events"),
+        }
+    return _LAUNCHERS[key]

@@ -31,8 +31,8 @@ from iceresist.backends.launch import CellLauncher
 from iceresist.errors import InputError
 from iceresist.grid.forest import CELLS
 from iceresist.lbm.solver import collide_builder
-from iceresist.lbm.stream import (POOL_ARGS, _namespace, cell_device, pooled_source,
-                                  stream_collide_source)
+from iceresist.lbm.stream import (POOL_ARGS, _namespace, block_namespace, cell_device, pooled_source,
+                                  stream_collide_block_source, stream_collide_source)
 from iceresist.lbm.codegen import compile_source
 
 log = logging.getLogger(__name__)
@@ -44,15 +44,19 @@ DEFAULT_MARGIN = 0.25
 @lru_cache(maxsize=None)
 def pooled_fused_launcher(target, precision: str, operator: str) -> CellLauncher:
     """The free-surface fused stream-collide with f indexed through ``fslot`` (args ``POOL_ARGS``);
-    per cell on CUDA, per block (the cell update looped over the 512 cells) on the CPU."""
+    per cell on CUDA, per block on the CPU (:func:`~iceresist.lbm.stream.stream_collide_block_source`: an
+    all-liquid block gathered line by line and collided across its 512 cells, which vectorises)."""
     real = jit.real_type(precision)
-    ns = _namespace(target, real, collide_builder(operator)(target, real))
+    collide = collide_builder(operator)(target, real)
     if target.is_cuda:
-        fn = compile_source(pooled_source(stream_collide_source(free_surface=True)), "stream_collide_cell", ns,
-                            cell_device(target))
+        fn = compile_source(pooled_source(stream_collide_source(free_surface=True)), "stream_collide_cell",
+                            _namespace(target, real, collide), cell_device(target))
         return CellLauncher(target, fn, POOL_ARGS, label="f_update")
-    fn = compile_source(pooled_source(stream_collide_source(loop_cells=True, free_surface=True)),
-                        "stream_collide_block", ns, cell_device(target))
+    # the vectorised block form: an all-liquid block gathered line by line and collided across its cells
+    src = pooled_source(stream_collide_block_source(free_surface=True))
+    head, body = src.split("\n", 1)
+    fn = compile_source(f"{head}\n    sb = fslot[b]\n{body}", "stream_collide_block",
+                        block_namespace(target, real, collide), cell_device(target))
     return CellLauncher(target, fn, POOL_ARGS, per_block=True, label="f_update")
 
 

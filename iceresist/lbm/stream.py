@@ -250,22 +250,27 @@ def build_stream_collide_block(target, real, collide, vector: bool = True, free_
 
     With ``vector`` (default) the block is updated in three sweeps so that the collision vectorises
     across cells (:func:`stream_collide_block_source`); without it, the per-cell update looped over
-    the cells (``stream_collide_source(loop_cells=True)``), kept as the reference form. The
-    free-surface variant (gravity times the cell's density, eq. 11 at gas sources) takes the
-    per-cell form."""
-    if not vector or free_surface:
+    the cells (``stream_collide_source(loop_cells=True)``), kept as the reference form. Both take
+    ``free_surface`` (gravity times the cell's density, eq. 11 at gas sources)."""
+    if not vector:
         return compile_source(stream_collide_source(loop_cells=True, free_surface=free_surface),
                               "stream_collide_block", _namespace(target, real, collide), cell_device(target))
+    return compile_source(stream_collide_block_source(free_surface), "stream_collide_block",
+                          block_namespace(target, real, collide), cell_device(target))
+
+
+def block_namespace(target, real, collide) -> dict:
+    """The names :func:`stream_collide_block_source` uses: those of the per-cell form and its scratch."""
     ns = _namespace(target, real, collide)
     ns.update({"np": np, "rdtype": real, "PLANE": PLANE})
-    return compile_source(stream_collide_block_source(), "stream_collide_block", ns, cell_device(target))
+    return ns
 
 
-def _pull_body() -> str:
+def _pull_body(free_surface: bool = False) -> str:
     """The pull part of the per-cell update (everything before the collision), taken from
     :func:`stream_collide_source` so both forms share one set of boundary rules."""
-    body = stream_collide_source().split("\n", 1)[1]
-    return body.split("    out = collide(", 1)[0]
+    body = stream_collide_source(free_surface=free_surface).split("\n", 1)[1]
+    return body.split("    rho_c = " if free_surface else "    out = collide(", 1)[0]
 
 
 #: Stride of one population in the block scratch: 512 cells plus 8 cells of padding either side,
@@ -308,8 +313,10 @@ def _line_gather(q: int) -> str:
     return s
 
 
-def stream_collide_block_source() -> str:
-    """Python source of the CPU block update ``stream_collide_block(b, *ARGS)`` in three sweeps.
+def stream_collide_block_source(free_surface: bool = False) -> str:
+    """Python source of the CPU block update ``stream_collide_block(b, *ARGS)`` in three sweeps (``*FS_ARGS`` with
+    ``free_surface``: the pull of a mixed block takes eq. (11) at GAS sources and the collision the force
+    rho g, as in :func:`stream_collide_source`).
 
     1. pull: the 27 populations of the 512 cells into a block scratch, population q of cell c at
        ``tmp[q * PLANE + 8 + c]``; a block whose cells are all FLUID is gathered line by line
@@ -321,7 +328,7 @@ def stream_collide_block_source() -> str:
 
     Same arithmetic as the per-cell form, cell by cell; only the order of the work differs.
     """
-    s = f"def stream_collide_block(b, {', '.join(ARGS)}):\n"
+    s = f"def stream_collide_block(b, {', '.join(FS_ARGS if free_surface else ARGS)}):\n"
     s += f"    tmp = np.empty({Q * PLANE}, rdtype)\n"
     s += "    full = True\n"
     s += f"    for c in range({CELLS}):\n        if flags[b, c] != FLUID:\n            full = False\n"
@@ -329,14 +336,18 @@ def stream_collide_block_source() -> str:
     s += "".join("    " + ln + "\n" for q in range(Q) for ln in _line_gather(q).splitlines())
     s += "    else:\n"
     zero_fill = "".join(f"                tmp[{_slot(q)} + c] = zero\n" for q in range(Q))
-    body = _pull_body().replace("        return\n", zero_fill + "                continue\n", 1)
+    body = _pull_body(free_surface).replace("        return\n", zero_fill + "                continue\n", 1)
     s += f"        for c in range({CELLS}):\n"
     s += "".join("        " + ln + "\n" for ln in body.splitlines())
     s += "".join(f"            tmp[{_slot(q)} + c] = f{q}\n" for q in range(Q))
     # 2. collide, vectorised across cells
     s += f"    for c in range({CELLS}):\n"
     s += "".join(f"        f{q} = tmp[{_slot(q)} + c]\n" for q in range(Q))
-    s += f"        out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
+    if free_surface:
+        s += f"        rho_c = one + {' + '.join(F_NAMES)}\n"
+        s += f"        out = collide(({', '.join(F_NAMES)}), omega, rho_c * Fx, rho_c * Fy, rho_c * Fz)\n"
+    else:
+        s += f"        out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
     s += "".join(f"        tmp[{_slot(q)} + c] = out[{q}]\n" for q in range(Q))
     # 3. write back
     s += "    if full:\n"

@@ -93,23 +93,20 @@ def build_body_state(target, real):
         bint[r, 2] = shape_int[k, 2]
         bint[r, 9] = int32(k)
 
-    def block_coord(i, n, periodic):
-        """Block coordinate i on an axis of n blocks: wrapped where periodic, -1 outside a walled axis."""
-        if periodic != 0:
-            return i % n
-        return i if 0 <= i < n else int64(-1)
-
-    block_coord = target.device(block_coord)
-
     def mark_blocks(lx, ly, lz, hx, hy, hz, grid, nblocks3, block_map, active):
-        """active = 1 on the blocks the cells lx..hx, ly..hy, lz..hz dilated by one cell touch."""
+        """active = 1 on the blocks the cells lx..hx, ly..hy, lz..hz dilated by one cell touch. The three axes are
+        written out: a helper per axis (a tuple return) spilled registers on sm_90."""
         for bz in range((lz - 1) >> 3, ((hz + 1) >> 3) + 1):
-            cz = block_coord(bz, nblocks3[2], grid[5])
+            cz = bz % nblocks3[2] if grid[5] != 0 else bz
+            if cz < 0 or cz >= nblocks3[2]:
+                continue
             for by in range((ly - 1) >> 3, ((hy + 1) >> 3) + 1):
-                cy = block_coord(by, nblocks3[1], grid[4])
+                cy = by % nblocks3[1] if grid[4] != 0 else by
+                if cy < 0 or cy >= nblocks3[1]:
+                    continue
                 for bx in range((lx - 1) >> 3, ((hx + 1) >> 3) + 1):
-                    cx = block_coord(bx, nblocks3[0], grid[3])
-                    if cx < 0 or cy < 0 or cz < 0:
+                    cx = bx % nblocks3[0] if grid[3] != 0 else bx
+                    if cx < 0 or cx >= nblocks3[0]:
                         continue
                     b = block_map[cx, cy, cz]
                     if b >= 0:

@@ -52,7 +52,7 @@ log = logging.getLogger(__name__)
 
 #: Cells of a body's cell box per launch row. A body whose box holds more (the hull: 0.7 M cells at the quick
 #: tier-2 resolution, 78 M at the paper's) is split into slabs along z, each launched as a body row of its own
-#: (:func:`tile_bodies`), so that it spreads over every CPU thread and CUDA thread block instead of one.
+#: (:func:`tile_rows`), so that it spreads over every CPU thread and CUDA thread block instead of one.
 TILE_CELLS = 32768
 
 

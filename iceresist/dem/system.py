@@ -498,7 +498,8 @@ class DEMSystem:
 
     def mean_contact_force_on(self, body: int) -> np.ndarray:
         """Contact force on a body (N) averaged over the sub-steps of the last :meth:`step` call, each sub-step's
-        force taken at its end (the value :meth:`contact_force_on` shows after that sub-step)."""
+        force taken at its end (the value :meth:`contact_force_on` shows after that sub-step); after a step with
+        ``accumulate`` use :meth:`contact_sum_on` instead."""
         if self.last_substeps == 0:
             return self.contact_force_on(body)
         return self._get("bcsum")[body, :3].astype(float) / self.last_substeps

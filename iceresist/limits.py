@@ -129,7 +129,7 @@ def check_step_count(scene, dt_s: float, *, dt_key: str = "numerics.dt_s") -> in
 
 
 def check_fluid(scene, units) -> None:
-    """All pre-run limits of a fluid scene (called by :class:`iceresist.model.FluidModel`)."""
+    """All pre-run limits of a fluid scene (called by :class:`iceresist.models.FluidModel`)."""
     if scene.numerics.check_limits:
         check_lattice_speed_for_operator(scene, units)
         check_cell_reynolds(scene, units)
@@ -200,7 +200,7 @@ def check_scene_ice(scene, width_m: float) -> None:
 
 
 def check_tier1(model) -> None:
-    """Limits of a built :class:`~iceresist.tier1.Tier1Model`: record count, sub-step count, hull travel."""
+    """Limits of a built :class:`~iceresist.models.tier1.Tier1Model`: record count, sub-step count, hull travel."""
     scene = model.scene
     check_step_count(scene, model.dt_s, dt_key="contact.sample_interval_s")
     r = scene.run

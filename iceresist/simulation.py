@@ -1,16 +1,7 @@
 """The time loop, after Oceananigans.jl's ``Simulation``: stop criteria, callbacks and output writers on schedules.
 
-A *model* is anything with this protocol (no I/O of its own)::
-
-    model.step(n)                 advance n time steps
-    model.iteration, model.time_s current step count and simulated time (s)
-    model.dt_s                    time step (s), optional: lets time schedules land on the right step
-    model.cells                   number of lattice cells (for MLUPS)
-    model.fields() -> dict        name -> [x, y, z(, 3)] host arrays (physical units)
-    model.state() / load_state(d) everything a checkpoint needs, as a nested dict of arrays
-    model.describe() -> dict      plain values for the run metadata
-    model.is_finite() -> bool     optional: a cheap NaN/Inf check (else fields() are checked)
-    model.diagnostics() -> dict   optional: one time-series row (mass, energy, forces, ...)
+The model is an :class:`iceresist.models.base.Model` (state and one time step, no I/O of its own); the
+simulation asks it only what that contract promises.
 
 A writer whose ``schedule`` is ``None`` writes only once, when the run ends.
 ``Simulation.run`` steps the model in chunks that end exactly where a schedule
@@ -32,6 +23,7 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.io.checkpoint import read_checkpoint, write_checkpoint
 from iceresist.io.meta import mlups
+from iceresist.models.base import Model
 
 log = logging.getLogger(__name__)
 
@@ -133,17 +125,9 @@ class Callback:
 
 
 # -- NaN checker ----------------------------------------------------------------------------------------
-def fields_are_finite(model) -> bool:
-    check = getattr(model, "is_finite", None)
-    if check is not None:
-        return bool(check())
-    return all(np.isfinite(a).all() for a in model.fields().values() if np.issubdtype(np.asarray(a).dtype,
-                                                                                       np.floating))
-
-
 def check_finite(sim):
     """Stop the run when the model holds NaN or Inf (default callback ``nan_checker``)."""
-    if not fields_are_finite(sim.model):
+    if not sim.model.is_finite():
         sim.diverge()
 
 
@@ -188,8 +172,7 @@ class TimeSeriesWriter:
 
     def write(self, sim):
         model = sim.model
-        diag = self.diagnostics(model) if self.diagnostics is not None else (
-            model.diagnostics() if hasattr(model, "diagnostics") else {})
+        diag = self.diagnostics(model) if self.diagnostics is not None else model.diagnostics()
         row = {"iteration": model.iteration, "time_s": model.time_s, **diag}
         self.runfile.append_timeseries(row, self.group)
         self.last_iteration = model.iteration
@@ -242,14 +225,18 @@ class Simulation:
     outputs already written stay, and no output is written from a diverged state.
     """
 
-    def __init__(self, model, *, stop_iteration: int | None = None, stop_time_s: float | None = None,
+    def __init__(self, model: Model, *, stop_iteration: int | None = None, stop_time_s: float | None = None,
                  wall_time_limit_s: float | None = None, progress: bool = True, nan_check_interval: int = 100):
+        if not isinstance(model, Model):
+            raise TypeError(f"Simulation needs an iceresist.models.base.Model, not {type(model).__name__}")
         self.model = model
         self.stop_iteration, self.stop_time_s, self.wall_time_limit_s = stop_iteration, stop_time_s, wall_time_limit_s
         self.progress = progress
         self.callbacks: dict[str, Callback] = {"nan_checker": Callback(check_finite,
                                                                        IterationInterval(nan_check_interval))}
         self.output_writers: dict[str, object] = {}
+        #: ``func(sim)`` called once per :meth:`run`, after the pickup and before the first output.
+        self.on_start: list[Callable] = []
         self.stop_reason: str | None = None
         # stopped at its stop iteration or time, not by an interrupt, a divergence, the watchdog or the wall limit
         self.completed = False
@@ -286,14 +273,13 @@ class Simulation:
     def mlups(self) -> float:
         """Million cell updates per second over the time spent stepping (compilation of the first step included)."""
         # a model step may hold several lattice steps (tier 2: one record = lbm_steps_per_record LBM steps)
-        lattice_steps = getattr(self.model, "lbm_steps_per_record", 1)
-        return mlups(getattr(self.model, "cells", 0) * lattice_steps, self.steps_done, self.step_time_s)
+        return mlups(self.model.lattice_updates_per_step, self.steps_done, self.step_time_s)
 
     def _check_stop(self):
         m = self.model
         if self.stop_iteration is not None and m.iteration >= self.stop_iteration:
             self._reach_end(f"stop iteration {self.stop_iteration} reached")
-        if self.stop_time_s is not None and m.time_s >= self.stop_time_s - 1e-6 * (getattr(m, "dt_s", 0.0) or 0.0):
+        if self.stop_time_s is not None and m.time_s >= self.stop_time_s - 1e-6 * m.dt_s:
             self._reach_end(f"stop time {self.stop_time_s:g} s reached")
         if self.wall_time_limit_s is not None and time.perf_counter() - self._start_wall >= self.wall_time_limit_s:
             self.stop(f"wall time limit {self.wall_time_limit_s:g} s reached")
@@ -333,7 +319,7 @@ class Simulation:
         n = self._chunk_cap
         if self.stop_iteration is not None:
             n = min(n, self.stop_iteration - m.iteration)
-        dt = getattr(m, "dt_s", None)
+        dt = m.dt_s
         if self.stop_time_s is not None:
             n = min(n, max(1, math.ceil((self.stop_time_s - m.time_s) / dt - 1e-6)) if dt else 1)
         for _, act in self._actions():
@@ -371,7 +357,7 @@ class Simulation:
         total = None
         if self.stop_iteration is not None:
             total = self.stop_iteration - m.iteration
-        dt = getattr(m, "dt_s", None)
+        dt = m.dt_s
         if self.stop_time_s is not None and dt:
             by_time = math.ceil((self.stop_time_s - m.time_s) / dt - 1e-6)
             total = by_time if total is None else min(total, by_time)
@@ -407,6 +393,8 @@ class Simulation:
         if pickup:
             self._pickup(pickup)
         self.start_iteration = self.model.iteration
+        for func in self.on_start:
+            func(self)
         for _, act in self._actions():
             if act.schedule is not None:
                 act.schedule.initialize(self)

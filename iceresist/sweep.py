@@ -20,7 +20,6 @@ before anything runs, so one table never mixes two versions of a preset.
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import logging
 import time
@@ -29,10 +28,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S
 from iceresist.errors import InputError
-from iceresist.run import DEFAULT_CHECKPOINT_WALL_S
 from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
-from iceresist.simulation import Checkpointer
 
 log = logging.getLogger(__name__)
 
@@ -123,14 +121,12 @@ def resolve_cases(cases) -> list[str]:
 
 def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "auto", progress: bool = False,
              overrides: dict | None = None, callbacks: dict | None = None, checkpoint_schedule=None) -> Path:
-    """Run one case to ``DIR/cases/<case>.h5`` (via a partial file renamed at the end), continuing a killed run
-    of it from its checkpoint. ``checkpoint_schedule``: when to checkpoint (default every ``CHECKPOINT_WALL_S``
-    of wall time)."""
-    from iceresist.io.hdf5 import RunFile
-    from iceresist.io.meta import leg_meta, run_meta
-    from iceresist.simulation import Callback, IterationInterval, Simulation, TimeSeriesWriter, WallTimeInterval
-    from iceresist.tier1 import Tier1Model
-    from iceresist.tier2 import Tier2Model
+    """Run one case to ``DIR/cases/<case>.h5`` through the driver (:func:`iceresist.driver.run_model`), via a
+    partial file renamed at the end, continuing a killed run of it from its checkpoint. ``checkpoint_schedule``:
+    when to checkpoint (default every ``CHECKPOINT_WALL_S`` of wall time)."""
+    from iceresist.driver import Outputs, Stop, run_model
+    from iceresist.models import Tier1Model, Tier2Model
+    from iceresist.simulation import IterationInterval, WallTimeInterval
 
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
@@ -141,60 +137,43 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     chk = checkpoint_path(out_dir, case)
     final.parent.mkdir(parents=True, exist_ok=True)
     earlier = _resumable(partial, chk, scene.source_text)
-    if earlier is None and chk.exists():
-        chk.unlink()  # the checkpoint of another scene, or of a partial file that is gone
     model = (Tier1Model if tier == 1 else Tier2Model)(scene, backend=backend)
-    build_s = time.perf_counter() - t_build
-    wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0)) if earlier is not None else 0.0
-    desc = model.describe()
-    with RunFile(partial, "a" if earlier is not None else "w", write_xdmf=False) as rf:
-        if earlier is None:
-            rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"],
-                                     precision=model.precision, cells=model.cells),
-                          scene_name=scene.scene.name, case=case, fidelity=fidelity, tier=tier,
-                          bow=get_case(case).bow, concentration_nominal=get_case(case).concentration,
-                          knots=get_case(case).knots, model=desc, finished=False)
-            g = rf.h5.require_group("bodies")
-            g["initial_positions_m"] = model.ice_state()["positions_m"]
-            g["hull_vertices_m"] = model.geometry.vertices()
-        else:
-            g = rf.h5["bodies"]
-        legs = leg_meta(earlier, int(earlier.get("checkpoint_iteration", 0)) if earlier else 0, desc["backend"])
-        rf.write_meta(**legs)
-        sim = Simulation(model, stop_time_s=scene.run.end_time_s, progress=progress)
-        sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(1))
-        sim.output_writers["checkpointer"] = Checkpointer(
-            chk, checkpoint_schedule or WallTimeInterval(CHECKPOINT_WALL_S), write_final=False, runfile=rf,
-            wall_before_s=wall_before_s, t0=t_build)
-        from iceresist import watchdog
+    c = get_case(case)
 
-        dog = watchdog.install(sim, runfile=rf, json_path=partial.with_suffix(".watchdog.json"))
-        for name, (func, every) in (callbacks or {}).items():
-            sim.callbacks[name] = Callback(func, IterationInterval(every))
-        log.info("case %s (%s, tier %d): %d cubes, %d spheres, %.3g s simulated", case, fidelity, tier,
-                 model.layout.count, model.dem.n_spheres, scene.run.end_time_s)
-        if earlier is not None:
-            log.info("case %s: continuing from its checkpoint at record %d (leg %d)", case,
-                     int(earlier.get("checkpoint_iteration", -1)), legs["legs"])
-        sim.run(pickup=chk if earlier is not None else False)
-        if dog.report is not None:
-            raise InputError(f"case {case}: stopped by the watchdog: {dog.report.message} "
-                             f"(diagnostic in {partial.with_suffix('.watchdog.json').name})")
-        if sim.diverged:
-            raise InputError(f"case {case}: the DEM run diverged ({sim.stop_reason}); lower contact.dem_safety")
-        if not sim.completed:  # a callback stopped it before its end: the partial file and checkpoint stay
-            raise InputError(f"case {case}: stopped before its end time ({sim.stop_reason}); run the sweep again "
-                             f"to continue it from its checkpoint")
+    def on_new(rf, model):
+        g = rf.h5.require_group("bodies")
+        g["initial_positions_m"] = model.ice_state()["positions_m"]
+        g["hull_vertices_m"] = model.geometry.vertices()
+
+    def on_completed(rf, model, sim):
         st = model.ice_state()
+        g = rf.h5["bodies"]
         g["final_positions_m"] = st["positions_m"]
         g["final_quaternions"] = st["quaternions"]
-        rf.write_meta(finished=True, iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
-                      dem_substeps=int(model.dem.substeps_taken),
-                      wall_time_s=wall_before_s + sim.wall_time_s + build_s,
-                      build_time_s=build_s, step_time_s=sim.step_time_s,
-                      lbm_steps=int(getattr(model, "lbm_steps", 0)), mlups=sim.mlups,
-                      final_x_bow_m=model.x_bow_m, stop_reason=sim.stop_reason,
-                      finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
+        rf.write_meta(dem_substeps=int(model.dem.substeps_taken), lbm_steps=int(model.lbm_steps),
+                      final_x_bow_m=model.x_bow_m)
+
+    log.info("case %s (%s, tier %d): %d cubes, %d spheres, %.3g s simulated", case, fidelity, tier,
+             model.layout.count, model.dem.n_spheres, scene.run.end_time_s)
+    if earlier is not None:
+        log.info("case %s: continuing from its checkpoint at record %d", case,
+                 int(earlier.get("checkpoint_iteration", -1)))
+    outputs = Outputs(timeseries=IterationInterval(1), checkpoint_final=False,
+                      checkpoint=checkpoint_schedule or WallTimeInterval(CHECKPOINT_WALL_S))
+    result = run_model(model, scene, partial, chk, stop=Stop(time_s=scene.run.end_time_s), outputs=outputs,
+                       pickup=earlier is not None, progress=progress, callbacks=callbacks,
+                       meta={"case": case, "fidelity": fidelity, "tier": tier, "bow": c.bow,
+                             "concentration_nominal": c.concentration, "knots": c.knots},
+                       on_new=on_new, on_completed=on_completed, build_s=time.perf_counter() - t_build)
+    sim, dog = result.sim, result.watchdog
+    if dog.report is not None:
+        raise InputError(f"case {case}: stopped by the watchdog: {dog.report.message} "
+                         f"(diagnostic in {partial.with_suffix('.watchdog.json').name})")
+    if sim.diverged:
+        raise InputError(f"case {case}: the DEM run diverged ({sim.stop_reason}); lower contact.dem_safety")
+    if not sim.completed:  # a callback stopped it before its end: the partial file and checkpoint stay
+        raise InputError(f"case {case}: stopped before its end time ({sim.stop_reason}); run the sweep again "
+                         f"to continue it from its checkpoint")
     partial.replace(final)
     chk.unlink(missing_ok=True)
     return final

@@ -95,13 +95,7 @@ class Watchdog:
     def inspect(self, model) -> WatchdogReport | None:
         """The first violated limit of ``model`` now, or ``None``."""
         it, t = int(model.iteration), float(model.time_s)
-        probe = model.watchdog_probe() if hasattr(model, "watchdog_probe") else None
-        if probe is None:
-            from iceresist.simulation import fields_are_finite
-
-            ok = fields_are_finite(model)
-            return None if ok else WatchdogReport(it, t, "finite", float("nan"), "finite", None,
-                                                  "NaN or Inf in the solution")
+        probe = model.watchdog_probe()
         finite, where = probe.get("finite", (True, None))
         if not finite:
             return WatchdogReport(it, t, "finite", float("nan"), "finite", where, "NaN or Inf in the solution")
@@ -181,10 +175,9 @@ class Watchdog:
 def default_interval(model) -> int:
     """Check interval of a model when the scene leaves ``run.watchdog_every_steps`` out: the model's own
     ``watchdog_interval`` where it has one, else by kind (fluid or DEM)."""
-    own = getattr(model, "watchdog_interval", None)
-    if own is not None:
-        return int(own)
-    return DEFAULT_INTERVAL_FLUID if getattr(model, "cells", 0) else DEFAULT_INTERVAL_DEM
+    if model.watchdog_interval is not None:
+        return int(model.watchdog_interval)
+    return DEFAULT_INTERVAL_FLUID if model.cells else DEFAULT_INTERVAL_DEM
 
 
 def install(sim, *, interval: int | None = None, runfile=None, json_path=None, **limits) -> Watchdog:

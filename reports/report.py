@@ -104,7 +104,7 @@ def fig_bows(plt, table):
 
 def fig_tank(plt, cases: dict):
     """Tier 2: the water level at the fore wall and ahead of the bow and the drift of the ice ahead of the bow
-    against time (:meth:`iceresist.tier2.Tier2Model.tank_motion`), with the steady window and the time the
+    against time (:meth:`iceresist.models.tier2.Tier2Model.tank_motion`), with the steady window and the time the
     stern's start wave reaches the bow (docs/SHIP.md, "The start wave"); None when no case recorded them."""
     from iceresist.sweep import case_start_wave, hull_of_model
 

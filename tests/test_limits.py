@@ -149,7 +149,7 @@ def test_concentration_beyond_touching_is_refused_with_the_touching_limit(tmp_pa
                     "touching limit")
     c_ok = _number_after(line, "ice.concentration <=")
     assert 0.9 < c_ok < 1.0
-    from iceresist.tier1 import Tier1Model
+    from iceresist.models.tier1 import Tier1Model
 
     model = Tier1Model(parse_scene(to_toml(_tier1(ice={"concentration": c_ok}))), backend="cpu")
     assert model.layout.gap_across_m >= -1e-12 and model.layout.gap_along_m >= -1e-12
@@ -167,7 +167,7 @@ def test_count_beyond_touching_is_refused():
 
 
 def test_too_many_dem_substeps_names_a_stiffness_that_works(monkeypatch):
-    from iceresist.tier1 import Tier1Model
+    from iceresist.models.tier1 import Tier1Model
 
     monkeypatch.setattr(limits, "MAX_DEM_SUBSTEPS", 300)
     scene = parse_scene(to_toml(_tier1(contact={"stiffness_N_m": 5e5}, run={"end_time_s": 0.1})))
@@ -186,7 +186,7 @@ def test_ship_too_fast_for_the_dem_substep(tmp_path, capsys):
 
 
 def test_stiffness_raises_the_substep_count_as_sqrt_k():
-    from iceresist.tier1 import Tier1Model
+    from iceresist.models.tier1 import Tier1Model
 
     n = [Tier1Model(parse_scene(to_toml(_tier1(contact={"stiffness_N_m": k, "sample_interval_s": 0.01}))),
                     backend="cpu").substeps_per_step for k in (5e3, 5e5)]

@@ -8,6 +8,7 @@ import pytest
 
 from iceresist import cli
 from iceresist.io import RunFile
+from iceresist.models.base import Model
 from iceresist.run import add_run_arguments
 from iceresist.scene import preset_text
 from iceresist.units import Units
@@ -75,10 +76,11 @@ def test_missing_file_and_bad_flags(tmp_path, main):
     _one_line_error(*main("poiseuille", "--pickup", "--output", tmp_path), "no result to continue")
 
 
-class FakeFluid:
-    """Stands in for FluidModel: the protocol plus what run.py reads (units, shape, target, precision)."""
+class FakeFluid(Model):
+    """Stands in for FluidModel: the model contract plus what run.py reads (units, shape, target, precision)."""
 
     components = ("fluid",)
+    iteration = 0
 
     def __init__(self, scene, backend=None, precision=None):
         self.units = scene.units()
@@ -89,10 +91,6 @@ class FakeFluid:
         self.dt_s = self.units.dt_s
         self.iteration = 0
         self.u = np.zeros(self.shape_cells + (3,))
-
-    @property
-    def time_s(self):
-        return self.iteration * self.dt_s
 
     def step(self, n=1):
         for _ in range(n):
@@ -119,12 +117,18 @@ class FakeFluid:
     def describe(self):
         return {"components": ["fluid"], "backend": "cpu", "precision": self.precision}
 
+    def watchdog_probe(self):
+        return {"finite": (self.is_finite(), None)}
+
+    def allocation(self):
+        return {"u": self.u.nbytes}
+
 
 @pytest.fixture
 def fake_model(monkeypatch):
-    import iceresist.model
+    import iceresist.models
 
-    monkeypatch.setattr(iceresist.model, "build_model", lambda scene, **kw: FakeFluid(scene, **kw))
+    monkeypatch.setattr(iceresist.models, "build_model", lambda scene, **kw: FakeFluid(scene, **kw))
 
 
 def test_run_writes_result_meta_fields_and_xdmf(tmp_path, main, fake_model):
@@ -158,15 +162,15 @@ def test_existing_result_is_kept_unless_force(tmp_path, main, fake_model):
     # --force with a start that fails (cells not a multiple of 8 is caught before any file is opened)
     bad = tmp_path / "bad.toml"
     bad.write_text(POISEUILLE.replace("[0.008, 0.008, 0.016]", "[0.008, 0.008, 0.015]"))
-    import iceresist.model
+    import iceresist.models
 
-    iceresist.model.build_model = _real_build_model  # restored by monkeypatch at teardown
+    iceresist.models.build_model = _real_build_model  # restored by monkeypatch at teardown
     _one_line_error(*main(bad, "--output", tmp_path, "--force"), "multiple of 8")
     assert h5.read_bytes() == before
     _one_line_error(*main("poiseuille", "--output", tmp_path, "--force", "--pickup"), "exclude each other")
 
 
-from iceresist.model import build_model as _real_build_model  # noqa: E402
+from iceresist.models import build_model as _real_build_model  # noqa: E402
 
 
 def test_pickup_continues_a_result(tmp_path, main, fake_model):
@@ -184,7 +188,7 @@ def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_p
     steps (not 650 + 700), two legs, and the wall time up to the checkpoint plus the second leg's. It is
     finished only after a leg that reached its stop criterion: not after the interrupt, and not again once a
     third leg towards 1500 is interrupted."""
-    import iceresist.model
+    import iceresist.models
 
     class Interrupted(FakeFluid):
         at = 650
@@ -195,7 +199,7 @@ def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_p
                 raise KeyboardInterrupt
             super().step(n)
 
-    monkeypatch.setattr(iceresist.model, "build_model", lambda scene, **kw: Interrupted(scene, **kw))
+    monkeypatch.setattr(iceresist.models, "build_model", lambda scene, **kw: Interrupted(scene, **kw))
     scene = tmp_path / "poiseuille.toml"
     scene.write_text(POISEUILLE + "checkpoint_every_steps = 500\n")
     rc, err = main(scene, "--output", tmp_path, "--steps", "1200")
@@ -233,14 +237,13 @@ def test_units_of_the_preset_match_the_scene_doc():
 def test_run_checkpoints_every_ten_minutes_unless_the_scene_says(tmp_path, output, schedule):
     """A long run killed without a checkpoint loses all its work (an interrupt skips the final one), so a scene
     that names no checkpoint schedule gets the sweep's 600 s of wall time; one that does keeps its own."""
-    from iceresist.run import DEFAULT_CHECKPOINT_WALL_S, build_simulation
+    from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S
+    from iceresist.run import scene_outputs
     from iceresist.scene.load import load_scene
 
     scene = load_scene("poiseuille")
     scene = scene.model_copy(update={"output": scene.output.model_copy(update=output)})
-    with RunFile(tmp_path / "r.h5", "w", shape_cells=scene.shape_cells()) as rf:
-        sim = build_simulation(scene, FakeFluid(scene), rf, tmp_path / "r.checkpoint.h5", progress=False)
-    chk = sim.output_writers["checkpointer"].schedule
+    chk = scene_outputs(scene)[1].checkpoint
     kind, value = schedule
     assert type(chk).__name__ == kind
     assert (chk.interval_s if kind == "WallTimeInterval" else chk.interval) == value

@@ -11,7 +11,7 @@ pytest.importorskip("iceresist.lbm.solver")
 
 from iceresist.io import RunFile  # noqa: E402
 from iceresist.lbm.solver import operator_available  # noqa: E402
-from iceresist.model import FluidModel, build_model  # noqa: E402
+from iceresist.models import FluidModel, build_model  # noqa: E402
 from iceresist.run import add_run_arguments, cmd_run  # noqa: E402
 from iceresist.scene import parse_scene, preset_text  # noqa: E402
 

@@ -11,7 +11,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.io import RunFile, read_checkpoint
-from iceresist.model import FluidModel, FreeSurfaceModel, build_model
+from iceresist.models import FluidModel, FreeSurfaceModel, build_model
 from iceresist.run import add_run_arguments
 from iceresist.scene import parse_scene, preset_text
 

@@ -8,24 +8,23 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.io import RunFile
+from iceresist.models.base import Model
 from iceresist.simulation import (Callback, Checkpointer, FieldWriter, IterationInterval, Simulation,
                                   TimeInterval, TimeSeriesWriter, WallTimeInterval)
 
 SHAPE = (4, 3, 2)
 
 
-class LogisticModel:
+class LogisticModel(Model):
     """x <- r x (1 - x) per cell: chaotic, so any lost or repeated step changes every bit."""
+
+    iteration = 0
 
     def __init__(self, dt_s=0.1, nan_at=None, seed=1):
         self.x = np.random.default_rng(seed).uniform(0.1, 0.9, SHAPE)
         self.iteration, self.dt_s, self.nan_at = 0, dt_s, nan_at
         self.cells = int(np.prod(SHAPE))
         self.step_calls = []
-
-    @property
-    def time_s(self):
-        return self.iteration * self.dt_s
 
     def step(self, n=1):
         self.step_calls.append(n)
@@ -50,6 +49,12 @@ class LogisticModel:
 
     def describe(self):
         return {"kind": "logistic"}
+
+    def watchdog_probe(self):
+        return {"finite": (self.is_finite(), None)}
+
+    def allocation(self):
+        return {"x": self.x.nbytes}
 
 
 def _iterations_called(sim, schedule, stop):

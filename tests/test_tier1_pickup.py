@@ -7,7 +7,7 @@ from iceresist import cli
 from iceresist.io import RunFile
 from iceresist.ship.presets import case_scene
 from iceresist.sweep import TINY_OVERRIDES
-from iceresist.tier1 import Tier1Model
+from iceresist.models.tier1 import Tier1Model
 
 
 def scene_file(tmp_path, tier=1, overrides=TINY_OVERRIDES, checkpoint_every=10):

@@ -6,7 +6,7 @@ import h5py
 import numpy as np
 import pytest
 
-from iceresist.model import build_model
+from iceresist.models import build_model
 from iceresist.ship.presets import TIER2, case_scene
 from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, analyse_case, run_case
 
@@ -86,7 +86,7 @@ def test_tier2_case_file_is_what_the_report_reads(tiny_run):
     assert row["start_wave_fraction"] == pytest.approx(sw["window_fraction"], abs=1e-12)
     assert sw["duration_s"] == pytest.approx(m.geometry.prismatic_length_m / (np.sqrt(9.81 * 0.14) - 0.514),
                                              rel=1e-9)
-    # units: dt from the Mach rule against sqrt(g h), gravity from dt (module docstring of iceresist.tier2)
+    # units: dt from the Mach rule against sqrt(g h), gravity from dt (module docstring of iceresist.models.tier2)
     u = m.units
     assert u.lbm_dt_s == pytest.approx(0.1 * u.dx_m / np.sqrt(9.81 * 0.14), rel=1e-9)
     assert u.g_lattice == pytest.approx(9.81 * u.lbm_dt_s ** 2 / u.dx_m, rel=1e-12)
@@ -215,9 +215,11 @@ def test_tier2_cheap_watchdog_probe_reads_the_speed_the_populations_give(tiny_ru
 
 
 def test_scenes_allocate_only_what_they_use():
-    """Tier 1: no LBM arrays; a single-phase fluid scene: no phase field and no DEM."""
+    """Tier 1: no LBM arrays (the DEM's alone); a single-phase fluid scene: no phase field and no DEM."""
     t1 = build_model(case_scene(CASE, "quick", 1, **TINY_OVERRIDES), backend="cpu")
-    assert t1.allocated_bytes() == 0 and t1.cells == 0
+    assert list(t1.allocation()) == ["dem"] and t1.cells == 0
+    # the DEM's arrays: at least positions, velocities, quaternions and forces of every body and sphere (float64)
+    assert t1.allocated_bytes() >= 8 * (3 + 3 + 4 + 3) * t1.dem.n_bodies + 8 * 3 * t1.dem.n_spheres
     assert not any(hasattr(t1, k) for k in ("fb", "fluid", "solver", "forest", "phase"))
     from iceresist.scene.schema import Scene
 

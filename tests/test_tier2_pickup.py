@@ -31,7 +31,7 @@ def test_tier2_pickup_continues_bit_for_bit(tmp_path, monkeypatch, tile_cells):
     np.testing.assert_array_equal(ta["iteration"], np.arange(14))
     assert np.abs(tb["Fx_fluid_N"][9:]).max() > 0            # the hull moves the water after the restart
     if tile_cells is not None:
-        from iceresist.model import build_model
+        from iceresist.models import build_model
         from iceresist.scene.load import load_scene
 
         model = build_model(load_scene(path), backend="cpu")
@@ -43,7 +43,7 @@ def test_tier2_pickup_continues_bit_for_bit(tmp_path, monkeypatch, tile_cells):
 
 
 def test_tier2_checkpoint_without_flow_state_is_refused():
-    from iceresist.model import build_model
+    from iceresist.models import build_model
 
     model = build_model(case_scene(CASE, "quick", 2, **TINY_TIER2_OVERRIDES), backend="cpu")
     with pytest.raises(InputError, match="no tier-2 flow state"):

@@ -10,10 +10,29 @@ import pytest
 
 from iceresist import watchdog
 from iceresist.io import RunFile
+from iceresist.models.base import Model
 from iceresist.simulation import FieldWriter, IterationInterval, Simulation, TimeSeriesWriter
 
 
-class FakeFluid:
+class _Fake(Model):
+    """The parts of the model contract these fakes do not exercise."""
+
+    iteration = 0
+
+    def state(self):
+        return {}
+
+    def load_state(self, state):
+        pass
+
+    def describe(self):
+        return {}
+
+    def allocation(self):
+        return {}
+
+
+class FakeFluid(_Fake):
     """A 8^3 lattice 'fluid' at rest whose state goes bad at ``bad_at`` in the way ``mode`` says."""
 
     cells = 512
@@ -26,10 +45,6 @@ class FakeFluid:
         self.rho = np.ones((8, 8, 8))
         self.u = np.zeros((3, 8, 8, 8))
         self.u[0] = 0.01  # KE reference 0.5 * 512 * 0.05^2 below
-
-    @property
-    def time_s(self):
-        return float(self.iteration)
 
     def step(self, n=1):
         for _ in range(n):
@@ -128,7 +143,7 @@ def test_writers_between_checks_wait_for_the_watchdog(tmp_path):
     assert snaps == [0, 20]
 
 
-class FakeDEM:
+class FakeDEM(_Fake):
     """Bodies drifting at 0.1 m/s; one body runs away at ``bad_at``."""
 
     cells = 0
@@ -138,10 +153,6 @@ class FakeDEM:
     def __init__(self, bad_at=7):
         self.iteration, self.bad_at = 0, bad_at
         self.v = np.full((5, 3), 0.1)
-
-    @property
-    def time_s(self):
-        return self.iteration * self.dt_s
 
     def step(self, n=1):
         self.iteration += n
@@ -175,21 +186,35 @@ def test_runaway_body_is_named(tmp_path):
         assert json.loads(h5["watchdog"].attrs["where"]) == {"body": 2}
 
 
-def test_model_without_probe_is_checked_for_nan(tmp_path):
-    class Plain:
-        cells, dt_s, iteration, time_s = 0, 1.0, 0, 0.0
+def test_a_probe_of_finiteness_alone_stops_the_run_at_the_first_bad_state(tmp_path):
+    class Plain(_Fake):
+        dt_s = 1.0
 
         def step(self, n=1):
             self.iteration += n
 
-        def is_finite(self):
-            return self.iteration < 4
+        def fields(self):
+            return {}
+
+        def diagnostics(self):
+            return {}
+
+        def watchdog_probe(self):
+            return {"finite": (self.iteration < 4, None)}
 
     sim = Simulation(Plain(), stop_iteration=20, progress=False)
     sim.callbacks.pop("nan_checker")
     dog = watchdog.install(sim)
     sim.run()
     assert dog.report.quantity == "finite" and dog.report.iteration == 4 and sim.diverged
+
+
+def test_the_simulation_refuses_what_is_not_a_model():
+    class Plain:
+        cells, dt_s, iteration, time_s = 0, 1.0, 0, 0.0
+
+    with pytest.raises(TypeError, match="needs an iceresist.models.base.Model"):
+        Simulation(Plain(), stop_iteration=20, progress=False)
 
 
 def test_real_fluid_beyond_the_limits_is_stopped_and_readable(tmp_path, capsys):

@@ -78,7 +78,7 @@ def finest_fit(per_cell: float, fixed: int, budget_bytes: float, cells_of) -> in
 
 def measure(scene, backend: str, records: int) -> dict:
     """Build the tier-2 model of ``scene``, step one record of warm-up and ``records`` timed ones."""
-    from iceresist.tier2 import Tier2Model
+    from iceresist.models.tier2 import Tier2Model
 
     t0 = time.perf_counter()
     model = Tier2Model(scene, backend=backend)
@@ -147,7 +147,7 @@ def compare_pure(scene, backend: str, records: int) -> list[dict]:
     """Rows: each part of the coupled LBM step (seconds per step and share), the rest (host NumPy, Python), the
     whole coupled step, the pure fused LBM step on as many cells, and their ratio."""
     from iceresist.backends.launch import profiling
-    from iceresist.tier2 import Tier2Model
+    from iceresist.models.tier2 import Tier2Model
 
     model = Tier2Model(scene, backend=backend)
     model.step(1)  # warm-up: compiles, and the first record's start transient
@@ -185,7 +185,7 @@ def compare_pure(scene, backend: str, records: int) -> list[dict]:
 def run(args):
     from iceresist.errors import InputError
     from iceresist.ship.presets import FIDELITIES, TIER2
-    from iceresist.tier2 import Tier2Model
+    from iceresist.models.tier2 import Tier2Model
 
     if args.preset not in FIDELITIES:
         raise InputError(f"--preset: unknown preset {args.preset!r}; use one of {', '.join(FIDELITIES)}")

@@ -191,7 +191,7 @@ def _all_blocks_wet():
 
 def trace(steps: int = 2) -> dict:
     """``{(kernel, threads, argtypes): [scene labels]}`` over :func:`check_scenes` and the plain LBM step."""
-    from iceresist.model import build_model
+    from iceresist.models import build_model
 
     seen: dict = {}
     def run(scene, read: bool):
@@ -220,7 +220,7 @@ def record_transfers(records: int = 2) -> dict:
     mean loads on the hull) of the CI-sized tier-2 case on the ``cuda`` target, traced (kernels recorded, not run;
     the first record, with the set-up, is not counted): ``{"records", "lbm_steps", "counts", "sites"}``."""
     from iceresist.backends import transfers
-    from iceresist.model import build_model
+    from iceresist.models import build_model
 
     with tracing():
         model = build_model(check_scenes()["tier2-float32"], backend="cuda")

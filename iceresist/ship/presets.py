@@ -6,7 +6,7 @@ distinct cases. Names: ``<bow>-c<percent>-v<knots>``.
 
 Fidelities (tier 1 = DEM with water models; tier 2 = the coupled LBM-DEM): ``paper`` and ``quick``, each
 described, with what it trades away, in ``FIDELITY_NOTES`` (the report prints the quick ones beside its table).
-Tier 2 (:mod:`iceresist.tier2`) changes the tank where the flow field makes it expensive (``TIER2``).
+Tier 2 (:mod:`iceresist.models.tier2`) changes the tank where the flow field makes it expensive (``TIER2``).
 """
 
 from __future__ import annotations

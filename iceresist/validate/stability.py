@@ -151,12 +151,11 @@ def _slug(s: Setting, i: int) -> str:
 
 def run_setting(s: Setting, out_dir: Path, name: str, *, backend: str = "cpu") -> dict:
     """Build, run and classify one setting; returns its row."""
-    from iceresist import watchdog
-    from iceresist.io.hdf5 import RunFile
-    from iceresist.model import build_model
+    from iceresist.driver import Outputs, Stop, run_model
+    from iceresist.models import build_model
     from iceresist.scene.load import parse_scene
     from iceresist.ship.presets import to_toml
-    from iceresist.simulation import IterationInterval, Simulation, TimeSeriesWriter
+    from iceresist.simulation import IterationInterval
 
     row = {"axis": s.axis, "setting": s.label, "value": s.value, "outcome": "", "message": "",
            "dem_substeps": np.nan, "dem_substep_s": np.nan, "steps": 0, "wall_s": 0.0,
@@ -179,16 +178,12 @@ def run_setting(s: Setting, out_dir: Path, name: str, *, backend: str = "cpu") -
     if s.steps is not None:
         stop_it = s.steps if stop_it is None else min(stop_it, s.steps)
     end_s = scene.run.end_time_s if s.steps is None else None
-    mass0 = model.solver.mass() if hasattr(model, "solver") else None
-    with RunFile(h5, "w", shape_cells=model.shape_cells, dx_m=model.units.dx_m, write_xdmf=False) as rf:
-        rf.write_meta(setting=s.label, axis=s.axis, scene_toml=to_toml(data))
-        sim = Simulation(model, stop_iteration=stop_it, stop_time_s=end_s, progress=False)
-        sim.output_writers["timeseries"] = TimeSeriesWriter(rf, IterationInterval(
-            scene.output.timeseries_every_steps))
-        interval = 50 if s.kind == "fluid" else 5
-        dog = watchdog.install(sim, interval=interval, runfile=rf, json_path=h5.with_suffix(".watchdog.json"))
-        sim.run()
-        rf.write_meta(stop_reason=sim.stop_reason, diverged=sim.diverged, steps=sim.steps_done)
+    mass0 = model.solver.mass() if s.kind == "fluid" else None
+    outputs = Outputs(timeseries=IterationInterval(scene.output.timeseries_every_steps), checkpoint=None,
+                      checkpoint_final=False, watchdog_every=50 if s.kind == "fluid" else 5)
+    result = run_model(model, scene, h5, None, stop=Stop(iteration=stop_it, time_s=end_s), outputs=outputs,
+                       meta={"setting": s.label, "axis": s.axis}, progress=False)
+    sim, dog = result.sim, result.watchdog
     row["steps"] = int(sim.steps_done)
     row["wall_s"] = time.perf_counter() - t0
     if dog.report is not None:

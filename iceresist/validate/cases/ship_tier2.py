@@ -1,6 +1,6 @@
 """The ship in brash ice, tier 2 (coupled LBM-DEM with free surface): mean ice resistance against the cell size.
 
-Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot) through :class:`iceresist.tier2.Tier2Model`. The rung refines the
+Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot) through :class:`iceresist.models.tier2.Tier2Model`. The rung refines the
 lattice cell dx in a fixed physical tank (the cells of every axis scaled together, whole 8x8x8 blocks), so the
 cubes, the hull's wetted shape and the free surface are resolved more finely; the DEM (hull sphere spacing, cube
 clumps, contact law) is the same on every rung. The record interval is fixed in seconds to a whole number of LBM
@@ -76,7 +76,7 @@ def overrides(params: dict) -> dict:
 
     ov = copy.deepcopy(TINY_TIER2_OVERRIDES) if params.get("tiny", True) else {}
     ov["domain"] = {"cells": [int(c) for c in params["cells"]], "dx_m": float(params["dx_m"])}
-    # the LBM step is proportional to dx (the Mach rule of iceresist.tier2): take the coarsest rung's step
+    # the LBM step is proportional to dx (the Mach rule of iceresist.models.tier2): take the coarsest rung's step
     coarse = copy.deepcopy(ov)
     coarse["domain"] = {**ov["domain"], "dx_m": float(params["coarsest_dx_m"])}
     lbm_dt_s = case_scene(CASE, "quick", 2, **coarse).units().dt_s

@@ -23,7 +23,7 @@ ice force is the mean over the LBM steps of the interval (each the mean over its
 force of the ice on the hull (paper section 4.2; water resistance excluded); the fluid force on the hull
 (pressure and friction of the LBM, eq. 20) is recorded beside it as ``Fx_fluid_N`` etc.
 
-Frames as in tier 1 (:mod:`iceresist.tier1`): x along the tank, y across, z up from the tank bottom.
+The set-up both tiers share (hull, ice channel, DEM, frames) is :class:`~iceresist.models.ship.ShipModel`.
 """
 
 from __future__ import annotations
@@ -35,8 +35,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.models.base import array_bytes
+from iceresist.models.fluid import check_block_shape, resolve_target
+from iceresist.models.ship import ShipModel, ship_start_x_m, steady_window_m
 from iceresist.ship.tank import start_wave, tank_flow
-from iceresist.tier1 import hull_geometry, hull_shape, ice_layout, steady_window_m
 from iceresist.units import GRAVITY_M_S2
 
 log = logging.getLogger(__name__)
@@ -58,36 +60,6 @@ class Tier2Units:
                 "g_lattice": self.g_lattice, "nu_m2_s": self.nu_m2_s, "lattice": True}
 
 
-def array_bytes(*objects) -> int:
-    """Bytes of the NumPy (or device) arrays held by the attributes of ``objects`` (directly, or in lists,
-    tuples and dicts of them), each array counted once."""
-    seen, total = set(), 0
-
-    def visit(v):
-        nonlocal total
-        if isinstance(v, (list, tuple)):
-            for x in v:
-                visit(x)
-        elif isinstance(v, dict):
-            for x in v.values():
-                visit(x)
-        elif not isinstance(v, type) and hasattr(v, "nbytes") and hasattr(v, "shape") and id(v) not in seen:
-            seen.add(id(v))
-            total += int(v.nbytes)
-
-    for obj in objects:
-        if obj is not None:
-            for v in vars(obj).values():
-                visit(v)
-    return total
-
-
-def ship_start_x_m(scene) -> float:
-    """Stem position at the start (m): ``ship.start_x_m``, by default 5 cm before the channel."""
-    sh = scene.ship
-    return float(sh.start_x_m) if sh.start_x_m is not None else float(scene.ice.channel_start_x_m) - 0.05
-
-
 def start_wave_of_scene(scene, geometry, layout) -> tuple:
     """(:class:`~iceresist.ship.tank.StartWave`, steady window in s after the start) of a tier-2 ship scene:
     the long wave of the impulsive start in the scene's tank, and when the window begins and ends."""
@@ -101,52 +73,33 @@ def start_wave_of_scene(scene, geometry, layout) -> tuple:
     return wave, window_s
 
 
-class Tier2Model:
+class Tier2Model(ShipModel):
     """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
 
     ``backend``, ``precision`` override the scene's ``[numerics]``; ``tau_floor`` raises tau to at least this
     value (module docstring)."""
 
     components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice")
+    tier = 2
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
                  tau_floor: float | None = None):
         from iceresist.coupling.floating import FloatingBodies
         from iceresist.coupling.geometry import Box, ConvexPolyhedron
-        from iceresist.dem import ContactParameters, DEMSystem, box
-        from iceresist.model import check_block_shape, resolve_target
-        from iceresist.scene.schema import Contact
 
-        if scene.ship is None or scene.ice is None or scene.free_surface is None:
-            raise InputError(f"{scene.source_name}: a tier-2 ship scene needs [ship], [ice] and [free_surface]")
+        self._check_sections(scene)
         if scene.is_lattice:
             raise InputError(f"{scene.source_name}: a ship scene is written in physical units ([scene] units)")
         gvec = np.asarray(scene.fluid.gravity_m_s2, dtype=float)
         if not np.allclose(gvec, (0.0, 0.0, -GRAVITY_M_S2)):
             raise InputError(f"fluid.gravity_m_s2: tier 2 runs with gravity [0, 0, -{GRAVITY_M_S2}] "
                              f"(got {list(gvec)})")
-        self.scene = scene
-        sh, ice = scene.ship, scene.ice
-        con = scene.contact or Contact()
-        self.contact = con
         self.shape_cells = tuple(int(n) for n in scene.shape_cells())
         check_block_shape(self.shape_cells)
         lu = scene.units()
         dx = lu.dx_m
-        self.domain_m = tuple(n * dx for n in self.shape_cells)
-        self.level_m = float(scene.free_surface.water_depth_m)
-        if self.level_m >= self.domain_m[2]:
-            raise InputError(f"free_surface.water_depth_m: {self.level_m} m fills the {self.domain_m[2]:.4g} m deep "
-                             f"domain")
-        self.rho_w = float(scene.rho_kg_m3)
-        self.geometry = hull_geometry(scene)
-        g = self.geometry
-        self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
-        width = ice.channel_width_m or self.domain_m[1]
-        self.layout = ice_layout(scene, width, self.centre_y_m, self.level_m, self.rho_w)
-        self.speed_m_s = float(sh.speed_m_s)
-        self.start_x_m = ship_start_x_m(scene)
-        self.window_m = steady_window_m(scene, g, self.layout)
+        self._set_up_ship(scene, tuple(n * dx for n in self.shape_cells))
+        sh, ice, con, g = scene.ship, scene.ice, self.contact, self.geometry
         self.tank = tank_flow(g.midship_area_m2, self.domain_m[1], self.level_m, float(sh.speed_m_s))
         if not self.tank.subcritical:
             log.warning("tier 2: %.3g m/s is above the limiting speed of this tank (depth Froude number %.3g, "
@@ -168,27 +121,18 @@ class Tier2Model:
         tau = max(lu.tau, float(tau_floor)) if tau_floor is not None else lu.tau
         nu = (tau - 0.5) * dx * dx / (3.0 * lbm_dt)
 
-        kt = con.tangential_stiffness_ratio * con.stiffness_N_m
-        dem = DEMSystem(backend=dem_backend, precision="float64", gravity_m_s2=tuple(gvec),
-                        ice_ice=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_ice),
-                        ice_ship=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_hull),
-                        safety=con.dem_safety)
-        Lx, Ly, _ = self.domain_m
-        for point, normal in (((0, 0, 0), (1, 0, 0)), ((Lx, 0, 0), (-1, 0, 0)), ((0, 0, 0), (0, 1, 0)),
-                              ((0, Ly, 0), (0, -1, 0)), ((0, 0, 0), (0, 0, 1))):
-            dem.add_wall(point, normal)
+        dem = self._make_dem(backend=dem_backend, precision="float64", gravity_m_s2=gvec)
+        self._add_tank_walls(dem)
         self.fb = FloatingBodies(self.shape_cells, depth_m=self.level_m, dx_m=dx, tau=tau, g_lattice=g_lat,
                                  rho_kg_m3=self.rho_w, operator=scene.fluid.operator, precision=self.precision,
                                  target=self.target, mobility=scene.free_surface.mobility_lattice,
                                  width=scene.free_surface.interface_width_cells, dem=dem,
                                  contact_film=con.fluid_film)
         self.dem = dem
-        self.hull = hull_shape(g, sh.sphere_spacing_m, sh.sphere_band_m)
         self.hull_body = self.fb.add_body(
             ConvexPolyhedron.of_shape(g.vertices(), self.hull), self.hull,
             position_m=(self.start_x_m, self.centre_y_m, self.level_m - g.draught_m),
             velocity_m_s=(self.speed_m_s, 0.0, 0.0), kinematic=True, material="ship")
-        self.cube = box((ice.size_m,) * 3, ice.density_kg_m3, spheres_per_edge=ice.spheres_per_edge, name="ice")
         cube_sdf = Box((ice.size_m,) * 3)
         for c in self.layout.centres_m:
             self.fb.add_body(cube_sdf, self.cube, position_m=c, material="ice")
@@ -199,7 +143,7 @@ class Tier2Model:
         self.units = Tier2Units(dx_m=dx, dt_s=self.dt_s, lbm_dt_s=self.lbm_dt_s, tau=tau, g_lattice=g_lat,
                                 nu_m2_s=nu)
         self.cells = int(self.fb.forest.cells)
-        self.iteration = 0
+        self._iteration = 0
         self.lbm_steps = 0
         self._probes = 0
         self._force_mean = np.zeros(3)
@@ -213,13 +157,12 @@ class Tier2Model:
 
     # -- protocol ---------------------------------------------------------------------------------------
     @property
-    def time_s(self) -> float:
-        return self.iteration * self.dt_s
+    def iteration(self) -> int:
+        return self._iteration
 
     @property
-    def x_bow_m(self) -> float:
-        """Stem position at the waterline (m); the hull moves rigidly at the prescribed speed."""
-        return self.start_x_m + self.speed_m_s * self.time_s
+    def lattice_steps_per_step(self) -> int:
+        return self.lbm_steps_per_record
 
     @property
     def substeps_per_record(self) -> int:
@@ -236,7 +179,7 @@ class Tier2Model:
             for _ in range(self.lbm_steps_per_record):
                 self.fb.step(1, accumulate_contacts=True)
                 subs += self.dem.last_substeps
-            self.iteration += 1
+            self._iteration += 1
             self.lbm_steps += self.lbm_steps_per_record
             # the sums stay on the target over the interval: one read each per record
             self._force_mean = self.dem.contact_sum_on(hb)[:3] / max(subs, 1)
@@ -256,8 +199,7 @@ class Tier2Model:
                 "pressure": np.where(liquid, (rho - 1.0) / 3.0 * self.rho_w * c * c, 0.0),
                 "flags": liquid.astype(np.uint8), "phi": phi}
 
-    @staticmethod
-    def field_units(lattice: bool) -> dict:
+    def field_units(self, lattice: bool) -> dict:
         return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits", "phi": "1"}
 
     def surface_height_m(self) -> np.ndarray:
@@ -293,17 +235,10 @@ class Tier2Model:
         probe = self.fb.fluid.probe(full, 0.5 * self.cells * u_ship ** 2)
         if not probe["finite"][0]:
             return probe
-        ice = np.arange(self.dem.n_bodies) != self.hull_body
-        pos, vel = self.dem.positions[ice], self.dem.velocities[ice]
-        bad = ~(np.isfinite(pos).all(axis=1) & np.isfinite(vel).all(axis=1))
-        if bad.any():
-            return {"finite": (False, {"body": int(np.flatnonzero(ice)[np.flatnonzero(bad)[0]])})}
-        speed = np.sqrt((vel ** 2).sum(axis=1))
-        if speed.size:
-            b = int(np.argmax(speed))
-            probe["max_body_speed_m_s"] = (float(speed[b]), {"body": int(np.flatnonzero(ice)[b])})
-            probe["max_body_speed_limit_m_s"] = 10.0 * max(self.speed_m_s, math.sqrt(9.81 * self.layout.cube_m))
-        return probe
+        ice = self.ice_probe()
+        if not ice["finite"][0]:
+            return ice
+        return {**probe, **{k: v for k, v in ice.items() if k != "finite"}}
 
     def diagnostics(self) -> dict:
         """One record: mean ice (contact) force on the hull (N), the mean fluid force on it (N), stem position (m),
@@ -344,12 +279,6 @@ class Tier2Model:
         return {"level_fore_wall_m": band(self.domain_m[0] - self.level_band_m),
                 "level_ahead_m": band(self.x_bow_m + 0.05), "ice_drift_ahead_m_s": drift}
 
-    def ice_state(self) -> dict:
-        """Cube centres (n, 3) m, quaternions (n, 4) and velocities (n, 3) m/s now (hull excluded)."""
-        ice = np.arange(self.dem.n_bodies) != self.hull_body
-        return {"positions_m": self.dem.positions[ice], "quaternions": self.dem.quaternions[ice],
-                "velocities_m_s": self.dem.velocities[ice]}
-
     def state(self) -> dict:
         """Everything a bit-for-bit restart needs: the record count and the last forces, the fluid (population
         rows, h, phi, flags), the coupling (cell owners, previous forces), the DEM with its contact history, and
@@ -371,7 +300,7 @@ class Tier2Model:
         self.fb.fluid.load_state(state["fluid"])
         self.fb.coupling.load_state(state["coupling"])
         self.dem.load_state(state["dem"])
-        self.iteration = int(state["iteration"])
+        self._iteration = int(state["iteration"])
         self.lbm_steps = int(state["lbm_steps"])
         self._force_mean = np.asarray(state["force_mean_N"], dtype=float).copy()
         self._force_last = np.asarray(state["force_last_N"], dtype=float).copy()
@@ -383,31 +312,16 @@ class Tier2Model:
         return {"lbm": array_bytes(fl.fluid, fl), "phase_field": array_bytes(fl.phase),
                 "dem": array_bytes(self.dem), "coupling": array_bytes(self.fb.coupling)}
 
-    def allocated_bytes(self) -> int:
-        return int(sum(self.allocation().values()))
-
     def describe(self) -> dict:
-        g, u = self.geometry, self.units
-        return {"components": list(self.components), "tier": 2, "backend": self.target.name,
-                "precision": self.precision, "cells": self.cells, "shape_cells": list(self.shape_cells),
-                "bodies": self.dem.n_bodies, "spheres": self.dem.n_spheres, "hull_spheres": self.hull.n_spheres,
-                "ice_cubes": self.layout.count, "channel_grid": [self.layout.n_across, self.layout.n_along],
-                "concentration": self.layout.concentration, "cube_m": self.layout.cube_m,
-                "channel_start_x_m": self.layout.start_x_m, "channel_length_m": self.layout.length_m,
-                "channel_width_m": self.layout.width_m, "centre_y_m": self.centre_y_m,
-                "water_level_m": self.level_m, "speed_m_s": self.speed_m_s, "start_x_m": self.start_x_m,
-                "steady_window_m": list(self.window_m),
+        u = self.units
+        return {**self.describe_ship(), "shape_cells": list(self.shape_cells),
                 "substep_s": self.lbm_dt_s / max(1, self.dem.substeps_for(self.lbm_dt_s)),
                 "substeps_per_record": self.substeps_per_record,
                 "record_interval_s": self.dt_s, "lbm_dt_s": self.lbm_dt_s,
-                "lbm_steps_per_record": self.lbm_steps_per_record, "critical_step_s": self.dem.critical_step_s(),
+                "lbm_steps_per_record": self.lbm_steps_per_record,
                 "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": u.g_lattice,
                 "nu_m2_s": u.nu_m2_s, "operator": self.scene.fluid.operator,
                 "ship_lattice_speed": self.speed_m_s * u.lbm_dt_s / u.dx_m, "tank": self.tank.describe(),
                 "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
-                "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
-                "hull": {"length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
-                         "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,
-                         "bow_rake_deg": g.bow_rake_deg, "stern_rake_deg": g.stern_rake_deg,
-                         "waterline_length_m": g.waterline_length_m, "freeboard_m": g.freeboard_m}}
+                "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation()}

@@ -1,11 +1,8 @@
-"""Models: the state of the components a scene uses and one time step of them; no I/O (DESIGN.md sections 2, 6).
+"""The fluid models: the LBM alone (:class:`FluidModel`) and water with a free surface (:class:`FreeSurfaceModel`).
 
-:func:`build_model` builds only what the scene asks for. A fluid-only scene
-gets a :class:`FluidModel` (block forest + LBM solver) and nothing else: no
-phase-field arrays, no DEM, no coupling state; a scene with ``[free_surface]`` alone
-gets a :class:`FreeSurfaceModel` (LBM + phase field, no DEM, no coupling). The model follows the protocol
-of :mod:`iceresist.simulation` and speaks physical units to the outside
-(``fields()``, ``diagnostics()``, ``time_s``), lattice units inside.
+A fluid-only scene gets a block forest and an LBM solver and nothing else: no phase-field arrays, no DEM, no
+coupling state; a scene with ``[free_surface]`` alone gets the LBM and the phase field, no DEM, no coupling
+(DESIGN.md section 6). Both follow the contract of :class:`iceresist.models.base.Model`.
 """
 
 from __future__ import annotations
@@ -16,6 +13,7 @@ import math
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.models.base import Model
 from iceresist.scene.schema import Scene
 from iceresist.units import Units
 
@@ -57,7 +55,7 @@ def check_block_shape(shape_cells) -> None:
                              f"use {lo} or {hi} cells (change domain.cells, or domain.size_m / domain.dx_m)")
 
 
-class FluidModel:
+class FluidModel(Model):
     """The LBM fluid alone: a uniform block forest and an :class:`~iceresist.lbm.solver.LBMSolver`.
 
     ``backend`` and ``precision`` override the scene's ``[numerics]``.
@@ -94,10 +92,6 @@ class FluidModel:
     @property
     def iteration(self) -> int:
         return int(self.solver.iteration)
-
-    @property
-    def time_s(self) -> float:
-        return self.iteration * self.dt_s
 
     def step(self, n: int = 1):
         self.solver.step(n)
@@ -174,9 +168,9 @@ class FluidModel:
                 "force_lattice": list(self.force_lattice), "bytes_per_cell": int(self.solver.bytes_per_cell),
                 "unit_system": self.scene.scene.units}
 
-    def allocated_bytes(self) -> int:
-        """Bytes of the state arrays this model holds (populations, both buffers)."""
-        return int(self.solver.bytes_per_cell) * int(self.forest.nblocks) * BLOCK ** 3
+    def allocation(self) -> dict[str, int]:
+        """Bytes of the state arrays this model holds: the populations, both buffers."""
+        return {"lbm": int(self.solver.bytes_per_cell) * int(self.forest.nblocks) * BLOCK ** 3}
 
 
 def _set_populations(solver, f: np.ndarray):
@@ -193,7 +187,7 @@ def _set_populations(solver, f: np.ndarray):
             buf[...] = f
 
 
-class FreeSurfaceModel:
+class FreeSurfaceModel(Model):
     """Water with a free surface under gravity (paper section 2.2): a uniform block forest and a
     :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` (cumulant LBM in the liquid, conservative
     Allen-Cahn phase field, populations only in the blocks near the water); no DEM, no coupling.
@@ -274,10 +268,6 @@ class FreeSurfaceModel:
     def iteration(self) -> int:
         return int(self.fluid.iteration)
 
-    @property
-    def time_s(self) -> float:
-        return self.iteration * self.dt_s
-
     def step(self, n: int = 1):
         self.fluid.step(n)
 
@@ -310,6 +300,11 @@ class FreeSurfaceModel:
 
     def is_finite(self) -> bool:
         return math.isfinite(self.fluid.volume()) and bool(np.isfinite(self.fluid.fluid.rows()[1]).all())
+
+    def watchdog_probe(self) -> dict:
+        """Finite state only (:meth:`is_finite`): the free-surface scenes run below the lattice limits by
+        construction (:mod:`iceresist.limits`)."""
+        return {"finite": (self.is_finite(), None)}
 
     def diagnostics(self) -> dict[str, float]:
         """Water volume (m^3, sum phi dx^3, the quantity eqs. 4-10 conserve) and its drift from t = 0,
@@ -358,32 +353,7 @@ class FreeSurfaceModel:
                 "f_pool_margin": fs.f_pool_margin, "allocated_bytes": self.fluid.allocated_bytes(),
                 "unit_system": self.scene.scene.units}
 
-    def allocated_bytes(self) -> int:
+    def allocation(self) -> dict[str, int]:
         """Bytes of the state arrays this model holds: the population pool, the phase field (h, phi) and the
         velocity, flag and work arrays (:meth:`FreeSurfaceFluid.allocated_bytes`)."""
-        return int(sum(self.fluid.allocated_bytes().values()))
-
-
-def build_model(scene: Scene, *, backend: str | None = None, precision: str | None = None):
-    """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
-    alone), and tier-1 and tier-2 ship scenes ([ship] + [ice])."""
-    if scene.ship is not None and scene.ice is not None:
-        if scene.ship.tier == 2:
-            from iceresist.tier2 import Tier2Model
-
-            return Tier2Model(scene, backend=backend, precision=precision)
-        from iceresist.tier1 import Tier1Model
-
-        return Tier1Model(scene, backend=backend, precision=precision)
-    extra = scene.optional_sections()
-    wants = [f for f in scene.output.fields if f in ("phi", "surface")]
-    if wants and scene.free_surface is None:
-        raise InputError(f"output.fields: {', '.join(wants)} need a [free_surface] section; "
-                         f"remove them from output.fields")
-    if extra == ["free_surface"]:
-        return FreeSurfaceModel(scene, backend=backend, precision=precision)
-    if extra:
-        raise InputError(f"{scene.source_name}: sections {', '.join('[' + s + ']' for s in extra)} need the "
-                         f"free-surface, DEM and coupling engine, which `iceresist run` does not build yet; "
-                         f"remove them to run the fluid alone")
-    return FluidModel(scene, backend=backend, precision=precision)
+        return {k: int(v) for k, v in self.fluid.allocated_bytes().items()}

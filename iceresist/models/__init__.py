@@ -1,0 +1,44 @@
+"""The models: state plus one time step of the components a scene uses, no I/O (DESIGN.md sections 2, 6).
+
+=========================  ======================================================  =============================
+model                      what it holds                                           scene sections
+=========================  ======================================================  =============================
+:class:`FluidModel`        block forest + LBM                                      no optional section
+:class:`FreeSurfaceModel`  LBM + phase field (eqs. 1-11)                           ``[free_surface]``
+:class:`Tier1Model`        DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
+:class:`Tier2Model`        free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
+=========================  ======================================================  =============================
+
+All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
+asks for.
+"""
+
+from __future__ import annotations
+
+from iceresist.errors import InputError
+from iceresist.models.base import Model
+from iceresist.models.fluid import FluidModel, FreeSurfaceModel
+from iceresist.models.tier1 import Tier1Model
+from iceresist.models.tier2 import Tier2Model
+
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "Tier1Model", "Tier2Model", "build_model"]
+
+
+def build_model(scene, *, backend: str | None = None, precision: str | None = None) -> Model:
+    """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
+    alone), and tier-1 and tier-2 ship scenes ([ship] + [ice])."""
+    if scene.ship is not None and scene.ice is not None:
+        model = Tier2Model if scene.ship.tier == 2 else Tier1Model
+        return model(scene, backend=backend, precision=precision)
+    extra = scene.optional_sections()
+    wants = [f for f in scene.output.fields if f in ("phi", "surface")]
+    if wants and scene.free_surface is None:
+        raise InputError(f"output.fields: {', '.join(wants)} need a [free_surface] section; "
+                         f"remove them from output.fields")
+    if extra == ["free_surface"]:
+        return FreeSurfaceModel(scene, backend=backend, precision=precision)
+    if extra:
+        raise InputError(f"{scene.source_name}: sections {', '.join('[' + s + ']' for s in extra)} need the "
+                         f"free-surface, DEM and coupling engine, which `iceresist run` does not build yet; "
+                         f"remove them to run the fluid alone")
+    return FluidModel(scene, backend=backend, precision=precision)

@@ -1,0 +1,186 @@
+"""The ship in a brash-ice channel, the part tiers 1 and 2 share (paper section 3, DESIGN.md section 1).
+
+:class:`ShipModel` sets up what both tiers hold: the hull geometry and its DEM sphere clump, the ice channel
+layout, the stem start and the steady window, the DEM system with its contact law and the tank walls, the ice
+cube shape. Tier 1 (:mod:`iceresist.models.tier1`) adds water models to the DEM; tier 2
+(:mod:`iceresist.models.tier2`) the coupled free-surface LBM.
+
+Frames: world x along the tank, y across, z up from the tank bottom; the water surface is at
+``free_surface.water_depth_m``. The ship position ``x_bow_m`` is the stem at the waterline.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.models.base import Model
+from iceresist.ship.channel import ChannelLayout, channel_layout
+from iceresist.ship.hull import HullGeometry
+
+
+def hull_geometry(scene) -> HullGeometry:
+    """The :class:`HullGeometry` of a scene's ``[ship]`` section."""
+    sh = scene.ship
+    stern = sh.stern_angle_deg
+    if stern is None:
+        stern = 45.0 if sh.bow_angle_deg == 30.0 else 30.0 if sh.bow_angle_deg == 45.0 else sh.bow_angle_deg
+    return HullGeometry(length_overall_m=sh.length_m, beam_m=sh.beam_m, draught_m=sh.draught_m,
+                        parallel_length_m=sh.parallel_length_m, waterline_angle_deg=sh.waterline_angle_deg,
+                        bow_rake_deg=sh.bow_angle_deg, stern_rake_deg=stern)
+
+
+def hull_shape(geometry: HullGeometry, spacing_m: float, band_m: float, density_kg_m3: float = 500.0):
+    """The hull as a DEM clump: spheres on the faces, kept up to ``band_m`` above the waterline.
+
+    Mass properties are those of the whole solid (they do not matter for a kinematic body)."""
+    from iceresist.dem import convex_polyhedron
+
+    shape = convex_polyhedron(geometry.vertices(), density_kg_m3, spacing_m, name="hull")
+    model_z = (shape.model_com_m + shape.sphere_offsets_m @ shape.model_to_body.T)[:, 2]
+    keep = model_z <= geometry.draught_m + band_m
+    return dataclasses.replace(shape, sphere_offsets_m=shape.sphere_offsets_m[keep])
+
+
+def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float, rho_w_kg_m3: float) -> ChannelLayout:
+    """The scene's ice channel (``[ice]``) across ``width_m``, centred on ``centre_y_m``, floating at ``level_m``,
+    after the pre-run ice limits (:func:`iceresist.limits.check_scene_ice`)."""
+    from iceresist.limits import check_scene_ice
+
+    ice = scene.ice
+    check_scene_ice(scene, width_m)
+    jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
+    return channel_layout(width_m=width_m, length_m=ice.channel_length_m, cube_m=ice.size_m,
+                          concentration=ice.concentration, count=ice.count, start_x_m=ice.channel_start_x_m,
+                          centre_y_m=centre_y_m, water_level_m=level_m, ice_density_kg_m3=ice.density_kg_m3,
+                          water_density_kg_m3=rho_w_kg_m3, jitter_m=jitter, seed=ice.seed)
+
+
+def steady_window_m(scene, geometry: HullGeometry, layout: ChannelLayout) -> tuple[float, float]:
+    """Stem positions (x0, x1) of the steady window (``ship.steady_window_m`` or the default of the schema)."""
+    if scene.ship.steady_window_m is not None:
+        return tuple(float(v) for v in scene.ship.steady_window_m)
+    x0, x1 = layout.start_x_m, layout.start_x_m + layout.length_m
+    if layout.length_m > geometry.waterline_length_m:
+        return x0 + geometry.waterline_length_m, x1
+    return x0 + geometry.end_length_m, x1
+
+
+def ship_start_x_m(scene) -> float:
+    """Stem position at the start (m): ``ship.start_x_m``, by default 5 cm before the channel."""
+    sh = scene.ship
+    return float(sh.start_x_m) if sh.start_x_m is not None else float(scene.ice.channel_start_x_m) - 0.05
+
+
+class ShipModel(Model):
+    """A ship scene's set-up shared by both tiers: hull, ice channel, DEM with its contact law and tank walls.
+
+    Subclasses call :meth:`_set_up_ship` with the tank's size, then :meth:`_make_dem`, and add the hull and
+    the cubes to the DEM (tier 2 through the coupling) in their own order."""
+
+    tier: int
+    #: LBM steps taken (tier 2 counts them; tier 1 has no lattice).
+    lbm_steps: int = 0
+
+    def _check_sections(self, scene) -> None:
+        if scene.ship is None or scene.ice is None or scene.free_surface is None:
+            raise InputError(f"{scene.source_name}: a tier-{self.tier} ship scene needs [ship], [ice] and "
+                             f"[free_surface]")
+
+    def _set_up_ship(self, scene, domain_m) -> None:
+        """Hull geometry, ice layout, speed, start and steady window of ``scene`` in a tank of ``domain_m``."""
+        from iceresist.dem import box
+        from iceresist.scene.schema import Contact
+
+        self._check_sections(scene)
+        self.scene = scene
+        sh, ice = scene.ship, scene.ice
+        self.contact = scene.contact or Contact()
+        self.domain_m = tuple(float(v) for v in domain_m)
+        self.level_m = float(scene.free_surface.water_depth_m)
+        if self.level_m >= self.domain_m[2]:
+            raise InputError(f"free_surface.water_depth_m: {self.level_m} m fills the {self.domain_m[2]:.4g} m deep "
+                             f"domain")
+        self.rho_w = float(scene.rho_kg_m3)
+        self.geometry = hull_geometry(scene)
+        self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
+        width = ice.channel_width_m or self.domain_m[1]
+        self.layout = ice_layout(scene, width, self.centre_y_m, self.level_m, self.rho_w)
+        self.speed_m_s = float(sh.speed_m_s)
+        self.start_x_m = ship_start_x_m(scene)
+        self.window_m = steady_window_m(scene, self.geometry, self.layout)
+        self.hull = hull_shape(self.geometry, sh.sphere_spacing_m, sh.sphere_band_m)
+        self.cube = box((ice.size_m,) * 3, ice.density_kg_m3, spheres_per_edge=ice.spheres_per_edge, name="ice")
+
+    def _make_dem(self, *, backend: str, precision: str, gravity_m_s2):
+        """The DEM system with the scene's contact law (ice-ice and ice-ship) and no bodies yet."""
+        from iceresist.dem import ContactParameters, DEMSystem
+
+        con = self.contact
+        kt = con.tangential_stiffness_ratio * con.stiffness_N_m
+        return DEMSystem(backend=backend, precision=precision, gravity_m_s2=tuple(gravity_m_s2),
+                         ice_ice=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_ice),
+                         ice_ship=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_hull),
+                         safety=con.dem_safety)
+
+    def _add_tank_walls(self, dem) -> None:
+        """The tank's ends, sides and bottom as DEM planes (the top is open)."""
+        Lx, Ly, _ = self.domain_m
+        for point, normal in (((0, 0, 0), (1, 0, 0)), ((Lx, 0, 0), (-1, 0, 0)), ((0, 0, 0), (0, 1, 0)),
+                              ((0, Ly, 0), (0, -1, 0)), ((0, 0, 0), (0, 0, 1))):
+            dem.add_wall(point, normal)
+
+    # -- what both tiers answer the same way ------------------------------------------------------------
+    @property
+    def x_bow_m(self) -> float:
+        """Stem position at the waterline (m); the hull moves rigidly at the prescribed speed."""
+        return self.start_x_m + self.speed_m_s * self.time_s
+
+    def _ice_mask(self) -> np.ndarray:
+        return np.arange(self.dem.n_bodies) != self.hull_body
+
+    def ice_state(self) -> dict:
+        """Cube centres (n, 3) m, quaternions (n, 4) and velocities (n, 3) m/s now (hull excluded)."""
+        ice = self._ice_mask()
+        return {"positions_m": self.dem.positions[ice], "quaternions": self.dem.quaternions[ice],
+                "velocities_m_s": self.dem.velocities[ice]}
+
+    def ice_speed_reference_m_s(self) -> float:
+        """max(ship speed, sqrt(g a)), a the cube edge: the speed scale of the ice (watchdog limits)."""
+        g = float(np.linalg.norm(self.scene.fluid.gravity_m_s2)) or 9.81
+        return max(self.speed_m_s, math.sqrt(g * self.layout.cube_m))
+
+    def ice_probe(self) -> dict:
+        """The ice part of the watchdog probe: a body with a non-finite position or velocity, else the fastest
+        ice body against 10 x :meth:`ice_speed_reference_m_s`."""
+        ice = self._ice_mask()
+        pos, vel = self.dem.positions[ice], self.dem.velocities[ice]
+        bad = ~(np.isfinite(pos).all(axis=1) & np.isfinite(vel).all(axis=1))
+        if bad.any():
+            return {"finite": (False, {"body": int(np.flatnonzero(ice)[np.flatnonzero(bad)[0]])})}
+        speed = np.sqrt((vel ** 2).sum(axis=1))
+        if not speed.size:
+            return {"finite": (True, None)}
+        b = int(np.argmax(speed))
+        return {"finite": (True, None), "max_body_speed_m_s": (float(speed[b]), {"body": int(np.flatnonzero(ice)[b])}),
+                "max_body_speed_limit_m_s": 10.0 * self.ice_speed_reference_m_s()}
+
+    def describe_ship(self) -> dict:
+        """The run metadata both tiers write: bodies, channel, ship and hull."""
+        g = self.geometry
+        return {"components": list(self.components), "tier": self.tier, "backend": self.target.name,
+                "precision": self.precision, "cells": self.cells, "bodies": self.dem.n_bodies,
+                "spheres": self.dem.n_spheres, "hull_spheres": self.hull.n_spheres, "ice_cubes": self.layout.count,
+                "channel_grid": [self.layout.n_across, self.layout.n_along],
+                "concentration": self.layout.concentration, "cube_m": self.layout.cube_m,
+                "channel_start_x_m": self.layout.start_x_m, "channel_length_m": self.layout.length_m,
+                "channel_width_m": self.layout.width_m, "centre_y_m": self.centre_y_m,
+                "water_level_m": self.level_m, "speed_m_s": self.speed_m_s, "start_x_m": self.start_x_m,
+                "steady_window_m": list(self.window_m), "critical_step_s": self.dem.critical_step_s(),
+                "hull": {"length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
+                         "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,
+                         "bow_rake_deg": g.bow_rake_deg, "stern_rake_deg": g.stern_rake_deg,
+                         "waterline_length_m": g.waterline_length_m, "freeboard_m": g.freeboard_m}}

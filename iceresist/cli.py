@@ -23,10 +23,44 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto", progress: bool = True,
+         cases=None, overrides: dict | None = None) -> int:
+    """``iceresist demo``: the FSICR comparison of the paper's table 2, the quick tier-1 sweep of every case
+    and its report (about 7 minutes on a 2-core x86 VM). ``cases`` and ``overrides`` shrink it (tests).
+
+    The engine runs the sweep into case files and ``sweep.csv`` (:func:`iceresist.sweep.run_sweep`, whose table
+    :mod:`iceresist.post` builds from the files); the report reads the same files (:func:`reports.report.write_report`).
+    With ``json_output`` one JSON object is printed: ``{"fsicr": ..., "sweep": [...], "report": {...}}``.
+    """
+    import json
+
+    from fsicr.cli import main as fsicr_main
+    from fsicr.compare import compare_table2
+    from iceresist.sweep import run_sweep
+    from reports.report import write_report
+
+    rc = 0 if json_output else fsicr_main(["compare"])
+    table = run_sweep("quick", 1, out_dir, cases, backend=backend, progress=progress and not json_output,
+                      overrides=overrides)
+    html, pdf = write_report(out_dir)
+    cols = ["case", "mean_force_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR"]
+    if json_output:
+        print(json.dumps({"command": "demo", "fsicr": compare_table2(),
+                          "sweep": json.loads(table[cols + ["note"]].to_json(orient="records")),
+                          "report": {"html": str(html), "pdf": str(pdf)}}))
+    else:
+        print("\nQuick tier-1 sweep (DEM with water models), model scale -> full scale by the cubic law")
+        print(table[cols].to_string(index=False, float_format="%.4g"))
+        noted = int((table["note"] != "").sum())
+        if noted:
+            print(f"{noted} of {len(table)} cases carry a note on their interval (the report's Runs table, "
+                  f"column note of sweep.csv)")
+        print(f"report: {html}\n        {pdf}")
+    return rc
+
+
 def _cmd_demo(args) -> int:
     """The quick tier-1 sweep of the paper's cases, the FSICR comparison and the report (runs/demo)."""
-    from iceresist.sweep import demo
-
     return demo(args.output, json_output=args.json)
 
 

@@ -64,6 +64,25 @@ def _cmd_demo(args) -> int:
     return demo(args.output, json_output=args.json)
 
 
+def _cmd_validate(args) -> int:
+    """``iceresist validate``: the ladders (or the stability matrix) into their files, then the report drawn
+    from those files (:mod:`reports.validation`)."""
+    from iceresist.validate.cli import cmd_validate, output_dir
+    from iceresist.validate.ladder import discover_cases
+    from reports.validation import write_stability_map, write_validation_report
+
+    rc = cmd_validate(args)
+    out = output_dir(args)
+    if args.stability:
+        print(f"stability map: {write_stability_map(out)}")
+        return rc
+    available, missing = discover_cases()
+    references = {name: getattr(mod, "REFERENCE", "") for name, mod in available.items()}
+    html, pdf = write_validation_report(out, references=references, missing=missing)
+    print(f"report: {html}\n        {pdf}")
+    return rc
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="iceresist", description="Ice resistance of a ship in a brash-ice channel (LBM-DEM) beside FSICR.")
     p.add_argument("--version", action="version", version=f"iceresist {__version__}")
@@ -99,6 +118,7 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("validate", help="error against run time of the reference cases, or (--stability) the "
                                         "stability matrix; report.html and report.pdf")
     add_validate_arguments(v)
+    v.set_defaults(func=_cmd_validate)
     return p
 
 

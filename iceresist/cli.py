@@ -107,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("report", help="write report.html and report.pdf of a sweep folder")
     add_report_arguments(rp)
 
-    from iceresist.steadiness import add_steadiness_arguments
+    from reports.steadiness import add_steadiness_arguments
 
     st = sub.add_parser("steadiness", help="mean ice force over steps of stem travel through the channel: does it "
                                          "settle? (finished or running case files)")

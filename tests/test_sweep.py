@@ -59,7 +59,7 @@ def test_post_processing_equals_hand_calculation(tiny_sweep):
 def test_steadiness_steps_equal_hand_means(tiny_sweep):
     """``iceresist steadiness`` on a real case file: steps of half the window from its start, each mean the plain
     mean of -Fx over the step read straight from the HDF5 time series (batch means drop a few samples)."""
-    from iceresist.steadiness import steadiness_table
+    from iceresist.post.steadiness import steadiness_table
 
     out, _ = tiny_sweep
     x0, x1 = TINY_OVERRIDES["ship"]["steady_window_m"]

@@ -29,7 +29,8 @@ def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto
     and its report (about 7 minutes on a 2-core x86 VM). ``cases`` and ``overrides`` shrink it (tests).
 
     The engine runs the sweep into case files and ``sweep.csv`` (:func:`iceresist.sweep.run_sweep`, whose table
-    :mod:`iceresist.post` builds from the files); the report reads the same files (:func:`reports.report.write_report`).
+    :mod:`iceresist.post` builds from the files); the report reads the same files
+    (:func:`reports.report.write_report`). What limits a case's interval is in the table's ``note`` column.
     With ``json_output`` one JSON object is printed: ``{"fsicr": ..., "sweep": [...], "report": {...}}``.
     """
     import json
@@ -51,10 +52,6 @@ def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto
     else:
         print("\nQuick tier-1 sweep (DEM with water models), model scale -> full scale by the cubic law")
         print(table[cols].to_string(index=False, float_format="%.4g"))
-        noted = int((table["note"] != "").sum())
-        if noted:
-            print(f"{noted} of {len(table)} cases carry a note on their interval (the report's Runs table, "
-                  f"column note of sweep.csv)")
         print(f"report: {html}\n        {pdf}")
     return rc
 

@@ -28,8 +28,6 @@ from reports.common import template_env
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_case", "preset_note", "write_report"]
-
 PAPER_TABLE2_KN = {"A": (188.0, 293.0), "B": (330.0, 355.0)}
 
 

@@ -23,11 +23,61 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto", progress: bool = True,
+         cases=None, overrides: dict | None = None) -> int:
+    """``iceresist demo``: the FSICR comparison of the paper's table 2, the quick tier-1 sweep of every case
+    and its report (about 7 minutes on a 2-core x86 VM). ``cases`` and ``overrides`` shrink it (tests).
+
+    The engine runs the sweep into case files and ``sweep.csv`` (:func:`iceresist.sweep.run_sweep`, whose table
+    :mod:`iceresist.post` builds from the files); the report reads the same files
+    (:func:`reports.report.write_report`). What limits a case's interval is in the table's ``note`` column.
+    With ``json_output`` one JSON object is printed: ``{"fsicr": ..., "sweep": [...], "report": {...}}``.
+    """
+    import json
+
+    from fsicr.cli import main as fsicr_main
+    from fsicr.compare import compare_table2
+    from iceresist.sweep import run_sweep
+    from reports.report import write_report
+
+    rc = 0 if json_output else fsicr_main(["compare"])
+    table = run_sweep("quick", 1, out_dir, cases, backend=backend, progress=progress and not json_output,
+                      overrides=overrides)
+    html, pdf = write_report(out_dir)
+    cols = ["case", "mean_force_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR"]
+    if json_output:
+        print(json.dumps({"command": "demo", "fsicr": compare_table2(),
+                          "sweep": json.loads(table[cols + ["note"]].to_json(orient="records")),
+                          "report": {"html": str(html), "pdf": str(pdf)}}))
+    else:
+        print("\nQuick tier-1 sweep (DEM with water models), model scale -> full scale by the cubic law")
+        print(table[cols].to_string(index=False, float_format="%.4g"))
+        print(f"report: {html}\n        {pdf}")
+    return rc
+
+
 def _cmd_demo(args) -> int:
     """The quick tier-1 sweep of the paper's cases, the FSICR comparison and the report (runs/demo)."""
-    from iceresist.sweep import demo
-
     return demo(args.output, json_output=args.json)
+
+
+def _cmd_validate(args) -> int:
+    """``iceresist validate``: the ladders (or the stability matrix) into their files, then the report drawn
+    from those files (:mod:`reports.validation`)."""
+    from iceresist.validate.cli import cmd_validate, output_dir
+    from iceresist.validate.ladder import discover_cases
+    from reports.validation import write_stability_map, write_validation_report
+
+    rc = cmd_validate(args)
+    out = output_dir(args)
+    if args.stability:
+        print(f"stability map: {write_stability_map(out)}")
+        return rc
+    available, missing = discover_cases()
+    references = {name: getattr(mod, "REFERENCE", "") for name, mod in available.items()}
+    html, pdf = write_validation_report(out, references=references, missing=missing)
+    print(f"report: {html}\n        {pdf}")
+    return rc
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -54,7 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     rp = sub.add_parser("report", help="write report.html and report.pdf of a sweep folder")
     add_report_arguments(rp)
 
-    from iceresist.steadiness import add_steadiness_arguments
+    from reports.steadiness import add_steadiness_arguments
 
     st = sub.add_parser("steadiness", help="mean ice force over steps of stem travel through the channel: does it "
                                          "settle? (finished or running case files)")
@@ -65,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     v = sub.add_parser("validate", help="error against run time of the reference cases, or (--stability) the "
                                         "stability matrix; report.html and report.pdf")
     add_validate_arguments(v)
+    v.set_defaults(func=_cmd_validate)
     return p
 
 

@@ -37,11 +37,13 @@ def html_table(table, columns: dict, na_rep: str = "NaN") -> str:
 
 
 def pdf_table_page(plt, table, columns: dict, title: str, na_rep: str = "nan"):
-    """A figure holding ``columns`` of ``table`` as a table (one PDF page)."""
-    fig, ax = plt.subplots(figsize=(11.0, 0.4 * len(table) + 1.2))
-    ax.axis("off")
+    """A figure holding ``columns`` of ``table`` as a table (one PDF page); text longer than 40 characters (a
+    note) wraps, and its row grows to hold it."""
     cells = [[na_rep if v is None or (isinstance(v, float) and v != v) else f"{v:.4g}" if isinstance(v, float)
-              else str(v) for v in row] for row in table[list(columns)].values]
+              else textwrap.fill(str(v), 40) or str(v) for v in row] for row in table[list(columns)].values]
+    heights = [max(c.count("\n") + 1 for c in row) for row in cells]
+    fig, ax = plt.subplots(figsize=(11.0, 0.4 * sum(heights) + 1.2))
+    ax.axis("off")
     if cells:
         labels = [textwrap.fill(str(h), 12) for h in columns.values()]  # headings wrap instead of overlapping
         t = ax.table(cellText=cells, colLabels=labels, loc="center")
@@ -49,10 +51,9 @@ def pdf_table_page(plt, table, columns: dict, title: str, na_rep: str = "nan"):
         t.set_fontsize(7)
         t.auto_set_column_width(list(range(len(labels))))
         t.scale(1.0, 1.3)
-        lines = max(h.count("\n") + 1 for h in labels)
+        lines = [max(h.count("\n") + 1 for h in labels)] + heights
         for (row, _), cell in t.get_celld().items():
-            if row == 0:
-                cell.set_height(cell.get_height() * lines)
+            cell.set_height(cell.get_height() * lines[row])
     ax.set_title(title)
     return fig
 

@@ -1,7 +1,8 @@
 """``iceresist report SWEEP_DIR``: the naval architect's report of a sweep, as ``report.html`` and ``report.pdf``.
 
-Reads only the files a sweep wrote (``sweep.json``, ``cases/*.h5``, the table rebuilt from them); never runs
-a simulation. The HTML is self-contained (figures embedded as base64 PNG); the PDF holds the same figures and
+Reads only the files a sweep wrote (``sweep.json``, ``cases/*.h5``) through :mod:`iceresist.post`, which
+builds the table from the case files; never runs a simulation and never writes ``sweep.csv`` (the sweep's
+own record). The HTML is self-contained (figures embedded as base64 PNG); the PDF holds the same figures and
 tables (matplotlib ``PdfPages``).
 """
 
@@ -16,29 +17,18 @@ from pathlib import Path
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.post.case import SCALE, case_start_wave, hull_of_model, load_case
+from iceresist.post.sweeptable import case_path, preset_note, sweep_table
 from iceresist.post.trends import trends_table
-
-log = logging.getLogger(__name__)
-
-from reports.common import HERE, STYLE  # noqa: F401 - re-exported for callers of the ship report
 from reports.common import html_table as _html_table
 from reports.common import pdf_table_page as _pdf_table_page
 from reports.common import png64 as _png64
 from reports.common import pyplot as _plt
 from reports.common import template_env
+
+log = logging.getLogger(__name__)
+
 PAPER_TABLE2_KN = {"A": (188.0, 293.0), "B": (330.0, 355.0)}
-
-
-def load_case(path) -> dict:
-    """Time series, final ice positions and model description of one case file."""
-    import h5py
-
-    with h5py.File(path, "r") as h5:
-        meta = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in h5["meta"].attrs.items()}
-        ts = {k: h5["timeseries"][k][...] for k in h5["timeseries"].keys()}
-        bodies = {k: h5["bodies"][k][...] for k in h5["bodies"].keys()}
-    model = json.loads(meta["model"]) if isinstance(meta["model"], str) else meta["model"]
-    return {"meta": meta, "ts": ts, "bodies": bodies, "model": model}
 
 
 def bow_ratios(table) -> tuple[float, float]:
@@ -106,8 +96,6 @@ def fig_tank(plt, cases: dict):
     """Tier 2: the water level at the fore wall and ahead of the bow and the drift of the ice ahead of the bow
     against time (:meth:`iceresist.models.tier2.Tier2Model.tank_motion`), with the steady window and the time the
     stern's start wave reaches the bow (docs/SHIP.md, "The start wave"); None when no case recorded them."""
-    from iceresist.sweep import case_start_wave, hull_of_model
-
     shown = {k: c for k, c in cases.items() if "level_ahead_m" in c["ts"]}
     if not shown:
         return None
@@ -153,13 +141,7 @@ def fig_topviews(plt, cases: dict):
         depth = np.clip(m["water_level_m"] - (p[:, 2] + a / 2), 0, None)
         pc = PolyCollection(polys, array=depth, cmap="viridis_r", clim=(0, 0.1), edgecolor="none")
         ax.add_collection(pc)
-        from iceresist.ship.hull import HullGeometry
-
-        h = m["hull"]
-        g = HullGeometry(length_overall_m=h["length_overall_m"], beam_m=h["beam_m"], draught_m=h["draught_m"],
-                         parallel_length_m=h["parallel_length_m"], waterline_angle_deg=h["waterline_angle_deg"],
-                         bow_rake_deg=h["bow_rake_deg"], stern_rake_deg=h["stern_rake_deg"])
-        wl = g.waterline_polygon() + np.array([float(c["meta"]["final_x_bow_m"]), m["centre_y_m"]])
+        wl = hull_of_model(m).waterline_polygon() + np.array([float(c["meta"]["final_x_bow_m"]), m["centre_y_m"]])
         ax.fill(wl[:, 0], wl[:, 1], facecolor="none", edgecolor="k", lw=1.0)
         x0 = m["channel_start_x_m"] - 0.5
         ax.set_xlim(x0, m["channel_start_x_m"] + m["channel_length_m"] + 0.3)
@@ -185,27 +167,12 @@ RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "c
                "dem_substeps": "DEM sub-steps", "simulated_s": "simulated [s]", "wall_time_s": "wall time [s]",
                "backend": "backend", "half_ratio": "2nd / 1st half", "window_steady": "steady window",
                "tank_froude_fraction": "F_h / F_L",
-               "start_wave_fraction": "window in start wave", "ci_method": "CI method"}
-
-
-def preset_note(preset: str | None, tier: int) -> str:
-    """What the quick preset trades away (:data:`iceresist.ship.presets.FIDELITY_NOTES`; its tier-2 note too for
-    a tier-2 sweep, with the grid caveat); empty for the paper preset."""
-    from iceresist.ship.presets import FIDELITY_NOTES
-
-    if preset != "quick":
-        return ""
-    note = "Quick preset: " + FIDELITY_NOTES[("quick", 1)]
-    if tier == 2:
-        note += " Tier 2: " + FIDELITY_NOTES[("quick", 2)]
-    return note
+               "start_wave_fraction": "window in start wave", "ci_method": "CI method", "note": "note"}
 
 
 def write_report(sweep_dir) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.pdf`` into ``sweep_dir``; returns their paths."""
     from matplotlib.backends.backend_pdf import PdfPages
-
-    from iceresist.sweep import SCALE, case_path, sweep_table
 
     d = Path(sweep_dir)
     if not d.is_dir():

@@ -101,12 +101,13 @@ def test_compare_json(capsys):
 
 def test_iceresist_demo_prints_the_comparison(capsys, tmp_path, monkeypatch):
     """`iceresist demo` = FSICR comparison + quick sweep + report; shrunk to one tiny case here."""
-    import iceresist.sweep as sweep
+    import iceresist.cli as cli
     from iceresist.cli import main as iceresist_main
+    from iceresist.sweep import TINY_OVERRIDES
 
-    real_demo = sweep.demo
-    monkeypatch.setattr(sweep, "demo", lambda out, **kw: real_demo(out, cases=["A-c68-v1.0"],
-                                                                   overrides=sweep.TINY_OVERRIDES, **kw))
+    real_demo = cli.demo
+    monkeypatch.setattr(cli, "demo", lambda out, **kw: real_demo(out, cases=["A-c68-v1.0"],
+                                                                 overrides=TINY_OVERRIDES, **kw))
     assert iceresist_main(["demo", "--output", str(tmp_path / "d")]) == 0
     out = capsys.readouterr().out
     assert "Bow B" in out and "A-c68-v1.0" in out and "report.html" in out

@@ -85,21 +85,27 @@ def test_plot_and_table(tmp_path):
          "message": "ice.density_kg_m3: ... e.g. 950", "dem_substeps": np.nan, "dem_substep_s": np.nan},
         {"axis": "beyond", "setting": "bgk", "value": 1, "outcome": "stopped by watchdog", "message": "watchdog",
          "dem_substeps": np.nan, "dem_substep_s": np.nan}])
+    from reports.validation import plot_stability_map, write_stability_map
+
     fig, ax = plt.subplots()
-    st.plot_stability_map(df, ax, csv_path=tmp_path / "stability.csv")
+    plot_stability_map(df, ax)
     assert [t.get_text() for t in ax.get_yticklabels()] == ["DEM stiffness", "ice density", "beyond"]
     assert len(ax.collections) >= 3
     plt.close(fig)
-    back = pd.read_csv(tmp_path / "stability.csv")
-    assert list(back["outcome"]) == list(df["outcome"])
+    df.to_csv(tmp_path / "stability.csv", index=False)
+    assert write_stability_map(tmp_path).is_file()
     md = st.markdown_table(df)
     assert "| DEM stiffness | k x 1 | stable | 2 x 1.00e-03 s |" in md
 
 
 @pytest.mark.slow
 def test_quick_matrix_has_nothing_in_between(tmp_path):
-    rc = st.run_and_plot(tmp_path, quick=True)
+    rc = st.run_matrix(tmp_path, quick=True)
     import pandas as pd
+
+    from reports.validation import write_stability_map
+
+    write_stability_map(tmp_path)
 
     df = pd.read_csv(tmp_path / "stability.csv")
     _check_rows(df)

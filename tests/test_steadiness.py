@@ -12,7 +12,7 @@ from iceresist.cli import main
 from iceresist.errors import InputError
 from iceresist.io.hdf5 import RunFile
 from iceresist.post import window_parts
-from iceresist.steadiness import format_steadiness, read_case_record, steadiness_table, window_spans
+from iceresist.post.steadiness import format_steadiness, read_case_record, steadiness_table, window_spans
 
 R_INF_N, DECAY_M = 14.0, 0.4  # R(s) = R_inf (1 - exp(-s / l)), s the stem travel into the channel
 CHANNEL_X0_M, SPEED_M_S, DT_S = 3.4, 0.514, 0.002

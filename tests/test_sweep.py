@@ -9,8 +9,9 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.simulation import IterationInterval
-from iceresist.sweep import (TINY_OVERRIDES, analyse_case, case_path, checkpoint_path, ice_free_width_m, is_finished,
-                             run_case, run_sweep, sweep_table)
+from iceresist.post.case import analyse_case, ice_free_width_m
+from iceresist.post.sweeptable import case_path, is_finished, sweep_table
+from iceresist.sweep import TINY_OVERRIDES, checkpoint_path, run_case, run_sweep
 
 CASES = ["A-c68-v1.0", "B-c68-v1.0"]
 VARYING = ["wall_time_s"]
@@ -58,7 +59,7 @@ def test_post_processing_equals_hand_calculation(tiny_sweep):
 def test_steadiness_steps_equal_hand_means(tiny_sweep):
     """``iceresist steadiness`` on a real case file: steps of half the window from its start, each mean the plain
     mean of -Fx over the step read straight from the HDF5 time series (batch means drop a few samples)."""
-    from iceresist.steadiness import steadiness_table
+    from iceresist.post.steadiness import steadiness_table
 
     out, _ = tiny_sweep
     x0, x1 = TINY_OVERRIDES["ship"]["steady_window_m"]
@@ -227,8 +228,43 @@ def test_report_is_self_contained(tiny_sweep):
     assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 10_000
 
 
+def test_report_reads_the_cases_and_leaves_sweep_csv_as_the_sweep_wrote_it(tiny_sweep):
+    """``iceresist report`` builds its table from the case files through post and writes no sweep.csv: the
+    file keeps its bytes and its modification time."""
+    import os
+
+    from reports.report import write_report
+
+    out, _ = tiny_sweep
+    csv = out / "sweep.csv"
+    before, stat = csv.read_bytes(), csv.stat()
+    os.utime(csv, ns=(stat.st_atime_ns, stat.st_mtime_ns - 10**9))  # a rewrite within the same tick shows too
+    mtime_ns = csv.stat().st_mtime_ns
+    write_report(out)
+    sweep_table(out)
+    assert csv.read_bytes() == before and csv.stat().st_mtime_ns == mtime_ns
+
+
+def test_interval_notes_are_table_data_not_log_lines(tiny_sweep, caplog):
+    """What limits a case's interval (a window short against tau_int, batches shorter than 5 tau_int, no
+    steadiness check) is said once, in the row's ``note``, and nothing is logged at WARNING or above."""
+    import logging
+
+    out, table = tiny_sweep
+    with caplog.at_level(logging.WARNING):
+        again = sweep_table(out)
+    assert not [r for r in caplog.records if r.levelno >= logging.WARNING]
+    assert list(again.note) == list(table.note)
+    for row in again.itertuples():
+        fallback = row.ci_method != "batch means"
+        assert ("using 5 batches" in row.note) == fallback
+        assert row.note.count("likely too narrow") <= 1
+    back = pd.read_csv(out / "sweep.csv", keep_default_na=False)
+    assert list(back.note) == list(table.note)
+
+
 def test_preset_note_names_what_the_quick_tiers_trade_away():
-    from reports.report import preset_note
+    from iceresist.post.sweeptable import preset_note
 
     tier1, tier2 = preset_note("quick", 1), preset_note("quick", 2)
     assert tier1.startswith("Quick preset: a 1.39 m long channel") and "grid" not in tier1

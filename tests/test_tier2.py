@@ -8,7 +8,8 @@ import pytest
 
 from iceresist.models import build_model
 from iceresist.ship.presets import TIER2, case_scene
-from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, analyse_case, run_case
+from iceresist.post.case import analyse_case
+from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, run_case
 
 CASE = "A-c68-v1.0"
 
@@ -277,7 +278,8 @@ def test_report_draws_the_tanks_water_from_the_case_file(tiny_run):
     """The report's tier-2 tank figure plots the recorded levels (cm) and drift against time, and marks t_s of the
     case's start wave; a tier-1 case (no levels recorded) gets no figure."""
     from reports.common import pyplot
-    from reports.report import fig_tank, load_case
+    from iceresist.post.case import load_case
+    from reports.report import fig_tank
 
     path, probe = tiny_run
     case = load_case(path)

@@ -135,14 +135,17 @@ def test_discovery_lists_missing_cases_without_failing():
 
 # -- the report and the command line ------------------------------------------------------------------------
 def test_report_writes_html_and_pdf_from_a_table(tmp_path):
-    from iceresist.validate.report import markdown_table, write_validation_report
+    from iceresist.post.convergence import markdown_table
+    from reports.validation import write_validation_report
 
     t = pd.concat([_rows("poiseuille", [8, 16, 32], [4e-3, 1e-3, 2.5e-4], [0.1, 0.8, 6.0]),
                    _rows("ship_tier1", [10, 14, 20], np.nan, [5.0, 8.0, 10.0], value=[1.72, 1.51, 1.40],
                          reference=np.nan)])
     t.to_csv(tmp_path / "ladder.csv", index=False)
-    html, pdf = write_validation_report(tmp_path)
+    html, pdf = write_validation_report(tmp_path, references={"poiseuille": "Hagen-Poiseuille profile, closed form"},
+                                        missing={"dam_break": "not available (no module)"})
     text = html.read_text()
+    assert "Hagen-Poiseuille profile, closed form" in text and "dam_break" in text
     assert text.startswith("<!DOCTYPE html>") and "data:image/png;base64," in text
     assert "poiseuille" in text and "ship_tier1" in text and "Richardson" in text and "error vs finest" in text
     assert pdf.read_bytes()[:4] == b"%PDF"
@@ -160,8 +163,27 @@ def test_cli_rejects_bad_flags_with_one_line_and_status_2(capsys, tmp_path):
     assert len(err) == 3 and "unknown case 'nosuch'" in err[-1]
 
 
+def test_iceresist_validate_runs_the_ladders_then_draws_the_report_from_their_files(tmp_path, monkeypatch, capsys):
+    """``iceresist validate`` composes engine -> files -> report: the ladders write ladder.csv (stood in for by a
+    table here), the command line prints their Markdown table and writes the report with each case's reference."""
+    from iceresist.cli import main
+
+    def fake_run_ladders(out, **kw):
+        _rows("poiseuille", [8, 16, 32], [4e-3, 1e-3, 2.5e-4], [0.1, 0.8, 6.0]).to_csv(out + "/ladder.csv",
+                                                                                      index=False)
+        return L.load_table(out)
+
+    monkeypatch.setattr(L, "run_ladders", fake_run_ladders)
+    assert main(["validate", "--out", str(tmp_path), "--cases", "poiseuille"]) == 0
+    out = capsys.readouterr().out
+    assert "| poiseuille | quick | 32 cells |" in out and "report.html" in out
+    from iceresist.validate.cases import poiseuille
+
+    assert poiseuille.REFERENCE in (tmp_path / "report.html").read_text()
+
+
 def test_report_notes_a_stability_table(tmp_path):
-    from iceresist.validate.report import write_validation_report
+    from reports.validation import write_validation_report
 
     _rows("poiseuille", [8, 16, 32], [4e-3, 1e-3, 2.5e-4], [0.1, 0.8, 6.0]).to_csv(tmp_path / "ladder.csv",
                                                                                   index=False)

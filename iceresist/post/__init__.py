@@ -1,8 +1,10 @@
 """Post-processing of ice-force records: steady-window mean with its uncertainty, full-scale
 conversion by Froude similarity, and the comparison with the FSICR R_CH (paper section 4.2, table 2).
 
-Numpy, scipy and pandas only; nothing here imports the engine, so the functions
-work on any record read back from the HDF5 time series.
+The statistics work on any record read back from the HDF5 time series (numpy, scipy and pandas only).
+:mod:`iceresist.post.case` analyses one case file of a sweep and :mod:`iceresist.post.sweeptable` builds a
+sweep's table from its case files; they read files (:mod:`iceresist.io`) and the ship's geometry
+(:mod:`iceresist.ship`), never the models or the driver, and they write nothing.
 """
 
 from iceresist.post.comparison import (

@@ -3,7 +3,7 @@
 The paper finds that the mean ice resistance rises with ice concentration (figs 9d and 10d, table 2) and with
 ship speed, and that the steeper Bow B meets more resistance than Bow A (1.76 x simulated, 1.21 x by FSICR).
 Its full-scale values are of the order of the FSICR channel resistance R_CH (0.64 and 0.93 x). Each check here
-reads only the sweep table (``iceresist.sweep.sweep_table``): the mean force and its 95 % interval per case.
+reads only the sweep table (``iceresist.post.sweeptable.sweep_table``): the mean force and its 95 % interval per case.
 
 A trend *holds* when the means are in the stated order. It is *resolved* when, in addition, the 95 % intervals
 of neighbouring cases do not overlap, so that the order is not an accident of the averaging window.

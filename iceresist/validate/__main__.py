@@ -1,5 +1,7 @@
-"""``python -m iceresist.validate``: the same as ``iceresist validate``."""
+"""``python -m iceresist.validate``: the same as ``iceresist validate`` (the command line composes the report)."""
 
-from iceresist.validate.cli import main
+import sys
 
-raise SystemExit(main())
+from iceresist.cli import main
+
+raise SystemExit(main(["validate", *sys.argv[1:]]))

@@ -1,8 +1,9 @@
 """``iceresist validate [--quick|--full] [--cases a,b] [--out DIR] [--backend cpu|cuda] [--stability]``.
 
 Runs the resolution ladders of the reference cases (:mod:`iceresist.validate.ladder`) into ``DIR/ladder.csv``
-(a rerun skips finished rungs) and writes the validation report (:mod:`iceresist.validate.report`).
-``--stability`` runs the stability matrix of :mod:`iceresist.validate.stability` instead. Bad flags: one line
+(a rerun skips finished rungs) and prints their error against run time (:mod:`iceresist.post.convergence`).
+``--stability`` runs the stability matrix of :mod:`iceresist.validate.stability` instead. ``iceresist validate``
+(:mod:`iceresist.cli`) then draws the report from the files (:mod:`reports.validation`). Bad flags: one line
 on stderr, exit status 2.
 """
 
@@ -41,10 +42,16 @@ def add_validate_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParse
     return p
 
 
+def output_dir(args) -> str:
+    """The validation folder of parsed arguments (``--out``, else runs/validate-quick or runs/validate-full)."""
+    return args.out or f"runs/validate-{'quick' if args.quick else 'full'}"
+
+
 def cmd_validate(args) -> int:
+    """Run the ladders (or ``--stability`` the matrix) into the files of :func:`output_dir`."""
     from iceresist.sweep import set_threads
 
-    out = args.out or f"runs/validate-{'quick' if args.quick else 'full'}"
+    out = output_dir(args)
     set_threads(args.threads)
     if args.stability:
         try:
@@ -53,16 +60,14 @@ def cmd_validate(args) -> int:
             raise InputError(f"--stability: the stability matrix is not available in this version ({exc})")
         argv = ["--quick" if args.quick else "--full", "--out", out, "--backend", args.backend]
         return int(stability_main(argv) or 0)
+    from iceresist.post.convergence import markdown_table
     from iceresist.validate.ladder import run_ladders
-    from iceresist.validate.report import markdown_table, write_validation_report
 
     table = run_ladders(out, quick=args.quick, cases=args.cases, backend=args.backend, precision=args.precision,
                         progress=not args.no_progress)
     if table.empty:
         raise InputError(f"{out}: no rung finished; see the errors above")
-    html, pdf = write_validation_report(out)
     print(markdown_table(table))
-    print(f"report: {html}\n        {pdf}")
     return 0
 
 

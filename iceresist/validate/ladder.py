@@ -13,24 +13,29 @@ from __future__ import annotations
 
 import importlib
 import logging
-import math
 import pkgutil
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
+from iceresist.post.convergence import (  # noqa: F401 - the reduction of the ladders lives in post
+    TABLE_NAME,
+    THRESHOLDS,
+    case_summary,
+    cheapest_runs,
+    load_table,
+    observed_order,
+    richardson,
+    with_errors,
+)
 
 log = logging.getLogger(__name__)
 
 #: The reference cases of ``iceresist validate`` in report order (issue: error against run time).
 KNOWN_CASES = ("poiseuille", "taylor_green", "sphere_drag", "standing_wave", "dam_break", "floating_cube",
                "settling_sphere", "ship_tier1", "ship_tier2")
-#: Error levels of the cheapest-run table.
-THRESHOLDS = (0.10, 0.05, 0.01)
-TABLE_NAME = "ladder.csv"
 KEY = ("case", "label", "ladder", "backend", "precision")
 
 
@@ -79,14 +84,6 @@ def select_cases(cases, available: dict, missing: dict) -> list[str]:
 
 
 # -- the table ---------------------------------------------------------------------------------------------
-def load_table(out_dir) -> pd.DataFrame:
-    """The rows written so far (empty frame when none)."""
-    path = Path(out_dir) / TABLE_NAME
-    if not path.is_file() or path.stat().st_size == 0:
-        return pd.DataFrame()
-    return pd.read_csv(path)
-
-
 def append_row(out_dir, row: dict):
     """Append one run to ``ladder.csv``; new ``x_`` columns of a later case widen the table."""
     path = Path(out_dir) / TABLE_NAME
@@ -147,119 +144,3 @@ def run_ladders(out_dir, *, quick: bool = True, cases=None, backend: str = "cpu"
         log.info("validate: %s %s: %s = %.6g (reference %.6g), error %.3g, %.3g s, %.3g MLUPS", name,
                  params["label"], res.quantity, res.value, res.reference, res.error, res.wall_s, res.mlups)
     return load_table(out)
-
-
-# -- convergence -------------------------------------------------------------------------------------------
-def observed_order(resolution, error) -> float:
-    """Least-squares slope p of log(error) = c - p log(resolution): the observed order of convergence.
-
-    NaN with fewer than two positive finite errors."""
-    n = np.asarray(resolution, dtype=float)
-    e = np.asarray(error, dtype=float)
-    ok = np.isfinite(n) & np.isfinite(e) & (n > 0) & (e > 0)
-    if ok.sum() < 2:
-        return float("nan")
-    return float(-np.polyfit(np.log(n[ok]), np.log(e[ok]), 1)[0])
-
-
-def richardson(resolution, value) -> tuple[float, float]:
-    """Observed order p and extrapolated value of the three finest rungs (Roache 1998, eqs. 5.4.1-5.4.3).
-
-    With h = 1/resolution and f1, f2, f3 from coarse to fine, p solves
-    (f1 - f2)/(f2 - f3) = (h1^p - h2^p)/(h2^p - h3^p) (closed form ln(ratio)/ln(r) for a constant
-    refinement ratio r), and f_exact = f3 + (f3 - f2) h3^p/(h2^p - h3^p). Returns (NaN, NaN) when the
-    differences change sign (oscillatory or no convergence) or fewer than three rungs are given."""
-    n = np.asarray(resolution, dtype=float)
-    f = np.asarray(value, dtype=float)
-    order = np.argsort(n)
-    n, f = n[order][-3:], f[order][-3:]
-    if len(n) < 3 or not np.all(np.isfinite(f)) or len(set(n)) < 3:
-        return float("nan"), float("nan")
-    h1, h2, h3 = 1.0 / n
-    d12, d23 = f[0] - f[1], f[1] - f[2]
-    if d23 == 0.0 or d12 == 0.0 or np.sign(d12) != np.sign(d23):
-        return float("nan"), float("nan")
-    ratio = d12 / d23
-    r21, r32 = h1 / h2, h2 / h3
-    if math.isclose(r21, r32, rel_tol=1e-9):
-        if ratio <= 1.0:
-            return float("nan"), float("nan")
-        p = math.log(ratio) / math.log(r32)
-    else:
-        from scipy.optimize import brentq
-
-        def g(p):
-            return (h1 ** p - h2 ** p) / (h2 ** p - h3 ** p) - ratio
-
-        try:
-            p = brentq(g, 1e-3, 20.0)
-        except ValueError:
-            return float("nan"), float("nan")
-    f_ext = f[2] + (f[2] - f[1]) * h3 ** p / (h2 ** p - h3 ** p)
-    return float(p), float(f_ext)
-
-
-def with_errors(table: pd.DataFrame) -> pd.DataFrame:
-    """The table with ``error`` filled in for cases measured against their own ladder, and the column
-    ``reference_kind`` ("external", "Richardson" or "finest rung"), and for those cases ``error_vs_finest`` (the
-    error against the finest rung) and ``richardson_order``. Rows of a case without an external
-    reference get the Richardson value of their ladder where it exists, else the finest rung's value."""
-    if table.empty:
-        return table.assign(reference_kind=pd.Series(dtype=str))
-    t = table.copy()
-    t["reference_kind"] = "external"
-    for (case, ladder, backend, precision), g in t.groupby(["case", "ladder", "backend", "precision"]):
-        if np.isfinite(g.reference.astype(float)).all():
-            continue
-        p, f_ext = richardson(g.resolution, g.value)
-        finest = float(g.loc[g.resolution.idxmax(), "value"])
-        t.loc[g.index, "error_vs_finest"] = (g.value - finest).abs() / abs(finest) if finest != 0 else np.nan
-        if np.isfinite(f_ext) and f_ext != 0.0:
-            ref, kind = f_ext, "Richardson"
-        else:
-            ref, kind = finest, "finest rung"
-        t.loc[g.index, "reference"] = ref
-        t.loc[g.index, "error"] = (g.value - ref).abs() / abs(ref) if ref != 0 else np.nan
-        t.loc[g.index, "reference_kind"] = kind
-        t.loc[g.index, "richardson_order"] = p
-    return t
-
-
-def cheapest_runs(table: pd.DataFrame, thresholds=THRESHOLDS) -> pd.DataFrame:
-    """Per case and ladder, the run of least wall time whose error is at most each threshold.
-
-    Columns: case, ladder, then for each threshold ``label_<pct>``, ``wall_s_<pct>``, ``error_<pct>``
-    (NaN / "" where the ladder does not reach it)."""
-    rows = []
-    if table.empty:
-        return pd.DataFrame(columns=["case", "ladder"])
-    for (case, ladder), g in table.groupby(["case", "ladder"], sort=False):
-        row = {"case": case, "ladder": ladder}
-        for thr in thresholds:
-            pct = f"{100 * thr:g}"
-            ok = g[g.error <= thr]
-            if ok.empty:
-                row.update({f"label_{pct}": "", f"wall_s_{pct}": np.nan, f"error_{pct}": np.nan})
-            else:
-                best = ok.loc[ok.wall_s.idxmin()]
-                row.update({f"label_{pct}": best.label, f"wall_s_{pct}": float(best.wall_s),
-                            f"error_{pct}": float(best.error)})
-        rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def case_summary(table: pd.DataFrame) -> pd.DataFrame:
-    """Per case and ladder: rungs, observed order (error against resolution), smallest error, total wall time,
-    whether the error falls at every refinement, and the reference kind."""
-    rows = []
-    for (case, ladder), g in table.groupby(["case", "ladder"], sort=False):
-        g = g.sort_values("resolution")
-        e = g.error.to_numpy(dtype=float)
-        pos = g[g.error > 0]
-        rows.append({"case": case, "ladder": ladder, "rungs": len(g),
-                     "observed_order": observed_order(pos.resolution, pos.error),
-                     "min_error": float(np.nanmin(e)) if np.isfinite(e).any() else np.nan,
-                     "wall_s": float(g.wall_s.sum()),
-                     "monotone": bool(np.all(np.diff(e[e > 0]) < 0)) if (e > 0).sum() > 1 else False,
-                     "reference_kind": g.reference_kind.iloc[0] if "reference_kind" in g else "external"})
-    return pd.DataFrame(rows)

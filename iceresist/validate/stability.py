@@ -230,43 +230,6 @@ def run_stability_matrix(out_dir, quick: bool = True, backend: str = "cpu"):
     return df
 
 
-# -- the map --------------------------------------------------------------------------------------------
-COLOURS = {"stable": "tab:green", "refused": "tab:orange", "stopped by watchdog": "tab:red",
-           NOT_CAUGHT: "black"}
-MARKERS = {"stable": "o", "refused": "X", "stopped by watchdog": "s", NOT_CAUGHT: "*"}
-
-
-def plot_stability_map(df, ax, csv_path=None):
-    """The stability map on ``ax``: one row per axis, a coloured marker per setting (label under it), the DEM
-    sub-steps per record written above the tier-1 markers. Writes ``df`` to ``csv_path`` when given."""
-    axes = list(dict.fromkeys(df["axis"]))
-    for y, axis in enumerate(axes):
-        sub = df[df["axis"] == axis].reset_index(drop=True)
-        for x, r in sub.iterrows():
-            ax.scatter(x, y, s=90, c=COLOURS.get(r["outcome"], "grey"), marker=MARKERS.get(r["outcome"], "o"),
-                       edgecolors="k", linewidths=0.5, zorder=3)
-            ax.annotate(str(r["setting"]), (x, y), xytext=(0, -11), textcoords="offset points", ha="center",
-                        va="top", fontsize=6)
-            if not (isinstance(r["dem_substeps"], float) and math.isnan(r["dem_substeps"])):
-                ax.annotate(f"{int(r['dem_substeps'])} sub", (x, y), xytext=(0, 7), textcoords="offset points",
-                            ha="center", va="bottom", fontsize=6, color="tab:blue")
-    ax.set_yticks(range(len(axes)))
-    ax.set_yticklabels(axes, fontsize=7)
-    ax.set_ylim(len(axes) - 0.5, -0.7)
-    ax.set_xlim(-0.6, max(int((df["axis"] == a).sum()) for a in axes) - 0.4)
-    ax.set_xticks([])
-    ax.set_xlabel("setting (mildest to most extreme, left to right)")
-    for outcome in OUTCOMES + (NOT_CAUGHT,):
-        if outcome in set(df["outcome"]) or outcome in OUTCOMES:
-            ax.scatter([], [], c=COLOURS[outcome], marker=MARKERS[outcome], edgecolors="k", linewidths=0.5,
-                       label=outcome)
-    ax.legend(loc="lower right", fontsize=7, framealpha=0.9)
-    ax.grid(axis="y", alpha=0.3)
-    if csv_path is not None:
-        df.to_csv(csv_path, index=False)
-    return ax
-
-
 def markdown_table(df) -> str:
     """The matrix as a Markdown table (docs/VALIDATION.md)."""
     lines = ["| axis | setting | outcome | DEM sub-steps per record | message |", "|---|---|---|---|---|"]
@@ -335,27 +298,17 @@ def add_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    """``iceresist validate --stability [--out DIR] [--full] [--json]``: the matrix, stability.csv and stability.png."""
+    """``iceresist validate --stability [--out DIR] [--full] [--json]``: the matrix and stability.csv."""
     p = add_arguments(argparse.ArgumentParser(prog="iceresist validate --stability"))
     args = p.parse_args([a for a in (argv or []) if a != "--stability"])
-    return run_and_plot(args.out, quick=not args.full, backend=args.backend, json_output=args.json)
+    return run_matrix(args.out, quick=not args.full, backend=args.backend, json_output=args.json)
 
 
-def run_and_plot(out_dir, *, quick: bool = True, backend: str = "cpu", json_output: bool = False) -> int:
-    """Run the matrix, write stability.csv and stability.png into ``out_dir``; exit status 1 if a row is in between."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+def run_matrix(out_dir, *, quick: bool = True, backend: str = "cpu", json_output: bool = False) -> int:
+    """Run the matrix into ``out_dir`` (``stability.csv``; the map is drawn from it by
+    :func:`reports.validation.write_stability_map`); exit status 1 if a row is in between."""
     out = Path(out_dir)
     df = run_stability_matrix(out, quick=quick, backend=backend)
-    fig, ax = plt.subplots(figsize=(9, 0.5 * df["axis"].nunique() + 1.5))
-    plot_stability_map(df, ax, csv_path=out / "stability.csv")
-    ax.set_title("Stability map: stable, refused before the start, or stopped by the watchdog")
-    fig.tight_layout()
-    fig.savefig(out / "stability.png", dpi=150)
-    plt.close(fig)
     if json_output:
         for r in df.to_dict(orient="records"):
             print(json.dumps({"name": "stability", **{k: (None if isinstance(v, float) and math.isnan(v) else v)

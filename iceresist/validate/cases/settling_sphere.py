@@ -102,27 +102,18 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> Ca
                              "t_peak_s": float(t[int(np.argmax(w))])})
 
 
-def velocity_figure(curves: dict, path, case: str = "E1"):
-    """Settling velocity against time, one line per ``{label: (t_s, w_m_s)}``, with the measured terminal
-    velocity of ``case``; written to ``path`` (PNG)."""
-    from reports.common import pyplot
+def write_curves(curves: dict, path, case: str = "E1"):
+    """Settling velocity against time, ``{label: (t_s, w_m_s)}``, as a CSV (columns label, time_s, w_m_s,
+    experiment, terminal_m_s: the measured terminal velocity of ``case``) that
+    :func:`reports.validation.settling_velocity_figure` draws."""
+    import pandas as pd
 
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6.0, 3.4))
-    for label, (t, w) in curves.items():
-        ax.plot(t, w, lw=1.0, label=label)
-    u_ref = CASES[case][2]
-    ax.axhline(u_ref, color="k", ls="--", lw=0.8, label=f"ten Cate et al. (2002) {case}: {u_ref} m/s")
-    ax.axhspan(0.95 * u_ref, 1.05 * u_ref, color="0.85", zorder=0, label="+- 5 %")
-    ax.set_xlabel("time [s]")
-    ax.set_ylabel("settling velocity [m/s]")
-    ax.set_title(f"Sphere settling in the experiment's box, case {case}", fontsize=9)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    frames = [pd.DataFrame({"label": label, "time_s": t, "w_m_s": w}) for label, (t, w) in curves.items()]
+    table = pd.concat(frames, ignore_index=True).assign(experiment=case, terminal_m_s=CASES[case][2])
+    table.to_csv(path, index=False, float_format="%.8g")
 
 
-if __name__ == "__main__":   # python -m iceresist.validate.cases.settling_sphere OUT.png [d ...]: the figure of VALIDATION.md
+if __name__ == "__main__":  # python -m iceresist.validate.cases.settling_sphere OUT.csv [d ...]: VALIDATION.md
     import sys
 
     ds = [float(a) for a in sys.argv[2:]] or [5.0, 6.0, 8.0]
@@ -130,4 +121,4 @@ if __name__ == "__main__":   # python -m iceresist.validate.cases.settling_spher
     for d in ds:
         t, w, *_ = settle("E1", d, u_lattice=0.04, t_end_s=3.0, operator="bgk")
         curves[f"{d:g} cells per diameter"] = (t, w)
-    velocity_figure(curves, sys.argv[1])
+    write_curves(curves, sys.argv[1])

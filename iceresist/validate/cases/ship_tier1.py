@@ -51,7 +51,8 @@ def overrides(params: dict) -> dict:
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
     """One tier-1 run through :func:`iceresist.sweep.run_case` into a scratch folder (the DEM runs in float64,
     as every tier-1 run: ``precision`` is recorded, not used)."""
-    from iceresist.sweep import analyse_case, run_case
+    from iceresist.post.case import analyse_case
+    from iceresist.sweep import run_case
 
     with tempfile.TemporaryDirectory(prefix="iceresist-validate-") as tmp:
         t0 = time.perf_counter()

@@ -112,7 +112,8 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> Ca
     """One tier-2 run through :func:`iceresist.sweep.run_case` into a scratch folder (the LBM in ``precision``,
     the DEM in float64), after :func:`warm_up` (its seconds in ``extra["compile_s"]``)."""
     from iceresist.io.hdf5 import RunFile
-    from iceresist.sweep import analyse_case, run_case
+    from iceresist.post.case import analyse_case
+    from iceresist.sweep import run_case
 
     compile_s = warm_up(backend, precision)
     ov = overrides(params)

@@ -1,7 +1,12 @@
-"""The validation report of a ``iceresist validate`` folder: ``report.html`` (self-contained) and ``report.pdf``.
+"""The validation report of a ``iceresist validate`` folder: ``report.html`` (self-contained) and ``report.pdf``,
+the stability map (``stability.png``) and the settling-sphere figure of docs/VALIDATION.md.
 
-Reads only ``DIR/ladder.csv`` (and ``DIR/stability.csv`` where the stability matrix was run); never runs a
-simulation. Uses the machinery of the ship report (:mod:`reports.common`).
+Reads only the files the validation wrote (``DIR/ladder.csv``, ``DIR/stability.csv``, a settling-velocity
+CSV) and reduces them with :mod:`iceresist.post.convergence`; never runs a simulation. Uses the machinery of
+the ship report (:mod:`reports.common`).
+
+``python -m reports.validation settling CURVES.csv OUT.png`` draws the settling-sphere figure from the curves
+that ``python -m iceresist.validate.cases.settling_sphere CURVES.csv 5 6 8`` writes.
 """
 
 from __future__ import annotations
@@ -9,12 +14,14 @@ from __future__ import annotations
 import datetime as _dt
 import logging
 import math
+import sys
 from pathlib import Path
 
 import pandas as pd
 
 from iceresist.errors import InputError
-from iceresist.validate.ladder import THRESHOLDS, case_summary, cheapest_runs, load_table, with_errors
+from iceresist.post.convergence import THRESHOLDS, case_summary, cheapest_runs, load_table, with_errors
+from reports.common import html_table, pdf_table_page, png64, pyplot, template_env
 
 log = logging.getLogger(__name__)
 
@@ -71,11 +78,6 @@ def stability_section(plt, out: Path):
     if not path.is_file():
         return None
     df = pd.read_csv(path)
-    try:
-        from iceresist.validate.stability import plot_stability_map
-    except ImportError as exc:
-        return {"note": f"stability.csv holds {len(df)} runs; the map needs iceresist.validate.stability ({exc})",
-                "fig": None}
     fig, ax = plt.subplots(figsize=(6.0, 4.5), layout="constrained")
     try:
         plot_stability_map(df, ax)
@@ -87,13 +89,14 @@ def stability_section(plt, out: Path):
     return {"note": f"{len(df)} runs from {path.name}.", "fig": fig}
 
 
-def write_validation_report(out_dir) -> tuple[Path, Path]:
-    """Write ``report.html`` and ``report.pdf`` of a validation folder; returns their paths."""
+def write_validation_report(out_dir, references: dict | None = None,
+                            missing: dict | None = None) -> tuple[Path, Path]:
+    """Write ``report.html`` and ``report.pdf`` of a validation folder; returns their paths. ``references``:
+    ``{case: the reference it is measured against}``; ``missing``: ``{case: why it is not available}`` (both
+    from :func:`iceresist.validate.ladder.discover_cases`, passed by the command line)."""
     from matplotlib.backends.backend_pdf import PdfPages
 
-    from iceresist.validate.ladder import discover_cases
-    from reports.common import html_table, pdf_table_page, png64, pyplot, template_env
-
+    references, missing = dict(references or {}), dict(missing or {})
     out = Path(out_dir)
     raw = load_table(out)
     if raw.empty:
@@ -102,18 +105,16 @@ def write_validation_report(out_dir) -> tuple[Path, Path]:
     table = with_errors(raw)
     summary = case_summary(table)
     cheapest = cheapest_runs(table)
-    available, missing = discover_cases()
     plt = pyplot()
     figs = {"error_time": fig_error_time(plt, table, summary)}
     stab = stability_section(plt, out)
     cases = []
     for case in dict.fromkeys(table.case):
-        mod = available.get(case)
         rows = table[table.case == case].sort_values(["ladder", "resolution"])
         cols = dict(RUN_COLUMNS)
         if "error_vs_finest" in rows and rows.error_vs_finest.notna().any():
             cols["error_vs_finest"] = "error vs finest rung"
-        cases.append({"name": case, "reference": getattr(mod, "REFERENCE", "") if mod else "",
+        cases.append({"name": case, "reference": references.get(case, ""),
                       "table": html_table(rows, cols, na_rep=""), "rows": rows, "columns": cols})
     missing_list = [(n, why) for n, why in missing.items() if n not in set(table.case)]
     html = template_env().get_template("validation.html.j2").render(
@@ -143,28 +144,84 @@ def write_validation_report(out_dir) -> tuple[Path, Path]:
     return html_path, pdf_path
 
 
-def markdown_table(table: pd.DataFrame) -> str:
-    """The error-against-run-time table as Markdown (docs/VALIDATION.md): one row per run with the case's
-    observed order, then the cheapest run meeting each threshold."""
-    t = with_errors(table) if "reference_kind" not in table else table
-    summary = case_summary(t)
-    lines = ["| case | ladder | rung | cells | steps | wall [s] | MLUPS | value | reference | error | order p |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
-    order = {c: i for i, c in enumerate(dict.fromkeys(t.case))}
-    for _, r in t.sort_values(["case", "ladder", "resolution"], key=lambda c: c.map(order) if c.name == "case" else c,
-                              kind="stable").iterrows():
-        s = summary[(summary.case == r.case) & (summary.ladder == r.ladder)].iloc[0]
-        lines.append(f"| {r.case} | {r.ladder} | {r.label} | {int(r.cells)} | {int(r.steps)} | {r.wall_s:.3g} | "
-                     f"{r.mlups:.3g} | {r.value:.5g} | {r.reference:.5g} | {r.error:.3g} | "
-                     f"{s.observed_order:.2f} |")
-    lines += ["", "| case | ladder | " + " | ".join(f"≤ {100 * t_:g} %" for t_ in THRESHOLDS) + " |",
-              "|---|---|" + "---|" * len(THRESHOLDS)]
-    for _, r in cheapest_runs(t).iterrows():
-        cells = []
-        for thr in THRESHOLDS:
-            pct = f"{100 * thr:g}"
-            lab = r[f"label_{pct}"]
-            cells.append(f"{lab} ({r[f'wall_s_{pct}']:.3g} s)" if isinstance(lab, str) and lab else "not reached")
-        lines.append(f"| {r.case} | {r.ladder} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+# -- the stability map (iceresist validate --stability) ----------------------------------------------------
+#: Outcomes of a row of the stability matrix (:mod:`iceresist.validate.stability`), in legend order.
+OUTCOMES = ("stable", "refused", "stopped by watchdog")
+NOT_CAUGHT = "unstable (not caught)"
+COLOURS = {"stable": "tab:green", "refused": "tab:orange", "stopped by watchdog": "tab:red", NOT_CAUGHT: "black"}
+MARKERS = {"stable": "o", "refused": "X", "stopped by watchdog": "s", NOT_CAUGHT: "*"}
 
+
+def plot_stability_map(df, ax):
+    """The stability map on ``ax``: one row per axis, a coloured marker per setting (label under it), the DEM
+    sub-steps per record written above the tier-1 markers."""
+    axes = list(dict.fromkeys(df["axis"]))
+    for y, axis in enumerate(axes):
+        sub = df[df["axis"] == axis].reset_index(drop=True)
+        for x, r in sub.iterrows():
+            ax.scatter(x, y, s=90, c=COLOURS.get(r["outcome"], "grey"), marker=MARKERS.get(r["outcome"], "o"),
+                       edgecolors="k", linewidths=0.5, zorder=3)
+            ax.annotate(str(r["setting"]), (x, y), xytext=(0, -11), textcoords="offset points", ha="center",
+                        va="top", fontsize=6)
+            if not (isinstance(r["dem_substeps"], float) and math.isnan(r["dem_substeps"])):
+                ax.annotate(f"{int(r['dem_substeps'])} sub", (x, y), xytext=(0, 7), textcoords="offset points",
+                            ha="center", va="bottom", fontsize=6, color="tab:blue")
+    ax.set_yticks(range(len(axes)))
+    ax.set_yticklabels(axes, fontsize=7)
+    ax.set_ylim(len(axes) - 0.5, -0.7)
+    ax.set_xlim(-0.6, max(int((df["axis"] == a).sum()) for a in axes) - 0.4)
+    ax.set_xticks([])
+    ax.set_xlabel("setting (mildest to most extreme, left to right)")
+    for outcome in OUTCOMES + (NOT_CAUGHT,):
+        if outcome in set(df["outcome"]) or outcome in OUTCOMES:
+            ax.scatter([], [], c=COLOURS[outcome], marker=MARKERS[outcome], edgecolors="k", linewidths=0.5,
+                       label=outcome)
+    ax.legend(loc="lower right", fontsize=7, framealpha=0.9)
+    ax.grid(axis="y", alpha=0.3)
+    return ax
+
+
+def write_stability_map(out_dir) -> Path:
+    """``DIR/stability.png``: the map of ``DIR/stability.csv``; returns its path."""
+    out = Path(out_dir)
+    path = out / "stability.csv"
+    if not path.is_file():
+        raise InputError(f"{out}: no stability.csv; run `iceresist validate --stability --out {out}` first")
+    df = pd.read_csv(path)
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(9, 0.5 * df["axis"].nunique() + 1.5))
+    plot_stability_map(df, ax)
+    ax.set_title("Stability map: stable, refused before the start, or stopped by the watchdog")
+    fig.tight_layout()
+    png = out / "stability.png"
+    fig.savefig(png, dpi=150)
+    plt.close(fig)
+    return png
+
+
+# -- the settling sphere (docs/VALIDATION.md) --------------------------------------------------------------
+def settling_velocity_figure(curves: pd.DataFrame, path) -> Path:
+    """Settling velocity against time, one line per ``label`` of ``curves`` (columns label, time_s, w_m_s,
+    experiment, terminal_m_s: what :func:`iceresist.validate.cases.settling_sphere.write_curves` writes), with
+    the measured terminal velocity of the experiment; written to ``path`` (PNG)."""
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6.0, 3.4))
+    for label, g in curves.groupby("label", sort=False):
+        ax.plot(g.time_s, g.w_m_s, lw=1.0, label=label)
+    case, u_ref = str(curves.experiment.iloc[0]), float(curves.terminal_m_s.iloc[0])
+    ax.axhline(u_ref, color="k", ls="--", lw=0.8, label=f"ten Cate et al. (2002) {case}: {u_ref} m/s")
+    ax.axhspan(0.95 * u_ref, 1.05 * u_ref, color="0.85", zorder=0, label="+- 5 %")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("settling velocity [m/s]")
+    ax.set_title(f"Sphere settling in the experiment's box, case {case}", fontsize=9)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return Path(path)
+
+
+if __name__ == "__main__":  # python -m reports.validation settling CURVES.csv OUT.png
+    if len(sys.argv) != 4 or sys.argv[1] != "settling":
+        print("usage: python -m reports.validation settling CURVES.csv OUT.png", file=sys.stderr)
+        raise SystemExit(2)
+    settling_velocity_figure(pd.read_csv(sys.argv[2]), sys.argv[3])

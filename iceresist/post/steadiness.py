@@ -1,4 +1,4 @@
-"""Does the ice force settle along the channel? ``iceresist steadiness CASE.h5 [CASE.h5 ...]``.
+"""Does the ice force settle along the channel? The analysis of ``iceresist steadiness CASE.h5 [CASE.h5 ...]``.
 
 The steady mean of a case (paper section 4.2) is taken over a fixed window of the stem's travel. Whether that
 window is long enough shows in the mean over consecutive steps of the travel: if the force is still rising from
@@ -6,7 +6,8 @@ step to step, the window's mean depends on where it ends (docs/SHIP.md, "Where t
 reads case files (finished, stopped or still being written), cuts each into steps of ``step_m`` of stem travel
 from the start of its steady window, and gives the mean ice resistance of each step with its batch-means
 interval (:func:`iceresist.post.window_parts`). Positions are stem travel into the ice channel, so cases whose
-channels start at different x (tier 1 and tier 2) line up.
+channels start at different x (tier 1 and tier 2) line up. The command and its figure are
+:mod:`reports.steadiness`.
 """
 
 from __future__ import annotations
@@ -72,7 +73,7 @@ def read_case_record(path) -> CaseRecord:
         raise InputError(f"{path}: not a ship case file ({exc.__class__.__name__}: {exc}); give the .h5 file "
                          f"of a ship scene written by iceresist run or sweep") from None
     name = str(meta.get("case", meta.get("scene_name", path.stem)))
-    # row 0 is the state before the first step (as in iceresist.sweep.analyse_case)
+    # row 0 is the state before the first step (as in iceresist.post.case.analyse_case)
     return CaseRecord(path=path, case=name, tier=int(model.get("tier", 0)), t_s=ts["time_s"][1:],
                       Fx_N=ts["Fx_N"][1:], x_bow_m=ts["x_bow_m"][1:], channel_start_x_m=channel_x0,
                       window_m=window, finished=bool(meta.get("finished", False)))
@@ -102,7 +103,7 @@ def steadiness_table(cases, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
     ``mean_N``, ``ci95_N``, ``samples``, ``batch_tau_int`` (batch length over the integrated autocorrelation
     time), ``interval_too_narrow`` (:attr:`~iceresist.post.SteadyMean.interval_too_narrow`), ``in_window`` (the
     step lies inside the case's steady window). ``cases``: paths or :class:`CaseRecord`."""
-    from iceresist.post import window_parts
+    from iceresist.post.resistance import window_parts
 
     records = [c if isinstance(c, CaseRecord) else read_case_record(c) for c in cases]
     rows = []
@@ -153,66 +154,7 @@ def window_spans(records) -> list[tuple[float, float, int]]:
     return [(lo, hi, i) for (lo, hi), i in spans.items()]
 
 
-def plot_steadiness(table: pd.DataFrame, records, png) -> Path:
-    """Force against stem travel into the channel for each case (thin line) with the step means and their
-    intervals (bars): where the bars stop rising, the force has settled."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for i, (rec, label) in enumerate(zip(records, case_labels(records))):
-        colour = f"C{i}"
-        g = table[table.file == str(rec.path)] if len(table) else table
-        ax.plot(rec.travel_m, -rec.Fx_N, color=colour, lw=0.4, alpha=0.35, label=None if len(g) else label)
-        if len(g):
-            mid = 0.5 * (g.travel_from_m + g.travel_to_m)
-            ax.errorbar(mid, g.mean_N, yerr=g.ci95_N, xerr=0.5 * (g.travel_to_m - g.travel_from_m), fmt="o",
-                        color=colour, capsize=3, label=label)
-    for lo, hi, i in window_spans(records):
-        ax.axvspan(lo, hi, color=f"C{i}", alpha=0.08)
-    ax.set_xlabel("stem travel into the ice channel [m]")
-    ax.set_ylabel("ice resistance, model scale [N]")
-    ax.set_title("Does the ice force settle? Step means (bars: 95 % interval); shaded: steady window")
-    if len(table):
-        top = float((table.mean_N + table.ci95_N).max())
-        ax.set_ylim(min(0.0, float((table.mean_N - table.ci95_N).min())) * 1.2, 2.5 * top)
-    ax.legend(loc="upper left", fontsize=8)
-    ax.grid(alpha=0.3)
-    png = Path(png)
-    png.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(png, dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    return png
-
-
 def _folder_tag(path: Path) -> str:
     """The folder that tells a case file apart: the sweep folder for ``SWEEP/cases/CASE.h5``, else the parent."""
     parent = path.resolve().parent
     return parent.parent.name if parent.name == "cases" else parent.name
-
-
-def add_steadiness_arguments(p) -> None:
-    p.add_argument("cases", nargs="+", help="case files (.h5) of ship runs; a running case is read as far as it goes")
-    p.add_argument("--step-m", type=float, default=DEFAULT_STEP_M,
-                   help=f"step of stem travel in metres (default {DEFAULT_STEP_M}, half the quick window)")
-    p.add_argument("--plot", default=None, help="also draw the force against stem travel into this PNG file")
-    p.add_argument("--csv", default=None, help="also write the table (one row per case and step) to this CSV file")
-    p.add_argument("--json", action="store_true", help="print the table as JSON (one object per case and step)")
-    p.set_defaults(func=_cmd_steadiness)
-
-
-def _cmd_steadiness(args) -> int:
-    records = [read_case_record(path) for path in args.cases]
-    table = steadiness_table(records, args.step_m)
-    print(table.to_json(orient="records") if args.json else format_steadiness(table))
-    if args.csv:
-        table.to_csv(args.csv, index=False)
-        if not args.json:
-            print(f"table: {args.csv}")
-    if args.plot:
-        png = plot_steadiness(table, records, args.plot)
-        if not args.json:
-            print(f"figure: {png}")
-    return 0

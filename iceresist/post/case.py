@@ -1,0 +1,183 @@
+"""Analysis of one case file of a sweep (``DIR/cases/<case>.h5``): the steady-window mean with its batch-means
+interval, full scale by the cubic law, FSICR R_CH beside it, the ice-free width of the channel, the floes under
+the hull and, for tier 2, the tank's start wave.
+
+Reads the files the engine wrote (:class:`iceresist.io.hdf5.RunFile`); never runs a simulation and never writes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.post.scaling import PAPER_SCALE
+from iceresist.post.statistics import MIN_BATCH_LENGTH_TAU
+
+#: Scale ratio of the paper (lambda).
+SCALE = PAPER_SCALE
+
+#: Batches used where the window is too short for the automatic choice (the table says so).
+FALLBACK_BATCHES = 5
+
+
+def load_case(path) -> dict:
+    """``{"meta", "ts", "bodies", "model"}`` of one case file: meta attributes, time series, ice start and end
+    positions, and the model description."""
+    from iceresist.io.hdf5 import RunFile
+
+    with RunFile(path, "r") as rf:
+        meta = rf.meta
+        model = rf.meta_object("model")
+        ts = rf.timeseries()
+        bodies = {k: rf.h5["bodies"][k][...] for k in rf.h5["bodies"].keys()}
+    return {"meta": meta, "ts": ts, "bodies": bodies, "model": model}
+
+
+def fsicr_r_ch_kN() -> dict:
+    """FSICR R_CH (kN) of the paper's table-1 ships (fsicr/ships), class IA."""
+    from importlib import resources
+
+    import fsicr
+
+    out = {}
+    for bow in "AB":
+        ship = fsicr.load_ship(str(resources.files("fsicr") / "ships" / f"b063_bow_{bow.lower()}.toml"))[0]
+        out[bow] = fsicr.r_ch(ship, "IA").r_ch_N / 1e3
+    return out
+
+
+def ice_free_width_m(positions, x_range, centre_y_m, cube_m, channel_width_m, slice_m=0.1,
+                     level_quantile=0.9) -> float:
+    """Median over x-slices of the width of the lane around the centreline free of floating ice (m).
+
+    A cube floats when its centre lies less than one cube edge below the top of the slice's ice, read as the
+    ``level_quantile`` of the slice's cube centres. The ice's own level, not the still water level: in tier 2
+    the water beside and behind the hull is drawn down, and the cubes float centimetres below the still level.
+    """
+    p = np.asarray(positions, dtype=float)
+    widths = []
+    x0, x1 = x_range
+    if not x1 > x0:
+        return float("nan")
+    slice_m = min(slice_m, x1 - x0)
+    half_w = channel_width_m / 2
+    for a in np.arange(x0, x1 - 1e-9, slice_m):
+        in_slice = p[(p[:, 0] >= a) & (p[:, 0] < a + slice_m)]
+        if in_slice.size:
+            top_m = np.quantile(in_slice[:, 2], level_quantile)
+            in_slice = in_slice[in_slice[:, 2] > top_m - cube_m]
+        y = in_slice[:, 1] - centre_y_m
+        port = y[y > 0] - cube_m / 2
+        stbd = -y[y <= 0] - cube_m / 2
+        w = (port.min() if port.size else half_w) + (stbd.min() if stbd.size else half_w)
+        widths.append(max(0.0, w))
+    return float(np.median(widths)) if widths else float("nan")
+
+
+def floes_under_hull(positions, waterline_xy, x_bow_m, centre_y_m, level_m, cube_m) -> int:
+    """Cubes below the surface (top under water) within the hull's waterline outline."""
+    from matplotlib.path import Path as MplPath
+
+    p = np.asarray(positions, dtype=float)
+    outline = np.asarray(waterline_xy) + np.array([x_bow_m, centre_y_m])
+    inside = MplPath(outline).contains_points(p[:, :2])
+    submerged = p[:, 2] + cube_m / 2 < level_m
+    return int((inside & submerged).sum())
+
+
+def analyse_case(path) -> dict:
+    """One table row from a finished case file (see :func:`iceresist.post.sweeptable.sweep_table` for the
+    columns). What limits the row's interval or its steadiness check is said in its ``note`` column (empty when
+    nothing does), not logged."""
+    from iceresist.post.resistance import ice_resistance_from_timeseries, window_halves
+    from iceresist.post.scaling import force_to_full_scale
+
+    case = load_case(path)
+    meta, model, ts, bodies = case["meta"], case["model"], case["ts"], case["bodies"]
+    t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]  # row 0 is the state before the first step
+    window = tuple(model["steady_window_m"])
+    notes = []
+    try:
+        sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1)
+        ci_note = "batch means"
+    except InputError as exc:  # a window shorter than 10 batches of 5 tau_int: fewer batches, said in the table
+        sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1,
+                                            n_batches=FALLBACK_BATCHES, warn_short_batches=False)
+        ci_note = f"{FALLBACK_BATCHES} batches (window short against tau_int)"
+        notes.append(f"{exc}; using {FALLBACK_BATCHES} batches")
+    if sm.interval_too_narrow:
+        notes.append(f"batches of {sm.batch_length} samples are shorter than {MIN_BATCH_LENGTH_TAU:.0f} tau_int = "
+                     f"{MIN_BATCH_LENGTH_TAU * sm.tau_int_samples:.3g} samples; the interval is likely too narrow")
+    try:  # is the window steady? (the halves of a short window may hold too few samples)
+        halves = window_halves(t, fx, x, window_m=window, motion_direction=+1)
+        half_ratio, steady = halves.ratio, halves.steady
+    except InputError as exc:
+        notes.append(f"no steadiness check of the window: {exc}")
+        half_ratio, steady = float("nan"), None
+    geom = hull_of_model(model)
+    x_bow = float(meta["final_x_bow_m"])
+    x_lo = model["channel_start_x_m"]
+    x_hi = x_bow - geom.end_length_m
+    final = bodies["final_positions_m"]
+    r_ch = fsicr_r_ch_kN()[meta["bow"]]
+    R_kN = float(force_to_full_scale(sm.mean_N, SCALE)) / 1e3
+    return {
+        "case": meta["case"], "bow": meta["bow"], "concentration": float(model["concentration"]),
+        "knots": float(meta["knots"]), "speed_m_s": float(model["speed_m_s"]), "tier": int(meta["tier"]),
+        "fidelity": meta["fidelity"], "cubes": int(model["ice_cubes"]),
+        "mean_force_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "std_N": sm.std_N,
+        "window_x0_m": model["steady_window_m"][0], "window_x1_m": model["steady_window_m"][1],
+        "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note,
+        # second-half over first-half mean of the window, and whether they agree (iceresist.post.window_halves)
+        "half_ratio": half_ratio, "window_steady": steady,
+        "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, SCALE)) / 1e3,
+        "R_CH_FSICR_kN": r_ch, "ratio_sim_FSICR": R_kN / r_ch,
+        "ice_free_width_m": ice_free_width_m(final, (x_lo, x_hi), model["centre_y_m"], model["cube_m"],
+                                             model["channel_width_m"]),
+        "floes_under_hull": floes_under_hull(final, geom.waterline_polygon(), x_bow, model["centre_y_m"],
+                                             model["water_level_m"], model["cube_m"]),
+        "resolution_m": float(model["resolution_m"]), "cells": int(model["cells"]),
+        "spheres": int(model["spheres"]), "steps": int(meta["steps"]), "dem_substeps": int(meta["dem_substeps"]),
+        "simulated_s": float(meta["time_s"]), "wall_time_s": float(meta["wall_time_s"]),
+        "backend": model["backend"], "file": f"cases/{Path(path).name}",
+        # tier 2: the ship's depth Froude number over Schijf's limit of the tank (iceresist.ship.tank)
+        "tank_froude_fraction": float(model.get("tank", {}).get("fraction_of_limit", float("nan"))),
+        "start_wave_fraction": start_wave_fraction(model, geom),
+        "note": "; ".join(notes),
+    }
+
+
+def hull_of_model(model: dict):
+    """The :class:`~iceresist.ship.hull.HullGeometry` of a case file's model description."""
+    from iceresist.ship.hull import HullGeometry
+
+    h = model["hull"]
+    return HullGeometry(length_overall_m=h["length_overall_m"], beam_m=h["beam_m"], draught_m=h["draught_m"],
+                        parallel_length_m=h["parallel_length_m"], waterline_angle_deg=h["waterline_angle_deg"],
+                        bow_rake_deg=h["bow_rake_deg"], stern_rake_deg=h["stern_rake_deg"])
+
+
+def case_start_wave(model: dict, geom) -> tuple | None:
+    """Tier 2: (:class:`~iceresist.ship.tank.StartWave`, steady window in s after the start) from a case file's
+    model description, the tank's width from its blockage, so files written before the start wave was
+    described read the same; None for tier 1 (no tank flow) or a ship at rest."""
+    from iceresist.ship.tank import start_wave
+
+    tank = model.get("tank")
+    speed = float(model["speed_m_s"])
+    if not tank or speed <= 0:
+        return None
+    depth = float(model["water_level_m"])
+    width = geom.midship_area_m2 / (float(tank["blockage"]) * depth)
+    wave = start_wave(geom.midship_area_m2, width, depth, speed, geom.prismatic_length_m)
+    x0 = float(model["start_x_m"])
+    return wave, tuple((x - x0) / speed for x in model["steady_window_m"])
+
+
+def start_wave_fraction(model: dict, geom) -> float:
+    """Tier 2: the part of the steady window before the stern's start wave reaches the bow
+    (:func:`iceresist.ship.tank.start_wave`, :func:`case_start_wave`); NaN for tier 1."""
+    sw = case_start_wave(model, geom)
+    return float("nan") if sw is None else sw[0].window_fraction(*sw[1])

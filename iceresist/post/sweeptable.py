@@ -1,0 +1,67 @@
+"""The table of a sweep folder, read from its case files.
+
+Layout of a sweep folder (written by ``iceresist sweep``, :mod:`iceresist.sweep`)::
+
+    DIR/sweep.json            preset, tier, cases asked for
+    DIR/cases/<case>.h5       one finished run
+    DIR/sweep.csv             the table, written by the sweep once at its end
+
+:func:`sweep_table` analyses every finished case file (:func:`iceresist.post.case.analyse_case`) and returns
+the table; it writes nothing, so reading a sweep (``iceresist report``) leaves ``sweep.csv`` as the sweep wrote it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from iceresist.post.case import analyse_case
+
+#: The table's file in a sweep folder.
+TABLE_NAME = "sweep.csv"
+
+
+def case_path(out_dir, case: str) -> Path:
+    return Path(out_dir) / "cases" / f"{case}.h5"
+
+
+def stored_meta(path: Path) -> dict | None:
+    """The meta attributes of a case file, or None when there is no readable one."""
+    if not path.is_file():
+        return None
+    from iceresist.io.hdf5 import RunFile
+
+    try:
+        with RunFile(path, "r") as rf:
+            return rf.meta
+    except (OSError, KeyError):
+        return None
+
+
+def is_finished(path: Path) -> bool:
+    """A case file under its final name that records a completed run."""
+    meta = stored_meta(path)
+    return bool(meta is not None and meta.get("finished", False))
+
+
+def sweep_table(out_dir) -> pd.DataFrame:
+    """The table of every finished case in ``out_dir``, in the order of the paper's matrix
+    (:data:`iceresist.ship.presets.CASES`), one row per case (:func:`~iceresist.post.case.analyse_case`)."""
+    from iceresist.ship.presets import CASES
+
+    out = Path(out_dir)
+    return pd.DataFrame([analyse_case(case_path(out, c)) for c in CASES if is_finished(case_path(out, c))])
+
+
+def preset_note(preset: str | None, tier: int) -> str:
+    """What the quick preset trades away (:data:`iceresist.ship.presets.FIDELITY_NOTES`; its tier-2 note too for
+    a tier-2 sweep, with the grid caveat); empty for the paper preset."""
+    from iceresist.ship.presets import FIDELITY_NOTES
+
+    if preset != "quick":
+        return ""
+    note = "Quick preset: " + FIDELITY_NOTES[("quick", 1)]
+    if tier == 2:
+        note += " Tier 2: " + FIDELITY_NOTES[("quick", 2)]
+    return note

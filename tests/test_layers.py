@@ -1,0 +1,226 @@
+"""The import contract of the packages (docs: DESIGN.md sections 2 and 9), read from the source with ``ast``.
+
+Every ``import`` counts, also those inside functions (a cycle hidden in a function-level import is still a
+cycle). The rules:
+
+* layers: the kernels (lattice, lbm, freesurface, dem, coupling, grid, backends) < the models and the driver
+  (model(s), tier1, tier2, simulation, run, sweep, validate) < the command line (iceresist.cli); nothing
+  imports a layer above its own, and post imports neither the models nor the driver;
+* data flows one way: engine -> files -> ``iceresist.post`` -> ``reports``: nothing under iceresist/ imports
+  ``reports`` except the composition root ``iceresist.cli``; ``reports`` imports from iceresist only
+  ``post``, ``io`` and ``errors``; ``fsicr`` imports nothing from iceresist;
+* no import cycles between modules of iceresist/, fsicr/ and reports/ beyond :data:`KNOWN_CYCLES`.
+
+``__main__`` modules are entry points (they may call the command line) and are not checked against the layers.
+"""
+
+from __future__ import annotations
+
+import ast
+from functools import cache
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("iceresist", "fsicr", "reports")
+
+KERNELS = {"lattice", "lbm", "freesurface", "dem", "coupling", "grid", "backends"}
+MODELS_DRIVER = {"model", "models", "tier1", "tier2", "simulation", "run", "sweep", "validate"}
+CLI = {"cli"}
+#: The layer of each top-level part of iceresist (higher may import lower, never the reverse).
+LAYERS = {**{k: 0 for k in KERNELS}, **{k: 1 for k in MODELS_DRIVER}, **{k: 2 for k in CLI}}
+LAYER_NAMES = ("kernels", "models/driver", "cli")
+#: What reports may import from iceresist.
+REPORTS_MAY_IMPORT = ("iceresist.post", "iceresist.io", "iceresist.errors")
+
+#: Cycles that are being taken apart elsewhere; each entry is the exact set of modules of one cycle.
+KNOWN_CYCLES = {
+    frozenset({"iceresist.model", "iceresist.tier2"}),
+    frozenset({"iceresist.scene.schema", "iceresist.ship.presets"}),
+    frozenset({"iceresist.coupling.kernels", "iceresist.coupling.surface_kernels"}),
+    frozenset({"iceresist.backends.jit", "iceresist.backends.launch"}),
+}
+#: Imports against the layers that are being moved elsewhere: the GPU build check traces CI-sized scenes of
+#: both tiers (models and sweep overrides) and belongs above the models, not in the backend layer.
+KNOWN_LAYER_BREACHES = {
+    ("iceresist.backends.buildcheck", "iceresist.model"),
+    ("iceresist.backends.buildcheck", "iceresist.sweep"),
+}
+
+
+@cache
+def modules() -> dict[str, Path]:
+    """Dotted module name -> file, for every module of the packages."""
+    out = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            parts = list(path.relative_to(ROOT).with_suffix("").parts)
+            if parts[-1] == "__init__":
+                parts.pop()
+            out[".".join(parts)] = path
+    return out
+
+
+def _known(name: str) -> str | None:
+    """The longest prefix of ``name`` that is one of our modules (None for a third-party name)."""
+    mods = modules()
+    parts = name.split(".")
+    for k in range(len(parts), 0, -1):
+        cand = ".".join(parts[:k])
+        if cand in mods:
+            return cand
+    return None
+
+
+@cache
+def imports() -> dict[str, set[str]]:
+    """Module -> the set of our modules it imports (anywhere in the file, functions included)."""
+    mods = modules()
+    graph = {}
+    for name, path in mods.items():
+        is_pkg = path.name == "__init__.py"
+        package = name if is_pkg else name.rpartition(".")[0]
+        found = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base_parts = package.split(".")
+                    base_parts = base_parts[:len(base_parts) - (node.level - 1)]
+                    base = ".".join(base_parts + ([node.module] if node.module else []))
+                else:
+                    base = node.module or ""
+                targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in mods else base for a in node.names]
+            else:
+                continue
+            for t in targets:
+                k = _known(t)
+                if k is not None and k != name:
+                    found.add(k)
+        graph[name] = found
+    return graph
+
+
+def _edges():
+    for src, targets in imports().items():
+        for dst in sorted(targets):
+            yield src, dst
+
+
+def _part(module: str) -> str | None:
+    """The top-level part of iceresist a module belongs to (``iceresist.dem.system`` -> ``dem``)."""
+    parts = module.split(".")
+    return parts[1] if parts[0] == "iceresist" and len(parts) > 1 else None
+
+
+def layer_violations(allowed=frozenset(KNOWN_LAYER_BREACHES)) -> list[str]:
+    bad = []
+    for src, dst in _edges():
+        if src.rpartition(".")[2] == "__main__" or (src, dst) in allowed:
+            continue
+        ls, ld = LAYERS.get(_part(src)), LAYERS.get(_part(dst))
+        if ls is not None and ld is not None and ld > ls:
+            bad.append(f"{src} ({LAYER_NAMES[ls]}) imports {dst} ({LAYER_NAMES[ld]})")
+        if _part(src) == "post" and ld is not None and ld >= 1:
+            bad.append(f"{src} (post) imports {dst} ({LAYER_NAMES[ld]})")
+    return bad
+
+
+def flow_violations() -> list[str]:
+    bad = []
+    for src, dst in _edges():
+        top_s, top_d = src.split(".")[0], dst.split(".")[0]
+        if top_s == "iceresist" and top_d == "reports" and src != "iceresist.cli":
+            bad.append(f"{src} imports {dst}: only iceresist.cli composes the engine with the reports")
+        if top_s == "fsicr" and top_d == "iceresist":
+            bad.append(f"{src} imports {dst}: fsicr stands alone")
+        if top_s == "reports" and top_d == "iceresist" and not any(
+                dst == ok or dst.startswith(ok + ".") for ok in REPORTS_MAY_IMPORT):
+            bad.append(f"{src} imports {dst}: reports read files through {', '.join(REPORTS_MAY_IMPORT)} only")
+    return bad
+
+
+def import_cycles() -> list[frozenset]:
+    """The strongly connected components of more than one module (Tarjan), each one cycle or knot of cycles."""
+    graph = imports()
+    index, low, on_stack, stack, out = {}, {}, set(), [], []
+    counter = [0]
+
+    def visit(v):
+        # iterative Tarjan: (node, iterator over its successors)
+        work = [(v, iter(sorted(graph[v])))]
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        while work:
+            node, it = work[-1]
+            for w in it:
+                if w not in index:
+                    index[w] = low[w] = counter[0]
+                    counter[0] += 1
+                    stack.append(w)
+                    on_stack.add(w)
+                    work.append((w, iter(sorted(graph[w]))))
+                    break
+                if w in on_stack:
+                    low[node] = min(low[node], index[w])
+            else:
+                work.pop()
+                if work:
+                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if low[node] == index[node]:
+                    comp = set()
+                    while True:
+                        w = stack.pop()
+                        on_stack.discard(w)
+                        comp.add(w)
+                        if w == node:
+                            break
+                    if len(comp) > 1:
+                        out.append(frozenset(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out, key=sorted)
+
+
+def _describe(cycles) -> str:
+    return "\n".join("  " + " <-> ".join(sorted(c)) for c in cycles)
+
+
+def test_the_import_graph_is_read():
+    """The graph sees imports inside functions and relative imports (else the contract proves nothing)."""
+    g = imports()
+    assert {"iceresist.cli", "iceresist.post.case", "reports.report", "fsicr"} <= set(g)
+    assert "reports.report" in g["iceresist.cli"]  # a function-level import
+    assert "iceresist.post.case" in g["reports.report"]
+
+
+def test_layers_kernels_below_models_below_cli():
+    bad = layer_violations()
+    assert not bad, "imports against the layers:\n  " + "\n  ".join(bad)
+
+
+def test_every_known_layer_breach_still_exists():
+    gone = {e for e in KNOWN_LAYER_BREACHES if e[1] not in imports().get(e[0], set())}
+    assert not gone, f"no longer imported, remove them from KNOWN_LAYER_BREACHES: {sorted(gone)}"
+
+
+def test_data_flows_one_way_engine_files_post_reports():
+    bad = flow_violations()
+    assert not bad, "imports against the one-way flow:\n  " + "\n  ".join(bad)
+
+
+def test_no_import_cycles_beyond_the_known_ones():
+    cycles = import_cycles()
+    new = [c for c in cycles if c not in KNOWN_CYCLES]
+    assert not new, (f"import cycles not in KNOWN_CYCLES:\n{_describe(new)}\nall cycles found:\n"
+                     f"{_describe(cycles)}")
+
+
+def test_every_known_cycle_still_exists():
+    """A known cycle that has been taken apart leaves the allow-list, so the list never hides a new one."""
+    gone = KNOWN_CYCLES - set(import_cycles())
+    assert not gone, f"no longer cycles, remove them from KNOWN_CYCLES:\n{_describe(gone)}"

@@ -57,8 +57,16 @@ def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto
 
 
 def _cmd_demo(args) -> int:
-    """The quick tier-1 sweep of the paper's cases, the FSICR comparison and the report (runs/demo)."""
-    return demo(args.output, json_output=args.json)
+    """The quick tier-1 sweep of the paper's cases, the FSICR comparison and the report (runs/demo). The
+    engine's progress lines stay off the terminal (``--verbose`` shows them); warnings still show."""
+    engine = logging.getLogger("iceresist")
+    level = engine.level
+    if not args.verbose:
+        engine.setLevel(logging.WARNING)
+    try:
+        return demo(args.output, json_output=args.json)
+    finally:
+        engine.setLevel(level)
 
 
 def _cmd_validate(args) -> int:

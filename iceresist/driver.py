@@ -78,7 +78,7 @@ class RunResult:
 def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, outputs: Outputs | None = None,
               pickup=False, meta: dict | None = None, lattice_units: bool = False, progress: bool = True,
               callbacks: dict | None = None, on_new: Callable | None = None, on_completed: Callable | None = None,
-              build_s: float = 0.0) -> RunResult:
+              build_s: float = 0.0, leave_progress: bool = True) -> RunResult:
     """Run ``model`` (built from ``scene``) into the result file ``path``, checkpointing to ``checkpoint_path``
     (None: no checkpoint, and no pickup).
 
@@ -88,7 +88,8 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
     ``{name: (func(sim), every_steps)}``. ``on_new(runfile, model)``: called once when a new result file is made;
     ``on_completed(runfile, model, sim)``: called when the leg reached its stop criterion (not after an interrupt,
     a divergence or the watchdog). ``build_s``: wall time the caller spent building the model, counted into the
-    leg's wall time. Everything that can fail on bad input must be checked by the caller before this opens a
+    leg's wall time. ``progress``: a progress bar on a terminal (kept after the run unless not
+    ``leave_progress``). Everything that can fail on bad input must be checked by the caller before this opens a
     file.
     """
     from iceresist import watchdog
@@ -103,13 +104,15 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
     dog_json = path.with_suffix(".watchdog.json")
     dog_json.unlink(missing_ok=True)  # the diagnostic of an earlier leg or run
     desc = model.describe()
-    with RunFile(path, "a" if pickup else "w", shape_cells=model.shape_cells, dx_m=model.units.dx_m,
+    units = model.units.describe() if model.units is not None else None
+    dx_m = model.units.dx_m if model.units is not None else 1.0  # places the fields' grid (none without a lattice)
+    with RunFile(path, "a" if pickup else "w", shape_cells=model.shape_cells, dx_m=dx_m,
                  write_xdmf=bool(outputs.fields)) as rf:
         if not pickup:
             rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"],
                                      precision=desc["precision"], cells=model.cells),
                           scene_name=scene.scene.name, scene_source=scene.source_name,
-                          description=scene.scene.description, model=desc, units=model.units.describe(),
+                          description=scene.scene.description, model=desc, units=units,
                           shape_cells=None if model.shape_cells is None else list(model.shape_cells),
                           **(meta or {}))
             if on_new is not None:
@@ -124,6 +127,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
 
         sim = Simulation(model, stop_iteration=stop.iteration, stop_time_s=stop.time_s,
                          wall_time_limit_s=stop.wall_s, progress=progress)
+        sim.leave_progress = leave_progress
         if outputs.fields:
             units = {k: v for k, v in model.field_units(lattice_units).items() if k in outputs.fields}
             sim.output_writers["fields"] = FieldWriter(rf, outputs.fields_schedule, list(outputs.fields),
@@ -141,8 +145,8 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
             rf.write_meta(**leg_meta(earlier, s.start_iteration, desc["backend"]), finished=False)
 
         sim.on_start.append(start_leg)
-        log.info("running %s: %d cells, dt = %.4g s, tau = %.6g, %s on %s -> %s", scene.scene.name, model.cells,
-                 model.dt_s, model.units.tau, model.precision, model.target.name, path)
+        log.info("running %s: %s, %d cells, %.4g s per step, %s on %s -> %s", scene.scene.name,
+                 "+".join(model.components), model.cells, model.dt_s, model.precision, model.target.name, path)
         try:
             sim.run(pickup=checkpoint_path if pickup is True else pickup)
         finally:

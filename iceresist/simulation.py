@@ -232,6 +232,8 @@ class Simulation:
         self.model = model
         self.stop_iteration, self.stop_time_s, self.wall_time_limit_s = stop_iteration, stop_time_s, wall_time_limit_s
         self.progress = progress
+        #: keep the finished progress bar on the terminal (False: a sweep's case bars make way for the next)
+        self.leave_progress = True
         self.callbacks: dict[str, Callback] = {"nan_checker": Callback(check_finite,
                                                                        IterationInterval(nan_check_interval))}
         self.output_writers: dict[str, object] = {}
@@ -379,8 +381,7 @@ class Simulation:
             return None
         from tqdm import tqdm
 
-        return tqdm(total=total, unit="step", dynamic_ncols=True,
-                    file=sys.stderr)
+        return tqdm(total=total, unit="step", dynamic_ncols=True, file=sys.stderr, leave=self.leave_progress)
 
     # -- the loop -------------------------------------------------------------------------------------
     def run(self, pickup=False):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import sys
 import time
 from pathlib import Path
 
@@ -138,7 +139,8 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
                        pickup=earlier is not None, progress=progress, callbacks=callbacks,
                        meta={"case": case, "fidelity": fidelity, "tier": tier, "bow": c.bow,
                              "concentration_nominal": c.concentration, "knots": c.knots},
-                       on_new=on_new, on_completed=on_completed, build_s=time.perf_counter() - t_build)
+                       on_new=on_new, on_completed=on_completed, build_s=time.perf_counter() - t_build,
+                       leave_progress=False)
     sim, dog = result.sim, result.watchdog
     if dog.report is not None:
         raise InputError(f"case {case}: stopped by the watchdog: {dog.report.message} "
@@ -177,15 +179,31 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
     for case in finished:  # every case the table would read, before anything runs or is written
         check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)
     info_path.write_text(json.dumps(info, indent=1))
+    bar = _cases_bar(names, progress)
     for case in names:
+        if bar is not None:
+            bar.set_description_str(f"{fidelity} tier {tier}: {case}")
         if case in finished:
             log.info("case %s: finished earlier, skipped", case)
-            continue
-        run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
-                 callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+        else:
+            run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
+                     callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
     table = sweep_table(out)
     table.to_csv(out / TABLE_NAME, index=False, float_format="%.10g")  # the one place sweep.csv is written
     return table
+
+
+def _cases_bar(names, progress: bool):
+    """A progress bar over the cases of a sweep (on a terminal; each case's own bar runs beneath it)."""
+    if not (progress and sys.stderr.isatty()):
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=len(names), unit="case", dynamic_ncols=True, file=sys.stderr)
 
 
 # -- command line ------------------------------------------------------------------------------------------

@@ -85,17 +85,6 @@ def dem_critical_step_s(mass_kg: float, stiffness_N_m: float) -> float:
     return 2.0 * math.sqrt(mass_kg / stiffness_N_m)
 
 
-def check_dem_step(dt_s: float, mass_kg: float, stiffness_N_m: float) -> float:
-    """Refuse a DEM step above the critical step ``2 sqrt(m/k)``; returns the critical step (s)."""
-    critical = dem_critical_step_s(mass_kg, stiffness_N_m)
-    if dt_s > critical:
-        raise StabilityError(
-            f"DEM step {dt_s:.4g} s is above the critical step 2*sqrt(m/k) = {critical:.4g} s "
-            f"(m = {mass_kg:.4g} kg, k = {stiffness_N_m:.4g} N/m): use DEM sub-steps or a softer contact stiffness"
-        )
-    return critical
-
-
 def dem_substeps(dt_s: float, mass_kg: float, stiffness_N_m: float, *, safety: float = 0.2) -> int:
     """Number of DEM sub-steps per fluid step so that each is at most ``safety * 2 sqrt(m/k)``."""
     if not 0.0 < safety <= 1.0:

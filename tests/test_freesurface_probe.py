@@ -1,10 +1,10 @@
 """The watchdog's probe and the water volume of a free-surface fluid, reduced per block on the target, against
-the dense NumPy reading of the same fields (iceresist.watchdog.fluid_probe, PhaseField.h), CPU and CUDA."""
+the dense NumPy reading of the same fields (iceresist.models.probe.fluid_probe, PhaseField.h), CPU and CUDA."""
 
 import numpy as np
 import pytest
 
-from iceresist import watchdog
+from iceresist.models import probe as watchdog_probes
 from iceresist.backends import jit
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.freesurface.probe import FluidProbe
@@ -28,8 +28,8 @@ def flow():
 def _reference(fs, full):
     if full:
         rho, u = fs.macroscopic()
-        return watchdog.fluid_probe(rho, u, fs.liquid(), KE_REF)
-    return watchdog.fluid_speed_probe(fs.velocity(), fs.liquid())
+        return watchdog_probes.fluid_probe(rho, u, fs.liquid(), KE_REF)
+    return watchdog_probes.fluid_speed_probe(fs.velocity(), fs.liquid())
 
 
 def _field(fs, full):

@@ -168,7 +168,7 @@ def test_tier2_watchdog_probe_reads_the_flow_and_names_the_cell_of_a_nan(tiny_ru
 
     m = tiny_run[1]["model"]
     p = m.watchdog_probe(full=True)
-    u_ship = m.speed_m_s * m.units.lbm_dt_s / m.units.dx_m
+    u_ship = m.speed_m_s * m.lbm_dt_s / m.units.dx_m
     assert p["finite"] == (True, None)
     assert 0.9 * u_ship < p["max_lattice_speed"][0] < min(1.1 * u_ship, watchdog.LATTICE_SPEED_LIMIT)
     assert 0.9 < p["density_min"][0] <= 1.0 <= p["density_max"][0] < 1.1

@@ -11,6 +11,7 @@ import pytest
 from iceresist import watchdog
 from iceresist.io import RunFile
 from iceresist.models.base import Model
+from iceresist.models.probe import fluid_probe
 from iceresist.simulation import FieldWriter, IterationInterval, Simulation, TimeSeriesWriter
 
 
@@ -72,7 +73,7 @@ class FakeFluid(_Fake):
 
     def watchdog_probe(self):
         fluid = np.ones((8, 8, 8), dtype=bool)
-        return watchdog.fluid_probe(self.rho, self.u, fluid, 0.5 * self.cells * 0.05 ** 2)
+        return fluid_probe(self.rho, self.u, fluid, 0.5 * self.cells * 0.05 ** 2)
 
 
 def _run(tmp_path, model, stop=200, every=10, fields_every=20):

@@ -359,8 +359,8 @@ class FreeSurfaceFluid:
         """The watchdog's quantities (:mod:`iceresist.freesurface.probe`), reduced per block on the target: phi
         finite, the liquid's velocity finite and its fastest cell; ``full``: from the populations, with the
         density band and the kinetic energy (lattice units). The same dict as
-        :func:`iceresist.watchdog.fluid_probe` on :meth:`macroscopic` (``full``) or
-        :func:`iceresist.watchdog.fluid_speed_probe` on :meth:`velocity`."""
+        :func:`iceresist.models.probe.fluid_probe` on :meth:`macroscopic` (``full``) or
+        :func:`iceresist.models.probe.fluid_speed_probe` on :meth:`velocity`."""
         if self._probe is None:
             from iceresist.freesurface.probe import FluidProbe
 

@@ -5,7 +5,7 @@ the (nblocks, 12) rows. So a probe copies 96 bytes per block off the target inst
 velocity and the phase field (about 160 bytes per cell in float64 on the host): at the paper's resolution that
 is tens of GB per probe, and on the 2-core CPU it was a fifth of a quick tier-2 case's wall time.
 
-It reads, as :func:`iceresist.watchdog.fluid_probe` does on dense arrays:
+It reads, as :func:`iceresist.models.probe.fluid_probe` does on dense arrays:
 
 * phi finite on every cell;
 * on the liquid cells (flag FLUID; a cell a body covers is GHOST): the velocity finite and the fastest cell.
@@ -126,8 +126,8 @@ def probe_launcher(target) -> BlockLauncher:
 
 class FluidProbe:
     """The probe of one free-surface fluid: ``probe(f, fslot, flags, u, phi, full, half_g, kinetic_energy_ref)``
-    returns the dict of :func:`iceresist.watchdog.fluid_probe` (``full``) or
-    :func:`iceresist.watchdog.fluid_speed_probe`, cells as [i, j, k] of the dense grid."""
+    returns the dict of :func:`iceresist.models.probe.fluid_probe` (``full``) or
+    :func:`iceresist.models.probe.fluid_speed_probe`, cells as [i, j, k] of the dense grid."""
 
     def __init__(self, forest, target):
         self.forest = forest

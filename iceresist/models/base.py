@@ -24,8 +24,8 @@ class Model(abc.ABC):
     Clock: ``iteration`` (model steps taken), ``dt_s`` (seconds per model step), ``time_s``.
     Size: ``cells`` (lattice cells, 0 where there is no lattice), ``shape_cells`` (or None),
     ``lattice_steps_per_step`` (LBM steps in one model step: a tier-2 record holds several), ``allocation()``.
-    Identity: ``components``, ``units`` (an object with ``dx_m``, ``dt_s``, ``tau`` and ``describe()``),
-    ``precision``, ``target`` (the compile target), ``describe()``.
+    Identity: ``components``, ``units`` (the lattice's :class:`~iceresist.units.Units`, None for a model without
+    a lattice), ``precision``, ``target`` (the compile target), ``describe()``.
     """
 
     #: Names of the components the model holds (run metadata).
@@ -40,6 +40,8 @@ class Model(abc.ABC):
     watchdog_interval: int | None = None
     #: Seconds of simulated time per model step.
     dt_s: float
+    #: Scales of the lattice (:class:`iceresist.units.Units`; its ``dt_s`` is the LBM step), or None.
+    units = None
 
     # -- clock ------------------------------------------------------------------------------------------
     @property

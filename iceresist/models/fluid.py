@@ -134,7 +134,7 @@ class FluidModel(Model):
     def watchdog_probe(self) -> dict:
         """Lattice quantities the run watchdog checks (:mod:`iceresist.watchdog`); the reference kinetic energy
         is that of the whole fluid moving at the scene's largest speed (at least a tenth of numerics.mach)."""
-        from iceresist.watchdog import fluid_probe
+        from iceresist.models.probe import fluid_probe
 
         if getattr(self, "_fluid_dense", None) is None:
             dense = self.forest.to_dense(self.forest.fluid.astype(np.float64))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,23 +22,12 @@ from iceresist.models.ship import ShipModel
 log = logging.getLogger(__name__)
 
 
-@dataclass(frozen=True)
-class Tier1Units:
-    """What the run job needs of a tier-1 model's units: no lattice (``tau`` is NaN, ``dx_m`` the sphere size)."""
-
-    dx_m: float
-    dt_s: float
-    tau: float = float("nan")
-
-    def describe(self) -> dict:
-        return {"dx_m": self.dx_m, "dt_s": self.dt_s, "lattice": False}
-
-
 class Tier1Model(ShipModel):
     """DEM ship + ice + tier-1 water for a scene with ``[ship]``, ``[ice]`` and ``[free_surface]``."""
 
     components = ("dem", "ship", "ice", "water-model")
     tier = 1
+    units = None  # no lattice
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None):
         from iceresist.dem import Water
@@ -66,7 +54,6 @@ class Tier1Model(ShipModel):
         self.substeps_per_step = max(1, int(math.ceil(con.sample_interval_s / self.substep_s - 1e-9)))
         self.dt_s = self.substeps_per_step * self.substep_s
         self.substep_s = self.dt_s / self.substeps_per_step  # the sub-step DEMSystem.step takes, to the last bit
-        self.units = Tier1Units(dx_m=2 * self.cube.sphere_radius_m, dt_s=self.dt_s)
         check_tier1(self)
         self._iteration = 0
         self._force_mean = np.zeros(3)

@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -39,25 +38,9 @@ from iceresist.models.base import array_bytes
 from iceresist.models.fluid import check_block_shape, resolve_target
 from iceresist.models.ship import ShipModel, ship_start_x_m, steady_window_m
 from iceresist.ship.tank import start_wave, tank_flow
-from iceresist.units import GRAVITY_M_S2
+from iceresist.units import GRAVITY_M_S2, Units
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class Tier2Units:
-    """Lattice scales of a tier-2 run: cell ``dx_m``, LBM step ``lbm_dt_s``, record interval ``dt_s``, ``tau``."""
-
-    dx_m: float
-    dt_s: float
-    lbm_dt_s: float
-    tau: float
-    g_lattice: float
-    nu_m2_s: float
-
-    def describe(self) -> dict:
-        return {"dx_m": self.dx_m, "dt_s": self.dt_s, "lbm_dt_s": self.lbm_dt_s, "tau": self.tau,
-                "g_lattice": self.g_lattice, "nu_m2_s": self.nu_m2_s, "lattice": True}
 
 
 def start_wave_of_scene(scene, geometry, layout) -> tuple:
@@ -140,8 +123,9 @@ class Tier2Model(ShipModel):
         self.lbm_dt_s = self.fb.dt_s
         self.lbm_steps_per_record = max(1, int(math.ceil(con.sample_interval_s / self.lbm_dt_s - 1e-9)))
         self.dt_s = self.lbm_steps_per_record * self.lbm_dt_s
-        self.units = Tier2Units(dx_m=dx, dt_s=self.dt_s, lbm_dt_s=self.lbm_dt_s, tau=tau, g_lattice=g_lat,
-                                nu_m2_s=nu)
+        #: the lattice's scales: dt is the LBM step (a model step, one record, is ``dt_s``)
+        self.units = Units(dx_m=dx, dt_s=self.lbm_dt_s, rho0_kg_m3=self.rho_w, nu_m2_s=nu, tau=tau)
+        self.g_lattice = g_lat
         self.cells = int(self.fb.forest.cells)
         self._iteration = 0
         self.lbm_steps = 0
@@ -192,7 +176,7 @@ class Tier2Model(ShipModel):
         field, 1 water, 0 air). rho, u and pressure are 0 outside the liquid (where flags = 0), so that the NaN
         check of the field writer sees only real blow-ups."""
         phi, rho, u = self.fb.fields()
-        c = self.units.dx_m / self.units.lbm_dt_s
+        c = self.units.dx_m / self.units.dt_s
         liquid = np.isfinite(rho)
         return {"rho": np.where(liquid, rho * self.rho_w, 0.0),
                 "u": np.where(liquid[..., None], np.moveaxis(u, 0, -1) * c, 0.0),
@@ -231,7 +215,7 @@ class Tier2Model(ShipModel):
         if full is None:
             full = self._probes % self.full_probe_every == 0
         self._probes += 1
-        u_ship = self.speed_m_s * self.units.lbm_dt_s / self.units.dx_m
+        u_ship = self.speed_m_s * self.units.dt_s / self.units.dx_m
         probe = self.fb.fluid.probe(full, 0.5 * self.cells * u_ship ** 2)
         if not probe["finite"][0]:
             return probe
@@ -319,9 +303,9 @@ class Tier2Model(ShipModel):
                 "substeps_per_record": self.substeps_per_record,
                 "record_interval_s": self.dt_s, "lbm_dt_s": self.lbm_dt_s,
                 "lbm_steps_per_record": self.lbm_steps_per_record,
-                "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": u.g_lattice,
+                "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": self.g_lattice,
                 "nu_m2_s": u.nu_m2_s, "operator": self.scene.fluid.operator,
-                "ship_lattice_speed": self.speed_m_s * u.lbm_dt_s / u.dx_m, "tank": self.tank.describe(),
+                "ship_lattice_speed": self.speed_m_s * u.dt_s / u.dx_m, "tank": self.tank.describe(),
                 "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
                 "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation()}

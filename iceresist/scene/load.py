@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from iceresist.errors import InputError, StabilityError
 from iceresist.scene.schema import CaseBase, Scene
+from iceresist.ship.cases import scene_data
 
 PRESETS_PACKAGE = "iceresist.scene.presets"
 DEFAULT_PRESET = "cavity"
@@ -135,11 +136,9 @@ class _CaseOnly(BaseModel):
 
 def _with_case(data: dict) -> dict:
     """The scene data with its ``[case]`` (if any) expanded: the case's sections
-    (:func:`iceresist.ship.presets.scene_data`), each changed by the keys the file's section of that name gives."""
+    (:func:`iceresist.ship.cases.scene_data`), each changed by the keys the file's section of that name gives."""
     if "case" not in data:
         return data
-    from iceresist.ship.presets import scene_data
-
     case = _CaseOnly.model_validate(data).case
     merged = scene_data(case.name, case.fidelity, case.tier)
     for section, values in data.items():

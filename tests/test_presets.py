@@ -139,6 +139,17 @@ def test_a_broken_case_file_is_refused_naming_the_key(monkeypatch, tmp_path):
         cases._load()
 
 
+def test_to_toml_writes_scalars_by_tomli_w_and_reads_back():
+    data = {"scene": {"name": "a\"b\\c", "description": "tab\there"},
+            "domain": {"cells": [8, 8, 16], "faces": {"x_min": {"kind": "wall"}}, "dx_m": None},
+            "run": {"end_time_s": 1e-06, "flag": True}}
+    text = to_toml(data)
+    assert "dx_m" not in text  # None leaves the key to its default
+    back = tomllib.loads(text)
+    del data["domain"]["dx_m"]
+    assert back == data
+
+
 def _imports(path: Path) -> set[str]:
     out = set()
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):

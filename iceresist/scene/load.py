@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from iceresist.errors import InputError, StabilityError
 from iceresist.scene.schema import CaseBase, Scene
+from iceresist.scene.write import toml_value
 from iceresist.ship.cases import scene_data
 
 PRESETS_PACKAGE = "iceresist.scene.presets"
@@ -25,16 +26,8 @@ _KEYED = re.compile(r"^([A-Za-z_][A-Za-z0-9_.\[\]]*): (.+)$", re.S)
 
 
 def _show(value) -> str:
-    """A value as TOML would write it."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace('"', '\\"') + '"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "a table"
-    return repr(value)
+    """A value as TOML would write it (a table as the words "a table")."""
+    return "a table" if isinstance(value, dict) else toml_value(value)
 
 
 def _model_at(loc) -> type[BaseModel] | None:

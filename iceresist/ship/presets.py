@@ -7,6 +7,7 @@ whose names this module re-exports); :func:`case_scene` builds the validated sce
 from __future__ import annotations
 
 from iceresist.scene.schema import Scene
+from iceresist.scene.write import to_toml
 from iceresist.ship.cases import (
     CASES,
     CHANNEL_START_X_M,
@@ -36,28 +37,3 @@ def case_scene(case: str, fidelity: str, tier: int = 1, **overrides) -> Scene:
     scene._source_text = to_toml(data)
     scene._source_name = f"{data['scene']['name']}.toml"
     return scene
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return '"' + v + '"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_toml_value(x)}" for k, x in v.items()) + " }"
-    return repr(v)
-
-
-def to_toml(data: dict) -> str:
-    """TOML text of a scene dict (sections of scalars, lists and inline tables). TOML has no null: a key whose
-    value is None is left out, which gives it its default (None for every optional scene key)."""
-    lines = []
-    for section, values in data.items():
-        lines.append(f"[{section}]")
-        for k, v in values.items():
-            if v is not None:
-                lines.append(f"{k} = {_toml_value(v)}")
-        lines.append("")
-    return "\n".join(lines)

@@ -12,6 +12,7 @@ import json
 import sys
 
 from . import report
+from .cliparser import OneLineParser
 from .compare import compare_table2
 from .errors import FsicrInputError
 from .power import required_power
@@ -19,13 +20,6 @@ from .resistance import r_ch_at_waterlines
 from .rules import ICE_CLASSES, PROPULSION_KINDS, parse_ice_class
 from .ship import DESCRIPTIONS, FLAGS, WATERLINE_FIELDS
 from .shipfile import builtin_ships, read_ship_file, resolve_ship_path, ship_from_mapping
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors as one line and exit status 2."""
-
-    def error(self, message):  # noqa: D401 - argparse API
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def _number(text: str) -> float:
@@ -138,9 +132,9 @@ def _cmd_ships(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="fsicr", description="Finnish-Swedish Ice Class Rules 2017: brash-ice channel resistance "
-                                          "R_CH and required engine output of new ships.")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    p = OneLineParser(prog="fsicr", description="Finnish-Swedish Ice Class Rules 2017: brash-ice channel "
+                                                "resistance R_CH and required engine output of new ships.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     r = sub.add_parser("resistance", help="R_CH with every intermediate value and the validity warnings")
     _add_ship_options(r, with_power=False)
     r.set_defaults(func=_cmd_resistance)

@@ -10,17 +10,11 @@ import argparse
 import logging
 import sys
 
+from fsicr.cliparser import OneLineParser
 from iceresist import __version__
 from iceresist.errors import InputError
 
 log = logging.getLogger("iceresist")
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports usage errors as one line and exit status 2."""
-
-    def error(self, message):  # noqa: D401 - argparse API
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto", progress: bool = True,
@@ -89,10 +83,11 @@ def _cmd_validate(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="iceresist", description="Ice resistance of a ship in a brash-ice channel (LBM-DEM) beside FSICR.")
+    p = OneLineParser(prog="iceresist",
+                      description="Ice resistance of a ship in a brash-ice channel (LBM-DEM) beside FSICR.")
     p.add_argument("--version", action="version", version=f"iceresist {__version__}")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     d = sub.add_parser("demo", help="run the main job on the built-in default scene")
     d.add_argument("--json", action="store_true", help="machine-readable output")

@@ -194,3 +194,29 @@ def test_fsicr_imports_nothing_from_the_engine():
     code = "import sys, fsicr.cli; bad = [m for m in sys.modules if m.startswith(('iceresist', 'numba'))]; print(bad)"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stdout.strip() == "[]"
+
+
+def test_every_command_line_uses_the_one_line_parser(capsys):
+    """fsicr, iceresist and iceresist validate build their parsers (and subcommands) from fsicr.cliparser; no
+    other ArgumentParser subclass is left in the packages."""
+    import re
+    from pathlib import Path
+
+    import fsicr.cli
+    import iceresist.cli
+    import iceresist.validate.cli
+    from fsicr.cliparser import OneLineParser
+
+    for module, argv in ((fsicr.cli, ["power", "--bogus"]), (iceresist.cli, ["run", "--bogus"]),
+                         (iceresist.validate.cli, ["--bogus"])):
+        parser = module.build_parser()
+        assert type(parser) is OneLineParser, module.__name__
+        with pytest.raises(SystemExit) as exc:
+            parser.parse_args(argv)
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and len(err.strip().splitlines()) == 1 and ": error: " in err, (module, err)
+    root = Path(__file__).resolve().parents[1]
+    subclasses = [str(f.relative_to(root)) for pkg in ("fsicr", "iceresist", "validation", "reports")
+                  for f in sorted((root / pkg).rglob("*.py"))
+                  if re.search(r"^class \w+\(argparse\.ArgumentParser\)", f.read_text(encoding="utf-8"), re.M)]
+    assert subclasses == ["fsicr/cliparser.py"]

@@ -35,7 +35,6 @@ REPORTS_MAY_IMPORT = ("iceresist.post", "iceresist.io", "iceresist.errors")
 
 #: Cycles that are being taken apart elsewhere; each entry is the exact set of modules of one cycle.
 KNOWN_CYCLES = {
-    frozenset({"iceresist.scene.schema", "iceresist.ship.presets"}),
     frozenset({"iceresist.coupling.kernels", "iceresist.coupling.surface_kernels"}),
     frozenset({"iceresist.backends.jit", "iceresist.backends.launch"}),
 }

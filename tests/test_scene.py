@@ -236,3 +236,26 @@ def test_validation_scenes_load():
     for f in files:
         scene = load_scene(f)
         assert scene.case is not None and scene.case.tier == 2 and scene.ship is not None, f.name
+
+
+@pytest.mark.parametrize("name", ["cavity", "dam_break", "poiseuille", "still_tank"])
+def test_built_in_scenes_round_trip_through_the_writer(name):
+    """TOML -> dict -> iceresist.scene.write.to_toml -> the same Scene (and the same dict)."""
+    import tomllib
+
+    from iceresist.scene.write import to_toml
+
+    data = tomllib.loads(preset_text(name))
+    text = to_toml(data)
+    assert tomllib.loads(text) == data
+    assert parse_scene(text).model_dump() == load_scene(name).model_dump()
+
+
+def test_case_scenes_round_trip_through_their_stored_text():
+    from iceresist.ship.presets import CASES, case_scene
+
+    for case in CASES:
+        for preset in ("paper", "quick"):
+            for tier in (1, 2):
+                scene = case_scene(case, preset, tier)
+                assert parse_scene(scene.source_text).model_dump() == scene.model_dump(), (case, preset, tier)

@@ -95,7 +95,10 @@ def test_plot_and_table(tmp_path):
     df.to_csv(tmp_path / "stability.csv", index=False)
     assert write_stability_map(tmp_path).is_file()
     md = st.markdown_table(df)
-    assert "| DEM stiffness | k x 1 | stable | 2 x 1.00e-03 s |" in md
+    cells = [[c.strip() for c in line.strip().strip("|").split("|")] for line in md.splitlines()]
+    assert cells[0] == ["axis", "setting", "outcome", "DEM sub-steps per record", "message"]
+    assert ["DEM stiffness", "k x 1", "stable", "2 x 1.00e-03 s", ""] in cells
+    assert ["ice density", "1000", "refused", "", "ice.density_kg_m3: ... e.g. 950"] in cells
 
 
 @pytest.mark.slow

@@ -13,6 +13,8 @@ import importlib
 import json
 import sys
 
+from tabulate import tabulate
+
 #: Benchmarks with a module of their own; any ``validation.bench_NAME`` module is found as well.
 REGISTRY = {"lbm": "validation.bench_lbm"}
 
@@ -42,18 +44,12 @@ def common_parser(name: str) -> argparse.ArgumentParser:
 
 
 def format_table(rows) -> str:
+    """The measurements as a plain text table (tabulate, as pandas' ``to_markdown``): the usual columns first,
+    floats to 4 significant digits, a key a row lacks left blank."""
     cols = [c for c in COLUMNS if any(c in r for r in rows)]
-    cols += [c for r in rows for c in r if c not in cols]
-    cols = list(dict.fromkeys(cols))
-
-    def fmt(v):
-        return f"{v:.4g}" if isinstance(v, float) else str(v)
-
-    table = [[fmt(r.get(c, "")) for c in cols] for r in rows]
-    widths = [max(len(c), *(len(t[i]) for t in table)) for i, c in enumerate(cols)]
-    lines = ["  ".join(c.rjust(w) for c, w in zip(cols, widths))]
-    lines += ["  ".join(v.rjust(w) for v, w in zip(t, widths)) for t in table]
-    return "\n".join(lines)
+    cols = list(dict.fromkeys(cols + [c for r in rows for c in r]))
+    return tabulate([[r.get(c) for c in cols] for r in rows], headers=cols, tablefmt="plain", floatfmt=".4g",
+                    missingval="")
 
 
 def main(argv=None):

@@ -16,6 +16,8 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 
 from iceresist.errors import InputError, StabilityError
 from iceresist.scene.schema import CaseBase, Scene
+from iceresist.scene.write import toml_value
+from iceresist.ship.cases import scene_data
 
 PRESETS_PACKAGE = "iceresist.scene.presets"
 DEFAULT_PRESET = "cavity"
@@ -24,16 +26,8 @@ _KEYED = re.compile(r"^([A-Za-z_][A-Za-z0-9_.\[\]]*): (.+)$", re.S)
 
 
 def _show(value) -> str:
-    """A value as TOML would write it."""
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, str):
-        return '"' + value.replace('"', '\\"') + '"'
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(_show(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "a table"
-    return repr(value)
+    """A value as TOML would write it (a table as the words "a table")."""
+    return "a table" if isinstance(value, dict) else toml_value(value)
 
 
 def _model_at(loc) -> type[BaseModel] | None:
@@ -135,11 +129,9 @@ class _CaseOnly(BaseModel):
 
 def _with_case(data: dict) -> dict:
     """The scene data with its ``[case]`` (if any) expanded: the case's sections
-    (:func:`iceresist.ship.presets.scene_data`), each changed by the keys the file's section of that name gives."""
+    (:func:`iceresist.ship.cases.scene_data`), each changed by the keys the file's section of that name gives."""
     if "case" not in data:
         return data
-    from iceresist.ship.presets import scene_data
-
     case = _CaseOnly.model_validate(data).case
     merged = scene_data(case.name, case.fidelity, case.tier)
     for section, values in data.items():

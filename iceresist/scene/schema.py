@@ -20,7 +20,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, field_validator, model_validator
 
-from iceresist.ship.presets import CASES
+from iceresist.ship.cases import CASES, FIDELITIES
 from iceresist.units import MACH_LATTICE, MACH_LATTICE_CEILING, MIN_TAU_EXCESS, Units, check_lattice_velocity
 
 log = logging.getLogger(__name__)
@@ -49,7 +49,7 @@ class CaseBase(_Section):
 
     name: str = Field(..., description="Case name `<bow>-c<percent>-v<knots>`: "
                                        + ", ".join(f"`{c}`" for c in CASES) + ".")
-    fidelity: Literal["paper", "quick"] = Field("quick", description="Preset fidelity (docs/SHIP.md).")
+    fidelity: Literal[tuple(FIDELITIES)] = Field("quick", description="Preset fidelity (docs/SHIP.md).")
     tier: Literal[1, 2] = Field(1, description="1 = DEM with water models; 2 = the coupled LBM-DEM.")
 
     @field_validator("name")

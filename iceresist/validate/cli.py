@@ -13,16 +13,10 @@ import argparse
 import logging
 import sys
 
+from fsicr.cliparser import OneLineParser
 from iceresist.errors import InputError
 
 log = logging.getLogger(__name__)
-
-
-class _Parser(argparse.ArgumentParser):
-    """argparse reporting usage errors as one line and exit status 2."""
-
-    def error(self, message):  # noqa: D401 - argparse API
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def add_validate_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -72,7 +66,7 @@ def cmd_validate(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="iceresist validate", description="Error against run time of the reference cases.")
+    p = OneLineParser(prog="iceresist validate", description="Error against run time of the reference cases.")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
     return add_validate_arguments(p)
 

@@ -231,14 +231,16 @@ def run_stability_matrix(out_dir, quick: bool = True, backend: str = "cpu"):
 
 
 def markdown_table(df) -> str:
-    """The matrix as a Markdown table (docs/VALIDATION.md)."""
-    lines = ["| axis | setting | outcome | DEM sub-steps per record | message |", "|---|---|---|---|---|"]
-    for _, r in df.iterrows():
-        sub = "" if isinstance(r["dem_substeps"], float) and math.isnan(r["dem_substeps"]) else \
-            f"{int(r['dem_substeps'])} x {r['dem_substep_s']:.2e} s"
-        msg = str(r["message"]).replace("|", "/")
-        lines.append(f"| {r['axis']} | {r['setting']} | {r['outcome']} | {sub} | {msg} |")
-    return "\n".join(lines)
+    """The matrix as a Markdown table (docs/VALIDATION.md), written by pandas (``DataFrame.to_markdown``)."""
+    import pandas as pd
+
+    df = df.reset_index(drop=True)
+    shown = pd.DataFrame({
+        "axis": df["axis"], "setting": df["setting"], "outcome": df["outcome"],
+        "DEM sub-steps per record": ["" if pd.isna(n) else f"{int(n)} x {dt:.2e} s"
+                                     for n, dt in zip(df["dem_substeps"], df["dem_substep_s"])],
+        "message": df["message"].astype(str).str.replace("|", "/", regex=False)})
+    return shown.to_markdown(index=False, disable_numparse=True)
 
 
 # -- the measurement behind the operator limits ---------------------------------------------------------

@@ -2,7 +2,7 @@
 cumulant operator (iceresist.validate.cases.standing_wave).
 
 The small grids run single-threaded: on a loaded 2-core x86 VM each parallel launch waits ~15 ms for its
-threads, ten times the work of a 2 048-cell step (docs/VALIDATION.md, "Free surface").
+threads, ten times the work of a 2 048-cell step (docs/notes/component-checks.md).
 """
 
 import numba

@@ -201,7 +201,7 @@ class Tier2Model(ShipModel):
     #: Every this many probes (the first included) the watchdog reads the populations: density band and kinetic
     #: energy. The probes between read the velocity the step already holds. Both are reduced per block on the
     #: target (:mod:`iceresist.freesurface.probe`): on a 3.2e6-cell quick case on a 2-core CPU the full probe
-    #: takes 0.13 s and the cheap one 0.03 s, against about 10 s for a record (docs/PERFORMANCE.md).
+    #: takes 0.13 s and the cheap one 0.03 s, against about 10 s for a record (docs/notes/coupled-step-speed.md).
     full_probe_every = 10
 
     def watchdog_probe(self, full: bool | None = None) -> dict:

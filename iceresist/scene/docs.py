@@ -87,14 +87,6 @@ def _default(field) -> str:
     return f"`{d}`"
 
 
-def schema_keys() -> list[str]:
-    """Every documented key, dotted (``domain.dx_m``, ``domain.faces.<face>.kind``, ``bodies[].name``)."""
-    keys = [prefix for _, _, prefix in SECTIONS]
-    for _, model, prefix in SECTIONS:
-        keys += [f"{prefix}.{name}" for name in model.model_fields]
-    return keys
-
-
 def reference_markdown() -> str:
     """Markdown tables of every key: meaning, unit, default, allowed values."""
     out = []

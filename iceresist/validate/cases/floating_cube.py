@@ -15,7 +15,7 @@ Lattice: g = ``g_lattice`` (default 1e-3, dt = sqrt(g_lattice dx / g)); tau = 0.
 8 cells per edge: a viscous water that damps the heave within a few periods). The water level is measured
 (phi = 1/2) over the columns the cube does not reach; the still-water level is chosen so that the level of
 the floating state lies on a cell face (the pressure datum of eq. 11 is the face between the last liquid
-and the first gas cell, so the level is resolved to half a cell; see docs/VALIDATION.md).
+and the first gas cell, so the level is resolved to half a cell; see docs/notes/floating-cube.md).
 """
 
 from __future__ import annotations

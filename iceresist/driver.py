@@ -101,6 +101,11 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
     path.parent.mkdir(parents=True, exist_ok=True)
     if not pickup and checkpoint_path is not None:
         checkpoint_path.unlink(missing_ok=True)  # the checkpoint of a result this run replaces
+    sim = Simulation(model, stop_iteration=stop.iteration, stop_time_s=stop.time_s,
+                     wall_time_limit_s=stop.wall_s, progress=progress)
+    sim.leave_progress = leave_progress
+    if pickup:  # a missing or wrong checkpoint stops here, before the result file is touched
+        sim.load_checkpoint(checkpoint_path if pickup is True else pickup)
     dog_json = path.with_suffix(".watchdog.json")
     dog_json.unlink(missing_ok=True)  # the diagnostic of an earlier leg or run
     desc = model.describe()
@@ -125,13 +130,10 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
                         "the pickup", path, "another checkpoint" if pickup is not True else "an older iceresist "
                         "wrote the file")
 
-        sim = Simulation(model, stop_iteration=stop.iteration, stop_time_s=stop.time_s,
-                         wall_time_limit_s=stop.wall_s, progress=progress)
-        sim.leave_progress = leave_progress
         if outputs.fields:
-            units = {k: v for k, v in model.field_units(lattice_units).items() if k in outputs.fields}
+            field_units = {k: v for k, v in model.field_units(lattice_units).items() if k in outputs.fields}
             sim.output_writers["fields"] = FieldWriter(rf, outputs.fields_schedule, list(outputs.fields),
-                                                       units=units)
+                                                       units=field_units)
         sim.output_writers["timeseries"] = TimeSeriesWriter(rf, outputs.timeseries)
         if checkpoint_path is not None:
             sim.output_writers["checkpointer"] = Checkpointer(checkpoint_path, outputs.checkpoint,
@@ -148,7 +150,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
         log.info("running %s: %s, %d cells, %.4g s per step, %s on %s -> %s", scene.scene.name,
                  "+".join(model.components), model.cells, model.dt_s, model.precision, model.target.name, path)
         try:
-            sim.run(pickup=checkpoint_path if pickup is True else pickup)
+            sim.run(pickup=Simulation.LOADED if pickup else False)
         finally:
             # totals over the legs of the run: steps from iteration 0, the wall time of the work kept (a leg
             # killed after its last checkpoint loses the steps and the time after it); mlups: this leg's rate

@@ -338,7 +338,10 @@ class Simulation:
                 return w
         return None
 
-    def _pickup(self, pickup):
+    def load_checkpoint(self, pickup=True):
+        """Put the state of a checkpoint (``True``: the Checkpointer's file, or a path) into the model; a missing
+        or wrong checkpoint is an :class:`InputError` and changes nothing. :meth:`run` with
+        ``pickup=Simulation.LOADED`` then continues from it."""
         path = pickup if not isinstance(pickup, bool) else (self._checkpointer().path if self._checkpointer() else None)
         if path is None:
             raise InputError("pickup asked for, but there is no Checkpointer and no checkpoint path")
@@ -348,6 +351,13 @@ class Simulation:
         state = read_checkpoint(path)
         self.model.load_state(state["model"])
         log.info("picked up from %s at iteration %d", path, self.model.iteration)
+
+    #: ``run(pickup=LOADED)``: the model holds the checkpoint's state already (:meth:`load_checkpoint`).
+    LOADED = "loaded"
+
+    def _pickup(self, pickup):
+        if pickup is not self.LOADED:
+            self.load_checkpoint(pickup)
         for w in self.output_writers.values():
             if hasattr(w, "pickup"):
                 w.pickup(self)

@@ -150,6 +150,16 @@ class Units:
                    tau=float(tau))
 
     @classmethod
+    def from_lattice(cls, dx_m: float, dt_s: float, rho0_kg_m3: float, tau: float) -> "Units":
+        """Scales of a lattice whose cell ``dx_m``, step ``dt_s`` and relaxation time ``tau`` are already chosen
+        (the viscosity follows: nu = (tau - 1/2) dx^2 / (3 dt))."""
+        for name, v in (("dx_m", dx_m), ("dt_s", dt_s), ("rho0_kg_m3", rho0_kg_m3)):
+            if not v > 0.0:
+                raise StabilityError(f"{name} must be > 0 (got {v!r})")
+        return cls(dx_m=float(dx_m), dt_s=float(dt_s), rho0_kg_m3=float(rho0_kg_m3),
+                   nu_m2_s=CS2 * (float(tau) - 0.5) * dx_m * dx_m / dt_s, tau=float(tau))
+
+    @classmethod
     def lattice(cls, *, tau: float | None = None, nu: float | None = None,
                 min_tau_excess: float = MIN_TAU_EXCESS) -> "Units":
         """Identity scales (dx = dt = rho0 = 1) for scenes written in lattice units; give ``tau`` or ``nu``."""

@@ -2,8 +2,10 @@
 
 Reads only the files a sweep wrote (``sweep.json``, ``cases/*.h5``) through :mod:`iceresist.post`, which
 builds the table from the case files; never runs a simulation and never writes ``sweep.csv`` (the sweep's
-own record). The HTML is self-contained (figures embedded as base64 PNG); the PDF holds the same figures and
-tables (matplotlib ``PdfPages``).
+own record). The HTML is self-contained (figures embedded as base64 PNG, one jinja2 template); the PDF holds the
+same figures and tables as matplotlib ``PdfPages``. One template for both formats would need an HTML-to-PDF
+renderer, and the one that renders such pages well (WeasyPrint) needs Pango from the operating system, which
+``pip install`` cannot bring; matplotlib, already drawing every figure, writes the PDF with nothing more.
 """
 
 from __future__ import annotations

@@ -4,14 +4,15 @@ import numpy as np
 import pytest
 
 from iceresist.backends import jit
-from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, LatticeUnits, Sphere
+from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, Sphere
 from iceresist.dem import DEMSystem, box, sphere
 from iceresist.grid.forest import BlockForest
 from iceresist.lattice import C
 from iceresist.lbm.solver import LBMSolver
+from iceresist.units import Units
 from tests.conftest import SIMULATED
 
-UNITS = LatticeUnits(dx_m=1.0, dt_s=1.0, rho_kg_m3=1.0)     # lattice units throughout
+UNITS = Units.lattice(tau=0.8)     # lattice units throughout (dx = dt = rho0 = 1; the coupling reads only these)
 
 
 def quaternion_matrices(q: np.ndarray) -> np.ndarray:

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from iceresist.backends import jit
-from iceresist.coupling import Box, FluidStructureCoupling, LatticeUnits
+from iceresist.coupling import Box, FluidStructureCoupling
 from iceresist.coupling.floating import FloatingBodies
 from iceresist.dem import DEMSystem, box
 from iceresist.errors import InputError
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import BlockForest, Face
+from iceresist.units import Units
 from iceresist.validate.cases import floating_cube as fc
 
 
@@ -33,7 +34,7 @@ def _still_water_link_force_N(model, n):
     z_bottom = model.dem.positions[0, 2] / model.dx_m - 0.5 * n
     d_b = level - (np.floor(z_bottom - 0.5) + 0.5)
     p = lambda d: (np.exp(3 * g * d) - 1) / 3  # noqa: E731
-    return (n * n * p(d_b) + 4 * n * p(d_b - 1) / 6) * model.units.force_N
+    return (n * n * p(d_b) + 4 * n * p(d_b - 1) / 6) * model.units.force_to_physical(1.0)
 
 
 @pytest.fixture(scope="module")
@@ -61,10 +62,10 @@ def test_default_buoyancy_is_the_pressure_when_the_fluid_has_gravity():
     fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=g_lat, depth_cells=10.0, operator="bgk", precision="float64")
     dem = DEMSystem()
     dem.add_body(box((0.02,) * 3, 950.0), position_m=(0.02, 0.02, 0.05))
-    cp = FluidStructureCoupling(fs, dem, [Box((0.02,) * 3)], LatticeUnits(dx, dt, 1000.0))
+    cp = FluidStructureCoupling(fs, dem, [Box((0.02,) * 3)], Units.from_lattice(dx, dt, 1000.0, 0.6))
     assert cp.buoyancy is False and cp.surface is fs
     with pytest.raises(InputError, match="gravity_lattice"):
-        FluidStructureCoupling(fs, dem, [Box((0.02,) * 3)], LatticeUnits(dx, 2 * dt, 1000.0))
+        FluidStructureCoupling(fs, dem, [Box((0.02,) * 3)], Units.from_lattice(dx, 2 * dt, 1000.0, 0.6))
 
 
 def test_released_cube_feels_the_link_force_of_still_water_and_sinks_towards_95_percent(short_float):

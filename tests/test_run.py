@@ -183,6 +183,19 @@ def test_pickup_continues_a_result(tmp_path, main, fake_model):
         assert a.meta["steps"] == 1200 and a.meta["iteration"] == 1200
 
 
+@pytest.mark.parametrize("damage", ["truncated", "empty", "random"])
+def test_pickup_from_a_bad_checkpoint_leaves_the_result_as_it_was(tmp_path, main, fake_model, damage):
+    """A checkpoint that cannot be read is refused in one line before the finished result is opened."""
+    assert main("poiseuille", "--output", tmp_path, "--steps", "20")[0] == 0
+    h5, chk = tmp_path / "poiseuille.h5", tmp_path / "poiseuille.checkpoint.h5"
+    data = chk.read_bytes()
+    chk.write_bytes({"truncated": data[: len(data) // 2], "empty": b"",
+                     "random": np.random.default_rng(3).bytes(4096)}[damage])
+    before = h5.read_bytes()
+    _one_line_error(*main("poiseuille", "--output", tmp_path, "--steps", "40", "--pickup"), str(chk))
+    assert h5.read_bytes() == before
+
+
 def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_path, main, monkeypatch):
     """Interrupted at iteration 650 with a checkpoint at 500, then continued to 1200: the result counts 1200
     steps (not 650 + 700), two legs, and the wall time up to the checkpoint plus the second leg's. It is

@@ -30,10 +30,11 @@ import numpy as np
 import pytest
 
 from iceresist.backends import jit
-from iceresist.coupling import FluidStructureCoupling, LatticeUnits, Sphere
+from iceresist.coupling import FluidStructureCoupling, Sphere
 from iceresist.dem import DEMSystem, sphere
 from iceresist.grid.forest import BlockForest, Face
 from iceresist.lbm.solver import LBMSolver
+from iceresist.units import Units
 
 
 def schiller_naumann(re):
@@ -56,7 +57,7 @@ def sphere_drag_coefficient(re, d_cells, U=0.1, lengths=(12, 8, 8), x_sphere=4.0
     dem = DEMSystem(gravity_m_s2=(0, 0, 0))
     R = d_cells / 2
     dem.add_body(sphere(R, 1000.0), position_m=(x_sphere * d_cells, shape[1] / 2, shape[2] / 2), kinematic=True)
-    cp = FluidStructureCoupling(solver, dem, [Sphere(R)], LatticeUnits(1.0, 1.0, 1.0))
+    cp = FluidStructureCoupling(solver, dem, [Sphere(R)], Units.lattice(tau=solver.tau))
     steps = int(round(run_diameters * d_cells / U))
     fx = np.empty(steps)
     for i in range(steps):

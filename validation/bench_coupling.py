@@ -45,7 +45,8 @@ def _large_edges(text):
 
 
 def _case(nbodies, edge, pitch, precision, operator, target, large=None, film=True):
-    from iceresist.coupling import Box, FluidStructureCoupling, LatticeUnits
+    from iceresist.coupling import Box, FluidStructureCoupling
+    from iceresist.units import Units
     from iceresist.dem import DEMSystem, box
     from iceresist.grid.forest import BlockForest
     from iceresist.lbm.solver import LBMSolver
@@ -70,7 +71,7 @@ def _case(nbodies, edge, pitch, precision, operator, target, large=None, film=Tr
         dem.add_body(box(large, 900.0), position_m=np.array(shape) / 2 + 0.3, velocity_m_s=(0.02, 0.0, 0.0),
                      kinematic=True)
         geometries.append(Box(large))
-    cp = FluidStructureCoupling(solver, dem, geometries, LatticeUnits(dx_m=1.0, dt_s=1.0, rho_kg_m3=1.0),
+    cp = FluidStructureCoupling(solver, dem, geometries, Units.lattice(tau=solver.tau),
                                 contact_film=film)
     return fo, solver, dem, cp
 

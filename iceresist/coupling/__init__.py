@@ -2,10 +2,10 @@
 
 Public API::
 
-    from iceresist.coupling import FluidStructureCoupling, LatticeUnits, Sphere, Box, ConvexPolyhedron
+    from iceresist.coupling import FluidStructureCoupling, Sphere, Box, ConvexPolyhedron
 """
 
-from iceresist.coupling.coupler import FluidStructureCoupling, LatticeUnits
+from iceresist.coupling.coupler import FluidStructureCoupling
 from iceresist.coupling.geometry import Box, ConvexPolyhedron, Sphere
 
-__all__ = ["FluidStructureCoupling", "LatticeUnits", "Sphere", "Box", "ConvexPolyhedron"]
+__all__ = ["FluidStructureCoupling", "Sphere", "Box", "ConvexPolyhedron"]

@@ -19,8 +19,8 @@ Buoyancy: a fluid without a gravity body force has no hydrostatic pressure, so b
 With the gravity body force in the LBM (always the case for a free surface with g > 0) the hydrostatic
 pressure acts through the momentum exchange instead, and ``buoyancy=None`` adds nothing.
 
-Units (:class:`LatticeUnits`): lattice velocity = v dt/dx, lattice force = F dt^2 / (rho_f dx^4), lattice
-torque = M dt^2 / (rho_f dx^5). Positions: the centre of cell (i, j, k) lies at origin + (i + 1/2) dx.
+Units (:class:`iceresist.units.Units`, of which the coupling reads dx, dt and rho0): lattice velocity = v dt/dx, lattice force = F dt^2 / (rho_f dx^4), lattice
+torque = M dt^2 / (rho_f dx^5). Positions: the centre of cell (i, j, k) lies at ``origin_m`` + (i + 1/2) dx.
 
 Free surface: given a :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` instead of an
 :class:`~iceresist.lbm.solver.LBMSolver`, the passes act on its flow populations and its phase field
@@ -35,7 +35,6 @@ The lattice gravity of the fluid must equal the DEM gravity in lattice units, |g
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -46,6 +45,7 @@ from iceresist.coupling.kernels import coupling_launchers
 from iceresist.errors import InputError, StabilityError
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import BLOCK
+from iceresist.units import Units
 
 log = logging.getLogger(__name__)
 
@@ -83,43 +83,19 @@ def tile_rows(slabs) -> np.ndarray:
     return np.ascontiguousarray(np.stack([body[order], j[order], m[body[order]]], axis=1), dtype=np.int64)
 
 
-@dataclass(frozen=True)
-class LatticeUnits:
-    """Cell size ``dx_m``, time step ``dt_s``, fluid density ``rho_kg_m3``, and the world position of the
-    corner (cell 0, 0, 0 lower corner) of the lattice ``origin_m``."""
-
-    dx_m: float
-    dt_s: float
-    rho_kg_m3: float
-    origin_m: tuple = (0.0, 0.0, 0.0)
-
-    def __post_init__(self):
-        for name in ("dx_m", "dt_s", "rho_kg_m3"):
-            if not getattr(self, name) > 0:
-                raise InputError(f"LatticeUnits {name} must be positive, got {getattr(self, name)!r}")
-
-    @property
-    def force_N(self) -> float:
-        """One lattice force unit in newtons."""
-        return self.rho_kg_m3 * self.dx_m ** 4 / self.dt_s ** 2
-
-    @property
-    def velocity_m_s(self) -> float:
-        return self.dx_m / self.dt_s
-
-
 class FluidStructureCoupling:
     """Couples an :class:`~iceresist.lbm.solver.LBMSolver` and a :class:`~iceresist.dem.DEMSystem`.
 
     ``geometries``: one shape of :mod:`iceresist.coupling.geometry` per DEM body, in body order.
-    ``units``: :class:`LatticeUnits`. ``buoyancy``: add -rho_f V g to each body (default: when the LBM
+    ``units``: :class:`~iceresist.units.Units` of the lattice; ``origin_m``: world position of the lower corner of cell (0, 0, 0). ``buoyancy``: add -rho_f V g to each body (default: when the LBM
     has no body force). ``debug``: fill newly covered cells with NaN, so a population the coupling failed
     to provide shows up in :meth:`check_populations`. ``contact_film``: bodies touching another body or a wall
     feel the fluid pressure on the touching face (the film closure of :mod:`iceresist.coupling.kernels`).
     """
 
-    def __init__(self, solver, dem, geometries, units: LatticeUnits, buoyancy: bool | None = None,
-                 debug: bool = False, contact_film: bool = True):
+    def __init__(self, solver, dem, geometries, units: Units, buoyancy: bool | None = None,
+                 debug: bool = False, contact_film: bool = True, origin_m=(0.0, 0.0, 0.0)):
+        self.origin_m = tuple(float(v) for v in origin_m)
         self.surface = solver if hasattr(solver, "phase") else None
         if self.surface is not None:
             solver = self.surface.fluid
@@ -157,7 +133,7 @@ class FluidStructureCoupling:
         flags0 = np.ascontiguousarray(fo.flags.astype(np.uint8))
         owner = np.full((fo.nblocks, BLOCK ** 3), -1, dtype=np.int32)
         g = np.asarray(dem.gravity, dtype=float)
-        buoy = units.rho_kg_m3 * self._volume_m3[:, None] * g[None, :] if self.buoyancy else np.zeros((self.n, 3))
+        buoy = units.rho0_kg_m3 * self._volume_m3[:, None] * g[None, :] if self.buoyancy else np.zeros((self.n, 3))
         n, nb = self.n, fo.nblocks
         dev = self._dev
         self._d = {"grid": dev(grid), "block_map": dev(block_map), "flags0": dev(flags0),
@@ -168,11 +144,11 @@ class FluidStructureCoupling:
                    "shape_int": dev(np.stack([kinds, first, count], axis=1).astype(np.int32)),
                    "par_lat": dev(np.ascontiguousarray(self._par_lat, dtype=np.float64)),
                    "half_lat": dev(np.ascontiguousarray(self._half_lat, dtype=np.float64)),
-                   "conv": dev(np.array([*np.asarray(units.origin_m, dtype=float), dx, units.dt_s / dx,
+                   "conv": dev(np.array([*np.asarray(self.origin_m, dtype=float), dx, units.dt_s / dx,
                                          units.dt_s], dtype=np.float64)),
                    "nblocks3": dev(np.array([nbx, nby, nbz], dtype=np.int64)),
                    "nbr": dev(np.ascontiguousarray(fo.nbr)),
-                   "load_scale": dev(np.array([units.force_N, dx], dtype=np.float64)),
+                   "load_scale": dev(np.array([units.force_to_physical(1.0), dx], dtype=np.float64)),
                    "buoy": dev(np.ascontiguousarray(buoy, dtype=np.float64)),
                    "box": dev(np.zeros((n, 6), np.int64)), "box_prev": dev(np.zeros((n, 6), np.int64)),
                    "now": dev(np.zeros((n, 6))), "fprev": dev(np.zeros((n, 6))), "fluid": dev(np.zeros((n, 6))),

@@ -36,12 +36,12 @@ import math
 import numpy as np
 
 from iceresist.backends import jit
-from iceresist.coupling.coupler import FluidStructureCoupling, LatticeUnits
+from iceresist.coupling.coupler import FluidStructureCoupling
 from iceresist.dem import DEMSystem
 from iceresist.errors import InputError
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.grid.forest import BlockForest, Face
-from iceresist.units import GRAVITY_M_S2
+from iceresist.units import GRAVITY_M_S2, Units
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class FloatingBodies:
             raise InputError(f"g_lattice must lie in (0, 0.01] (lattice units), got {g_lattice}")
         self.dx_m = float(dx_m)
         self.dt_s = math.sqrt(g_lattice * self.dx_m / GRAVITY_M_S2)
-        self.units = LatticeUnits(self.dx_m, self.dt_s, float(rho_kg_m3))
+        self.units = Units.from_lattice(self.dx_m, self.dt_s, float(rho_kg_m3), tau)
         self.depth_cells = float(depth_m) / self.dx_m
         self.forest = BlockForest.uniform(shape, {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
         self.fluid = FreeSurfaceFluid(self.forest, tau=tau, gravity_lattice=g_lattice, depth_cells=self.depth_cells,

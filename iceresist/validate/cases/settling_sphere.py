@@ -46,7 +46,8 @@ def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float
            backend: str = "cpu", precision: str = "float32"):
     """Settling velocity history (t_s, w_m_s) of case ``case`` at ``d_cells`` cells per diameter, with the cell
     count, the number of steps and the wall time of the stepping (first step, which compiles, excluded)."""
-    from iceresist.coupling import FluidStructureCoupling, LatticeUnits, Sphere
+    from iceresist.coupling import FluidStructureCoupling, Sphere
+    from iceresist.units import Units
     from iceresist.dem import DEMSystem, sphere
     from iceresist.grid.forest import BlockForest, Face
     from iceresist.lbm.solver import LBMSolver
@@ -73,7 +74,7 @@ def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float
     dem = DEMSystem()
     dem.add_body(sphere(d / 2, RHO_SPHERE), position_m=(n[0] * dx / 2, n[1] * dx / 2, RELEASE_HEIGHT_M + d / 2))
     dem.add_wall((0, 0, 0), (0, 0, 1))
-    cp = FluidStructureCoupling(solver, dem, [Sphere(d / 2)], LatticeUnits(dx, dt, rho_f))
+    cp = FluidStructureCoupling(solver, dem, [Sphere(d / 2)], Units.from_lattice(dx, dt, rho_f, tau))
     steps = int(t_end_s / dt)
     t, w = [], []
     wall = 0.0

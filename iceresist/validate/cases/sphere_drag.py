@@ -40,7 +40,8 @@ def ladder(quick: bool) -> list[dict]:
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
     from iceresist.backends.jit import resolve_backend
-    from iceresist.coupling import FluidStructureCoupling, LatticeUnits, Sphere
+    from iceresist.coupling import FluidStructureCoupling, Sphere
+    from iceresist.units import Units
     from iceresist.dem import DEMSystem, sphere
     from iceresist.grid.forest import BlockForest, Face
     from iceresist.lbm.solver import LBMSolver
@@ -56,7 +57,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> Ca
     dem = DEMSystem(gravity_m_s2=(0, 0, 0), backend=backend)
     radius = d / 2
     dem.add_body(sphere(radius, 1000.0), position_m=(3 * d, shape[1] / 2, shape[2] / 2), kinematic=True)
-    cp = FluidStructureCoupling(solver, dem, [Sphere(radius)], LatticeUnits(1.0, 1.0, 1.0))
+    cp = FluidStructureCoupling(solver, dem, [Sphere(radius)], Units.lattice(tau=solver.tau))
     cp.step(1)                       # compile outside the timed loop
     steps = int(RUN_DIAMETERS * d / U_LATTICE)
     fx = np.empty(steps)

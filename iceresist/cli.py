@@ -52,15 +52,18 @@ def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto
 
 def _cmd_demo(args) -> int:
     """The quick tier-1 sweep of the paper's cases, the FSICR comparison and the report (runs/demo). The
-    engine's progress lines stay off the terminal (``--verbose`` shows them); warnings still show."""
-    engine = logging.getLogger("iceresist")
-    level = engine.level
+    engine's and the report's progress lines stay off the terminal (``--verbose`` shows them); warnings still
+    show."""
+    loggers = [logging.getLogger(name) for name in ("iceresist", "reports")]
+    levels = [lg.level for lg in loggers]
     if not args.verbose:
-        engine.setLevel(logging.WARNING)
+        for lg in loggers:
+            lg.setLevel(logging.WARNING)
     try:
         return demo(args.output, json_output=args.json)
     finally:
-        engine.setLevel(level)
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
 
 
 def _cmd_validate(args) -> int:

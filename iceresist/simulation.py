@@ -428,7 +428,8 @@ class Simulation:
                 self._chunk_cap = max(1, min(2 * self._chunk_cap, int(0.2 / per_step) if per_step > 0 else 1 << 20))
                 if bar is not None:
                     bar.update(n)
-                    bar.set_postfix_str(f"{self.mlups:.1f} MLUPS", refresh=False)
+                    rate = f", {self.mlups:.1f} MLUPS" if self.model.cells else ""
+                    bar.set_postfix_str(f"t = {self.model.time_s:.4g} s{rate}", refresh=False)
                 self._actuate()
                 self._check_stop()
                 now = time.perf_counter()

@@ -472,14 +472,26 @@ def build_visits(target, real, free_surface: bool = False):
     return mark, links, classify_refill, redistribute, poison
 
 
+#: Modules whose source decides the compiled coupling code (visits, geometry, lattice constants, flags); the key
+#: of the kernel cache.
+KEY_MODULES = ("iceresist.coupling.kernels", "iceresist.coupling.surface_kernels", "iceresist.coupling.geometry",
+               "iceresist.grid.flags", "iceresist.lattice", "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
+
+
+def variant_of(real, h_lattice=None, free_surface: bool = False) -> str:
+    """The key of a launcher family: precision, free-surface flag and h lattice."""
+    return f"{np.dtype(real).name}|fs={bool(free_surface)}|{None if h_lattice is None else h_lattice.name}"
+
+
 def _cpu_kernel(loop_name, loop_src, launch_name, launch_src, visit, variant):
     """The CPU launcher: ``loop_src`` (serial, calling ``visit``) compiled once, ``launch_src`` (prange over it);
-    cached on disk by :mod:`iceresist.coupling.kcache` where the cache is on, else compiled in memory."""
+    cached on disk by :mod:`iceresist.backends.cache` where the cache is on, else compiled in memory."""
     import numba
 
-    from iceresist.coupling import kcache
+    from iceresist.backends import cache
 
-    cached = kcache.cpu_launcher(loop_name, loop_src, launch_name, launch_src, visit, variant)
+    cached = cache.cpu_launcher(launch_name, f"{loop_src}\n\n{launch_src}", {"visit": visit},
+                                [(loop_name, False), (launch_name, True)], cache.fingerprint(variant, KEY_MODULES))
     if cached is not None:
         return cached
     ns = {"visit": visit}
@@ -584,8 +596,6 @@ def coupling_launchers(target, real, h_lattice=None):
     (:mod:`iceresist.coupling.surface_kernels`)."""
     key = (target.name, target.simulator, np.dtype(real).name, None if h_lattice is None else h_lattice.name)
     if key not in _CACHE:
-        from iceresist.coupling.kcache import variant_of
-
         fs = h_lattice is not None
         v = variant_of(real, h_lattice, fs)
         mark, links, refill, redist, poison = build_visits(target, real, free_surface=fs)

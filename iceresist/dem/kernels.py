@@ -22,9 +22,10 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from iceresist.backends.launch import cuda_launch, profiled
-from iceresist.dem import kcache
+from iceresist.backends import cache
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
@@ -38,6 +39,9 @@ CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mass", "kin
                 "hp_old", "hxi_old", "hn_old", "hp_new", "hxi_new", "hn_new", "sforce", "storque", "senergy",
                 "snew", "sover"]
 # (CPython passes calls with more than 30 arguments as *args, which numba cannot inline: keep lists short)
+#: Modules whose source decides the compiled DEM code (device functions, constants); the key of the kernel cache.
+KEY_MODULES = ("iceresist.dem.kernels", "iceresist.dem.contact", "iceresist.dem.hydro", "iceresist.dem.quaternion",
+               "iceresist.dem.search")
 GATHER_ARGS = ["h", "do_kick", "bfirst", "bcount", "sforce", "storque", "mass", "kin", "ext", "env", "pos",
                "quat", "vel", "omega", "angmom", "volume", "blen", "bhalf", "vfirst", "vcount", "voff", "vvol",
                "bcontact", "bcsum", "force", "torque", "inv_meff"]
@@ -363,8 +367,8 @@ def make_launcher(target, item, argnames, name, kind, key=None):
     On the CPU one prange kernel serves every launch; below ``PARALLEL_FROM[kind]`` items it runs with one
     thread (``numba.set_num_threads(1)`` for the call: no wait for the workers, and the prange build ran the
     contact pass about 1.5x faster on one thread than a plain ``range`` loop did). It compiles on its first call,
-    from the on-disk cache of :mod:`iceresist.dem.kcache` when ``key`` (its fingerprint) is given and the cache
-    is on."""
+    from the on-disk cache of :mod:`iceresist.backends.cache` when ``key`` (its fingerprint) is given and the
+    cache is on."""
     args = ", ".join(argnames)
     if target.is_cuda:
         from numba import cuda
@@ -377,9 +381,9 @@ def make_launcher(target, item, argnames, name, kind, key=None):
         def launch(n, *a):
             cuda_launch(kern, (n + THREADS - 1) // THREADS, THREADS, n, *a)
     else:
-        kern = kcache.cpu_launcher(name, argnames, item, key) if key is not None else None
+        src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
+        kern = cache.cpu_launcher(name, src, {"item": item}, [(name, True)], key) if key is not None else None
         if kern is None:
-            src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
             ns = {"prange": numba.prange, "item": item}
             exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
             kern = target.kernel(ns[name])
@@ -407,7 +411,7 @@ def make_launcher(target, item, argnames, name, kind, key=None):
 def build_launchers(target, real):
     """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid)."""
     drift, place, contact, gather = build_items(target, real)
-    key = None if target.is_cuda else kcache.fingerprint(real)
+    key = None if target.is_cuda else cache.fingerprint(np.dtype(real).name, KEY_MODULES)
     return {
         "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift", "drift", key),
         "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place", key),

@@ -25,12 +25,14 @@ from pathlib import Path
 
 import numba
 
-from iceresist.backends import jit
+from iceresist.backends.conf import cpu_jit
 
 log = logging.getLogger(__name__)
 
-#: Modules of the backend layer whose source decides every compiled launcher (compile flags, the cache itself).
-BACKEND_MODULES = ("iceresist.backends.jit", "iceresist.backends.cache")
+#: Modules of the backend layer whose source decides every compiled launcher (compile flags, launcher text, the
+#: cache itself).
+BACKEND_MODULES = ("iceresist.backends.conf", "iceresist.backends.jit", "iceresist.backends.launch",
+                   "iceresist.backends.cache")
 
 
 def cache_dir() -> Path | None:
@@ -102,7 +104,7 @@ def cpu_launcher(name: str, source: str, namespace: dict, functions, key: str):
         setattr(mod, attr, value)
     kern = None
     for fn_name, parallel in functions:
-        kern = numba.njit(getattr(mod, fn_name), parallel=parallel, fastmath=set(jit.CPU_FASTMATH), cache=True)
+        kern = cpu_jit(getattr(mod, fn_name), parallel=parallel, cache=True)
         setattr(mod, f"{fn_name}_jit", kern)
     return kern
 
@@ -110,10 +112,9 @@ def cpu_launcher(name: str, source: str, namespace: dict, functions, key: str):
 def cpu_function(fn):
     """A serial CPU kernel of a module-level function without closures, cached by numba beside its source file
     (numba keys it by the function's bytecode), or compiled in memory where the cache is off."""
-    flags = {"parallel": False, "fastmath": set(jit.CPU_FASTMATH)}
     if cache_dir() is not None:
         try:
-            return numba.njit(fn, cache=True, **flags)
+            return cpu_jit(fn, cache=True)
         except RuntimeError as exc:  # no writable place for numba's cache beside the source or per user
             log.warning("%s not cached: %s", fn.__name__, exc)
-    return numba.njit(fn, **flags)
+    return cpu_jit(fn)

@@ -15,11 +15,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import cuda  # cuda.grid / cuda.atomic inside kernels (module global for the simulator)
 
 from iceresist.backends import cache
-from iceresist.backends.jit import Target
+from iceresist.backends.jit import Target, cuda_api
 from iceresist.backends.launch import cuda_launch
+
+cuda = cuda_api()  # cuda.grid / cuda.atomic inside the kernels below (a module global, for the simulator)
 
 P1, P2, P3 = 73856093, 19349663, 83492791
 SCAN_CHUNK = 256

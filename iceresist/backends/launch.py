@@ -16,10 +16,10 @@ Launchers are generated with named arguments (numba's CUDA kernels take no ``*ar
 kernels, so the same device function serves both targets. On the CPU a launcher given a ``cache_key`` compiles
 from the on-disk kernel cache (:mod:`iceresist.backends.cache`).
 
-Every CUDA kernel of the engine is compiled by :func:`cuda_kernel` (which names it) and launched by
-:func:`cuda_launch`: the one place a launch happens, so the GPU build check
-(:mod:`iceresist.backends.buildcheck`) can record each kernel's argument types, launches of no items
-included, instead of running it.
+Every CUDA kernel of the engine is compiled by :func:`~iceresist.backends.conf.cuda_kernel` (which names it) and
+launched by :func:`cuda_launch`: the one place a launch happens, so the GPU build check
+(:mod:`iceresist.backends.buildcheck`) can record each kernel's argument types, launches of no items included,
+instead of running it.
 
 Every launcher has a ``label`` (``"f_update"``, ``"links"``, ``"dem_contact"``, ...), the same on both targets;
 within :func:`profiling` each launch is timed under it (the coupled-step benchmark's parts).

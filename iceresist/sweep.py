@@ -221,13 +221,9 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 
 def set_threads(n: int | None):
-    if n is None:
-        return
-    import numba
+    from iceresist.backends.jit import set_threads as set_backend_threads
 
-    if not 1 <= n <= numba.config.NUMBA_NUM_THREADS:
-        raise InputError(f"--threads: must lie in 1..{numba.config.NUMBA_NUM_THREADS} (got {n})")
-    numba.set_num_threads(n)
+    set_backend_threads(n, "--threads")
 
 
 def cmd_sweep(args) -> int:

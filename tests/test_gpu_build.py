@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
+from iceresist.validate.gpu_build import REGISTER_FILE, float64_ops
 
 #: Kernels that must be in the check: each part of a tier-2 step and of tier 1 (LBM, free surface, coupling, DEM).
 EXPECTED = {
@@ -81,13 +81,33 @@ def test_float64_ops_counts_arithmetic_not_data_movement():
     assert float64_ops(ptx) == 5
 
 
+#: Copies between host and device over two records (the model's step: several coupled LBM steps and the mean loads
+#: on the hull) of the CI-sized tier-2 case on the ``cuda`` target, traced (kernels recorded, not run; the first
+#: record, with the set-up, is not counted); prints ``{"records", "lbm_steps", "counts", "sites"}`` as JSON.
+RECORD_TRANSFERS = """
+import json
+from iceresist.backends import transfers
+from iceresist.validate.gpu_build import check_scenes, tracing
+from iceresist.models import build_model
+
+records = 2
+with tracing():
+    model = build_model(check_scenes()["tier2-float32"], backend="cuda")
+    model.step(1)
+    with transfers.counting() as tally:
+        model.step(records)
+print(json.dumps({"records": records, "lbm_steps": records * model.lbm_steps_per_record,
+                  "counts": dict(tally.counts), "sites": str(tally)}))
+"""
+
+
 def test_a_tier2_record_reads_its_mean_loads_and_copies_nothing_else():
     """Two records (4 coupled LBM steps each) of the CI-sized tier-2 case on the cuda target, traced in a process of
     its own: no upload and no host array handed to a kernel; per record at most three small reads (the mean ice
     and fluid loads summed on the device, and the ice force at the end of the model's step), none per LBM step."""
     env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
-    code = "import json; from iceresist.backends.buildcheck import record_transfers; print(json.dumps(record_transfers()))"
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+    res = subprocess.run([sys.executable, "-c", RECORD_TRANSFERS], capture_output=True, text=True, env=env,
+                         timeout=600)
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["lbm_steps"] >= 2 * out["records"]

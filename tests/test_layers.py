@@ -3,13 +3,13 @@
 Every ``import`` counts, also those inside functions (a cycle hidden in a function-level import is still a
 cycle). The rules:
 
-* layers: the kernels (lattice, lbm, freesurface, dem, coupling, grid, backends) < the models and the driver
-  (model(s), tier1, tier2, simulation, run, sweep, validate) < the command line (iceresist.cli); nothing
-  imports a layer above its own, and post imports neither the models nor the driver;
+* layers (:data:`LAYER_PARTS`, from the bottom): backends and lattice < grid < kernels (lbm, freesurface, dem,
+  coupling) < models < driver (simulation, watchdog, driver, run, sweep, validate) < the command line
+  (iceresist.cli); nothing imports a layer above its own, and post imports neither the models nor the driver;
 * data flows one way: engine -> files -> ``iceresist.post`` -> ``reports``: nothing under iceresist/ imports
   ``reports`` except the composition root ``iceresist.cli``; ``reports`` imports from iceresist only
   ``post``, ``io`` and ``errors``; ``fsicr`` imports nothing from iceresist;
-* no import cycles between modules of iceresist/, fsicr/ and reports/ beyond :data:`KNOWN_CYCLES`.
+* no import cycles between modules of iceresist/, fsicr/ and reports/.
 
 ``__main__`` modules are entry points (they may call the command line) and are not checked against the layers.
 """
@@ -23,27 +23,21 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("iceresist", "fsicr", "reports")
 
-KERNELS = {"lattice", "lbm", "freesurface", "dem", "coupling", "grid", "backends"}
-MODELS = {"models"}
-DRIVER = {"simulation", "watchdog", "driver", "run", "sweep", "validate"}
-CLI = {"cli"}
-#: The layer of each top-level part of iceresist (higher may import lower, never the reverse).
-LAYERS = {**{k: 0 for k in KERNELS}, **{k: 1 for k in MODELS}, **{k: 2 for k in DRIVER}, **{k: 3 for k in CLI}}
-LAYER_NAMES = ("kernels", "models", "driver", "cli")
+#: The layers from the bottom up, each with the top-level parts of iceresist it holds: a part may import its own
+#: layer and those below, never one above (DESIGN.md section 2: kernels < grid < models < driver < cli).
+LAYER_PARTS = (
+    ("backends", {"backends", "lattice"}),
+    ("grid", {"grid"}),
+    ("kernels", {"lbm", "freesurface", "dem", "coupling"}),
+    ("models", {"models"}),
+    ("driver", {"simulation", "watchdog", "driver", "run", "sweep", "validate"}),
+    ("cli", {"cli"}),
+)
+LAYERS = {part: level for level, (_, parts) in enumerate(LAYER_PARTS) for part in parts}
+LAYER_NAMES = tuple(name for name, _ in LAYER_PARTS)
+MODELS_LAYER = LAYER_NAMES.index("models")
 #: What reports may import from iceresist.
 REPORTS_MAY_IMPORT = ("iceresist.post", "iceresist.io", "iceresist.errors")
-
-#: Cycles that are being taken apart elsewhere; each entry is the exact set of modules of one cycle.
-KNOWN_CYCLES = {
-    frozenset({"iceresist.coupling.kernels", "iceresist.coupling.surface_kernels"}),
-    frozenset({"iceresist.backends.jit", "iceresist.backends.launch"}),
-}
-#: Imports against the layers that are being moved elsewhere: the GPU build check traces CI-sized scenes of
-#: both tiers (models and sweep overrides) and belongs above the models, not in the backend layer.
-KNOWN_LAYER_BREACHES = {
-    ("iceresist.backends.buildcheck", "iceresist.models"),
-    ("iceresist.backends.buildcheck", "iceresist.sweep"),
-}
 
 
 @cache
@@ -112,15 +106,15 @@ def _part(module: str) -> str | None:
     return parts[1] if parts[0] == "iceresist" and len(parts) > 1 else None
 
 
-def layer_violations(allowed=frozenset(KNOWN_LAYER_BREACHES)) -> list[str]:
+def layer_violations() -> list[str]:
     bad = []
     for src, dst in _edges():
-        if src.rpartition(".")[2] == "__main__" or (src, dst) in allowed:
+        if src.rpartition(".")[2] == "__main__":
             continue
         ls, ld = LAYERS.get(_part(src)), LAYERS.get(_part(dst))
         if ls is not None and ld is not None and ld > ls:
             bad.append(f"{src} ({LAYER_NAMES[ls]}) imports {dst} ({LAYER_NAMES[ld]})")
-        if _part(src) == "post" and ld is not None and ld >= 1:
+        if _part(src) == "post" and ld is not None and ld >= MODELS_LAYER:
             bad.append(f"{src} (post) imports {dst} ({LAYER_NAMES[ld]})")
     return bad
 
@@ -202,24 +196,11 @@ def test_layers_kernels_below_models_below_cli():
     assert not bad, "imports against the layers:\n  " + "\n  ".join(bad)
 
 
-def test_every_known_layer_breach_still_exists():
-    gone = {e for e in KNOWN_LAYER_BREACHES if e[1] not in imports().get(e[0], set())}
-    assert not gone, f"no longer imported, remove them from KNOWN_LAYER_BREACHES: {sorted(gone)}"
-
-
 def test_data_flows_one_way_engine_files_post_reports():
     bad = flow_violations()
     assert not bad, "imports against the one-way flow:\n  " + "\n  ".join(bad)
 
 
-def test_no_import_cycles_beyond_the_known_ones():
+def test_no_import_cycles():
     cycles = import_cycles()
-    new = [c for c in cycles if c not in KNOWN_CYCLES]
-    assert not new, (f"import cycles not in KNOWN_CYCLES:\n{_describe(new)}\nall cycles found:\n"
-                     f"{_describe(cycles)}")
-
-
-def test_every_known_cycle_still_exists():
-    """A known cycle that has been taken apart leaves the allow-list, so the list never hides a new one."""
-    gone = KNOWN_CYCLES - set(import_cycles())
-    assert not gone, f"no longer cycles, remove them from KNOWN_CYCLES:\n{_describe(gone)}"
+    assert not cycles, f"import cycles:\n{_describe(cycles)}"

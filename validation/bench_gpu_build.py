@@ -1,6 +1,6 @@
 """``python -m validation.bench gpu_build``: compile every CUDA kernel of tiers 1 and 2 (and the plain LBM step)
 for sm_90 on any machine, and print each kernel's registers, spill and stack bytes, float64 instructions and
-whether it launches (:mod:`iceresist.backends.buildcheck`). Needs the ``gpu`` extra and, since the CUDA
+whether it launches (:mod:`iceresist.validate.gpu_build`). Needs the ``gpu`` extra and, since the CUDA
 simulator replaces ``numba.cuda``, ``NUMBA_ENABLE_CUDASIM=0`` (the default outside the tests).
 
 The common ``--backend``/``--precision``/``--n``/``--steps`` flags do not apply: the check always traces the
@@ -25,10 +25,10 @@ COLUMNS = ("name", "threads", "registers", "spill_stores_bytes", "spill_loads_by
 def run(args) -> list[dict]:
     if os.environ.get("NUMBA_ENABLE_CUDASIM", "0") == "1":
         raise SystemExit("the GPU build check compiles for a real device: run it with NUMBA_ENABLE_CUDASIM=0")
-    from iceresist.backends import buildcheck
+    from iceresist.validate import gpu_build
 
     try:
-        buildcheck.toolkit()
+        gpu_build.toolkit()
     except RuntimeError as exc:
         raise SystemExit(str(exc)) from None
 
@@ -37,7 +37,7 @@ def run(args) -> list[dict]:
             state = "ok" if b.launchable else "FAILS"
             print(f"[{i}/{n}] {b.name}: {state} ({b.compile_seconds:.1f} s)", file=sys.stderr)
 
-    builds = buildcheck.run_check(keep=args.keep_ptx, progress=progress)
+    builds = gpu_build.run_check(keep=args.keep_ptx, progress=progress)
     rows = []
     for b in builds:
         r = b.row()

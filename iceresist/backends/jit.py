@@ -1,4 +1,8 @@
-"""The only module that imports numba's decorators (cf. PySDM's ``impl_numba/conf.py``).
+"""Compile targets, precision and host <-> device transfers: what a kernel module needs of numba.
+
+The JIT flags and the compile calls live in :mod:`iceresist.backends.conf`, the launchers in
+:mod:`iceresist.backends.launch`; this module re-exports what kernel modules use of them, so that no kernel
+module imports numba itself.
 
 A kernel is written once as scalar Python inside a ``build_*(target, real)``
 factory and compiled for a :class:`Target`:
@@ -11,7 +15,7 @@ Precision is a value ``real`` (``np.float32`` or ``np.float64``); builders type
 their constants with it (``real(0.5)``) so fp32 kernels never compute in fp64.
 
 Arrays cross between host and device only through the target (:meth:`Target.to_device`,
-:meth:`Target.to_host`), so the GPU build check (:mod:`iceresist.backends.buildcheck`) can stand host arrays
+:meth:`Target.to_host`), so the GPU build check (:mod:`iceresist.validate.gpu_build`) can stand host arrays
 in for device arrays on a machine without a GPU, and a transfer count sees every copy.
 
 NUMBA_ENABLE_CUDASIM must be set before numba is first imported for the CUDA
@@ -25,14 +29,15 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable
 
-import numba
 import numpy as np
 
-#: CPU fast-math flags: everything but ``nnan``/``ninf`` so NaN checks survive.
-CPU_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+from iceresist.backends import launch
+from iceresist.backends.conf import (CPU_FASTMATH, CUDA_BLOCK_CELLS, cpu_jit, cuda_api, cuda_kernel, get_threads,
+                                     max_threads, prange, set_threads)
 
-#: Threads per block for one-thread-per-cell CUDA launches (8x8x8 cells = 512).
-CUDA_BLOCK_CELLS = 512
+__all__ = ["CPU_FASTMATH", "CUDA_BLOCK_CELLS", "HostStandIn", "Target", "cpu", "cpu_jit", "cuda", "cuda_api",
+           "cuda_available", "cuda_kernel", "get_threads", "is_host_array", "max_threads", "prange", "real_type",
+           "resolve_backend", "set_threads"]
 
 
 def real_type(precision: str):
@@ -57,17 +62,15 @@ class Target:
 
     def kernel(self, fn=None, **kw):
         """Compile a launcher body: ``njit(parallel=True)`` on the CPU, ``cuda.jit`` on the GPU for blocks of at
-        most ``threads`` threads (named by ``fn.__name__``; :func:`iceresist.backends.launch.cuda_kernel`)."""
+        most ``threads`` threads (named by ``fn.__name__``; :func:`iceresist.backends.conf.cuda_kernel`)."""
         if fn is None:
             return lambda f: self.kernel(f, **kw)
         if self.is_cuda:
-            from iceresist.backends.launch import cuda_kernel
-
             kw.pop("parallel", None)
             kw.pop("error_model", None)
             return cuda_kernel(fn, fn.__name__, kw.pop("threads", CUDA_BLOCK_CELLS), **kw)
         kw.pop("threads", None)
-        return numba.njit(fn, parallel=kw.pop("parallel", True), fastmath=set(CPU_FASTMATH), cache=kw.pop("cache", False), **kw)
+        return cpu_jit(fn, parallel=kw.pop("parallel", True), cache=kw.pop("cache", False), **kw)
 
     # ------------------------------------------------------------------ host <-> device
     def to_device(self, a):
@@ -78,9 +81,7 @@ class Target:
             return a
         if _HOST_STAND_IN:
             return a.copy().view(HostStandIn)
-        from numba import cuda as _cuda
-
-        return _cuda.to_device(a)
+        return cuda_api().to_device(a)
 
     def to_host(self, a, copy: bool = True) -> np.ndarray:
         """A NumPy array of the target array ``a``: a device-to-host copy on CUDA; on the CPU a copy, or ``a``
@@ -93,9 +94,7 @@ class Target:
         """Set every element of the target array ``a`` to ``value`` where it lives: no host array crosses over (on
         CUDA a kernel, :func:`iceresist.backends.launch.fill`)."""
         if self.is_cuda:
-            from iceresist.backends.launch import fill
-
-            fill(self, a, value)
+            launch.fill(self, a, value)
         else:
             a[...] = value
 
@@ -109,9 +108,7 @@ class Target:
     def synchronize(self):
         """Wait for the device (CUDA); a no-op on the CPU."""
         if self.is_cuda and not _HOST_STAND_IN:
-            from numba import cuda as _cuda
-
-            _cuda.synchronize()
+            cuda_api().synchronize()
 
 
 #: Set by the GPU build check: CUDA "device arrays" are host arrays (:class:`HostStandIn`) and nothing runs.
@@ -138,13 +135,11 @@ def is_host_array(a) -> bool:
 
 
 def _cpu_device(fn):
-    return numba.njit(fn, inline="always", fastmath=set(CPU_FASTMATH), cache=False)
+    return cpu_jit(fn, inline="always")
 
 
 def _cuda_device(fn):
-    from numba import cuda as _cuda
-
-    return _cuda.jit(fn, device=True)
+    return cuda_api().jit(fn, device=True)
 
 
 cpu = Target("cpu", _cpu_device)
@@ -154,9 +149,7 @@ cpu = Target("cpu", _cpu_device)
 def cuda_available() -> bool:
     """True where numba-cuda sees a GPU, or where the CUDA simulator is switched on."""
     try:
-        from numba import cuda as _cuda
-
-        return bool(_cuda.is_available())
+        return bool(cuda_api().is_available())
     except Exception:  # pragma: no cover - depends on the machine
         return False
 

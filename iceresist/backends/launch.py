@@ -1,19 +1,25 @@
-"""Launchers of per-cell device functions over a block forest (DESIGN.md section 3).
+"""Launchers: one generator for every iteration shape of the engine's kernels (DESIGN.md section 3).
 
-A per-cell update ``cell(b, c, *args)`` is written once; the launcher maps it:
+A scalar device function is written once; a launcher runs it over an iteration shape on either target:
 
-* CPU: ``numba.njit(parallel=True)``, ``prange`` over blocks, the 512 cells of a
-  block in order (x fastest) inside one thread (or one call of a per-block form
-  of the same update, ``per_block=True``);
-* CUDA: one thread per cell, grid = nblocks, block = 512 threads (8x8x8 cells).
+* :class:`CellLauncher` ``cell(b, c, *args)`` for every cell of every forest block: CPU ``prange`` over blocks,
+  the 512 cells of a block in order (x fastest) inside one thread (or one call of a per-block form of the same
+  update, ``per_block=True``); CUDA one thread per cell, grid = nblocks, block = 512 threads (8x8x8 cells);
+* :class:`ItemLauncher` ``item(i, *args)`` for i < n (forest blocks, bodies, spheres, array elements): CPU
+  ``prange`` over items (on one thread below a size the kernel module chooses), CUDA one thread per item;
+  :class:`BlockLauncher` is the same launcher over forest blocks;
+* :class:`BodyLauncher` ``visit(k, gx, gy, gz, bint, *args)`` over the cell box ``bint[k, 3:9]`` of every body:
+  CPU ``prange`` over bodies, CUDA one thread block per body, its threads striding over the box;
+* :class:`ActiveLauncher` ``visit(b, c, *args)`` for the cells of the forest blocks flagged ``active[b] != 0``.
 
-Launchers are generated with named arguments (numba's CUDA kernels take no
-``*args``) and live outside the kernels, so the same cell function serves both.
+Launchers are generated with named arguments (numba's CUDA kernels take no ``*args``) and live outside the
+kernels, so the same device function serves both targets. On the CPU a launcher given a ``cache_key`` compiles
+from the on-disk kernel cache (:mod:`iceresist.backends.cache`).
 
-Every CUDA kernel of the engine is compiled by :func:`cuda_kernel` (which names it) and launched by
-:func:`cuda_launch`: the one place a launch happens, so the GPU build check
-(:mod:`iceresist.backends.buildcheck`) can record each kernel's argument types, launches of no items
-included, instead of running it.
+Every CUDA kernel of the engine is compiled by :func:`~iceresist.backends.conf.cuda_kernel` (which names it) and
+launched by :func:`cuda_launch`: the one place a launch happens, so the GPU build check
+(:mod:`iceresist.validate.gpu_build`) can record each kernel's argument types, launches of no items included,
+instead of running it.
 
 Every launcher has a ``label`` (``"f_update"``, ``"links"``, ``"dem_contact"``, ...), the same on both targets;
 within :func:`profiling` each launch is timed under it (the coupled-step benchmark's parts).
@@ -25,10 +31,10 @@ import contextlib
 import time
 from functools import lru_cache
 
-import numba
 import numpy as np
 
-from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
+from iceresist.backends import cache
+from iceresist.backends.conf import CUDA_BLOCK_CELLS, cpu_jit, cuda_api, cuda_kernel, get_threads, prange, set_threads
 from iceresist.errors import InputError
 
 
@@ -47,23 +53,6 @@ def copy_into(dst, host):
 
 #: Set by the GPU build check: ``recorder(kernel, threads, args)`` is called instead of each CUDA launch.
 _RECORDER = None
-
-
-def cuda_kernel(fn, name: str, threads: int, **options):
-    """``numba.cuda.jit(fn, launch_bounds=threads, **options)``, tagged ``kernel_name = name`` (what the build
-    check and docs/PERFORMANCE.md call it) and ``kernel_threads = threads``.
-
-    The launch bound tells ptxas the largest block the kernel is launched with, so it keeps registers x threads
-    within the register file (spilling if it must) and the kernel always launches; without it ptxas assumes
-    1024 threads or none and may hand out more registers than a 512-thread block can hold."""
-    from numba import config, cuda
-
-    if not config.ENABLE_CUDASIM:  # the simulator takes no launch bounds
-        options["launch_bounds"] = threads
-    kern = cuda.jit(fn, **options)
-    kern.kernel_name = name
-    kern.kernel_threads = threads
-    return kern
 
 
 #: Set by :func:`iceresist.backends.transfers.counting`: ``watch(args)`` sees the arguments of each CUDA launch.
@@ -123,37 +112,78 @@ def device_name(fn) -> str:
     return getattr(getattr(fn, "py_func", fn), "__name__", "kernel")
 
 
+
 def jit_generated(target, src: str, name: str, namespace: dict, label: str | None = None,
                   threads: int = CUDA_BLOCK_CELLS):
     """Compile the generated launcher ``name`` defined by ``src`` (the names it calls in ``namespace``): a CUDA
     kernel named ``label`` (default ``name``) for blocks of at most ``threads`` threads, or a parallel njit with
     the project's fast-math flags on the CPU."""
     if target.is_cuda:
-        from numba import cuda
-
-        ns = {"cuda": cuda, **namespace}
+        ns = {"cuda": cuda_api(), **namespace}
         exec(compile(src, f"<iceresist {name} cuda>", "exec"), ns)
         return cuda_kernel(ns[name], label or name, threads)
-    ns = {"prange": numba.prange, **namespace}
-    exec(compile(src, f"<iceresist {name} cpu>", "exec"), ns)
-    return numba.njit(ns[name], parallel=True, fastmath=set(CPU_FASTMATH))
+    return compile_cpu(name, src, namespace, [(name, True)])
+
+
+def compile_cpu(label: str, src: str, namespace: dict, functions, cache_key: str | None = None):
+    """Compile the functions ``functions`` (``(name, parallel)`` in order) of the generated CPU source ``src``
+    calling the names in ``namespace``; each is bound as ``{name}_jit`` where a later one may call it. With a
+    ``cache_key`` (:func:`iceresist.backends.cache.fingerprint`) from the on-disk kernel cache under ``label``
+    where the cache is on, else in memory. Returns the last one."""
+    if cache_key is not None:
+        kern = cache.cpu_launcher(label, src, namespace, functions, cache_key)
+        if kern is not None:
+            return kern
+    ns = {"prange": prange, **namespace}
+    exec(compile(src, f"<iceresist {label} cpu>", "exec"), ns)
+    kern = None
+    for fn_name, parallel in functions:
+        kern = cpu_jit(ns[fn_name], parallel=parallel)
+        ns[f"{fn_name}_jit"] = kern
+    return kern
+
+
+def _on_one_thread(kernel, *args):
+    """``kernel(*args)`` with numba's parallel loops on one thread for the call (no wait for the workers)."""
+    threads = get_threads()
+    if threads == 1:
+        kernel(*args)
+        return
+    set_threads(1)
+    try:
+        kernel(*args)
+    finally:
+        set_threads(threads)
 
 
 class _GeneratedLauncher:
-    """A launcher generated around one device function ``fn``: subclasses give ``name``, the name ``fn`` has in
-    the generated source, the source (:meth:`_source`) and the CUDA launch shape (:meth:`_cuda_launch`)."""
+    """A launcher generated around one device function ``fn``: subclasses give ``name``, the name of the generated
+    launcher, ``fn_name``, the name ``fn`` has in the generated source, the source (:meth:`_source`), the CPU
+    functions of that source to compile (:attr:`cpu_functions`) and the CUDA launch shape (:meth:`_cuda_launch`).
+
+    ``cache_key``: compile the CPU launcher from the on-disk kernel cache (:func:`compile_cpu`). ``parallel``:
+    ``parallel(n)`` says whether a CPU launch over ``n`` runs on all threads (else on one, no wait for the
+    workers); None: always on all. ``kernel`` is the compiled launcher (on the CPU, its cache statistics)."""
 
     name = ""
     fn_name = ""
     threads = CUDA_BLOCK_CELLS
+    cpu_functions: tuple = ()
 
-    def __init__(self, target, fn, argnames, label: str | None = None, **options):
+    def __init__(self, target, fn, argnames, label: str | None = None, cache_key: str | None = None,
+                 parallel=None, **options):
         self.target = target
         self.argnames = tuple(argnames)
         self.label = label or device_name(fn)
-        self.source = self._source(target.is_cuda, ", ".join(self.argnames), **options)
-        self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn}, label=self.label,
-                                     threads=self.threads)
+        self.parallel = parallel
+        self.source = self._source(target.is_cuda, self.argnames, **options)
+        if target.is_cuda:
+            self._kernel = jit_generated(target, self.source, self.name, {self.fn_name: fn}, label=self.label,
+                                         threads=self.threads)
+        else:
+            self._kernel = compile_cpu(self.label, self.source, {self.fn_name: fn},
+                                       self.cpu_functions or ((self.name, True),), cache_key)
+        self.kernel = self._kernel
         self._call = profiled(self.label, self._launch)
 
     def __call__(self, n, *args):
@@ -164,7 +194,10 @@ class _GeneratedLauncher:
             grid, threads, lead = self._cuda_launch(n)
             cuda_launch(self._kernel, grid, threads, *lead, *args)
         elif n:
-            self._kernel(n, *args)
+            if self.parallel is None or self.parallel(n):
+                self._kernel(n, *args)
+            else:
+                _on_one_thread(self._kernel, n, *args)
 
 
 class CellLauncher(_GeneratedLauncher):
@@ -173,11 +206,12 @@ class CellLauncher(_GeneratedLauncher):
 
     name, fn_name = "launch_cells", "cell"
 
-    def __init__(self, target, cell, argnames, per_block: bool = False, label: str | None = None):
-        super().__init__(target, cell, argnames, label=label, per_block=per_block)
+    def __init__(self, target, cell, argnames, per_block: bool = False, label: str | None = None, **options):
+        super().__init__(target, cell, argnames, label=label, per_block=per_block, **options)
 
     @staticmethod
-    def _source(cuda: bool, sig: str, per_block: bool) -> str:
+    def _source(cuda: bool, argnames, per_block: bool) -> str:
+        sig = ", ".join(argnames)
         if cuda:
             return (f"def launch_cells({sig}):\n    b = cuda.blockIdx.x\n    c = cuda.threadIdx.x\n"
                     f"    cell(b, c, {sig})\n")
@@ -190,32 +224,114 @@ class CellLauncher(_GeneratedLauncher):
         return n, CUDA_BLOCK_CELLS, ()
 
 
-#: Threads per CUDA block for one-thread-per-forest-block launches (:class:`BlockLauncher`).
+#: Threads per CUDA block for one-thread-per-item launches (:class:`ItemLauncher`).
 CUDA_BLOCK_THREADS = 128
 
 
-class BlockLauncher(_GeneratedLauncher):
-    """Callable ``launcher(nblocks, *args)`` running ``block(b, *args)`` once per forest block: a reduction
-    over the block's cells into ``out[b, ...]`` (diagnostics read on the host from a small array, not a
-    copy of the fields).
+class ItemLauncher(_GeneratedLauncher):
+    """Callable ``launcher(n, *args)`` running ``item(i, *args)`` once per item i < n: forest blocks (a reduction
+    over the block's cells into ``out[b, ...]``, diagnostics read on the host from a small array, not a copy of
+    the fields), bodies, spheres, elements of an array.
 
-    * CPU: ``prange`` over blocks;
-    * CUDA: one thread per forest block, :data:`CUDA_BLOCK_THREADS` threads per CUDA block.
+    * CPU: ``prange`` over items (on one thread where ``parallel(n)`` says so);
+    * CUDA: one thread per item, :data:`CUDA_BLOCK_THREADS` threads per CUDA block.
     """
 
-    name, fn_name = "launch_blocks", "block"
+    name, fn_name = "launch_items", "item"
     threads = CUDA_BLOCK_THREADS
 
     @staticmethod
-    def _source(cuda: bool, sig: str) -> str:
+    def _source(cuda: bool, argnames) -> str:
+        sig = ", ".join(argnames)
         if cuda:
-            return (f"def launch_blocks(nblocks, {sig}):\n    b = cuda.grid(1)\n    if b < nblocks:\n"
-                    f"        block(b, {sig})\n")
-        return f"def launch_blocks(nblocks, {sig}):\n    for b in prange(nblocks):\n        block(b, {sig})\n"
+            return f"def launch_items(n, {sig}):\n    i = cuda.grid(1)\n    if i < n:\n        item(i, {sig})\n"
+        return f"def launch_items(n, {sig}):\n    for i in prange(n):\n        item(i, {sig})\n"
 
     @staticmethod
     def _cuda_launch(n):
         return (n + CUDA_BLOCK_THREADS - 1) // CUDA_BLOCK_THREADS, CUDA_BLOCK_THREADS, (np.int64(n),)
+
+
+#: A launcher over the blocks of a forest is a launcher over items.
+BlockLauncher = ItemLauncher
+
+#: Threads per CUDA block of a per-body launch (:class:`BodyLauncher`): they stride over the body's cell box.
+BODY_THREADS = 128
+
+
+class BodyLauncher(_GeneratedLauncher):
+    """``launcher(nbodies, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over every cell of the cell
+    box ``bint[k, 3:9]`` (inclusive) of every body k: on the CPU a prange over bodies, each calling the per-body
+    loop (compiled once, serial, the visit inlined into it); on CUDA one thread block per body, threads striding
+    over its cells."""
+
+    name, fn_name = "launch_bodies", "visit"
+    threads = BODY_THREADS
+    cpu_functions = (("body_loop", False), ("launch_bodies", True))
+
+    @staticmethod
+    def _source(cuda: bool, argnames) -> str:
+        sig = ", ".join(argnames)
+        if cuda:
+            return (f"def launch_bodies({sig}):\n"
+                    "    k = cuda.blockIdx.x\n"
+                    "    lx = bint[k, 3]\n    ly = bint[k, 4]\n    lz = bint[k, 5]\n"
+                    "    nx = bint[k, 6] - lx + 1\n    ny = bint[k, 7] - ly + 1\n    nz = bint[k, 8] - lz + 1\n"
+                    "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
+                    "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
+                    f"        visit(k, gx, gy, gz, {sig})\n")
+        loop = (f"def body_loop(k, {sig}):\n"
+                "    for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
+                "        for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
+                "            for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
+                f"                visit(k, gx, gy, gz, {sig})\n")
+        return (f"{loop}\n\ndef launch_bodies(nbodies, {sig}):\n"
+                "    for k in prange(nbodies):\n"
+                f"        body_loop_jit(k, {sig})\n")
+
+    @staticmethod
+    def _cuda_launch(n):
+        return n, BODY_THREADS, ()
+
+
+class ActiveLauncher(_GeneratedLauncher):
+    """``launcher(nblocks, active, *rest)`` runs ``visit(b, c, *rest)`` for the 512 cells of each block b with
+    ``active[b] != 0`` (a flag per forest block, set on the target): on the CPU a prange over the list of those
+    blocks (a host-side scan of the flags, which live in host memory there), each calling the per-block loop
+    (compiled once, serial); on CUDA one thread per cell of every block, the blocks without the flag returning at
+    once (the flags never leave the device)."""
+
+    name, fn_name = "launch_active", "visit"
+    cpu_functions = (("block_loop", False), ("launch_active", True))
+
+    @staticmethod
+    def _source(cuda: bool, argnames) -> str:
+        if argnames[0] != "active":
+            raise ValueError(f"an active-block launcher takes 'active' first, not {argnames[0]!r}")
+        rest = ", ".join(argnames[1:])
+        sig = ", ".join(argnames)
+        if cuda:
+            return (f"def launch_active({sig}):\n"
+                    "    b = cuda.blockIdx.x\n"
+                    "    if active[b] != 0:\n"
+                    f"        visit(b, cuda.threadIdx.x, {rest})\n")
+        loop = (f"def block_loop(b, {rest}):\n"
+                f"    for c in range({CUDA_BLOCK_CELLS}):\n"
+                f"        visit(b, c, {rest})\n")
+        return (f"{loop}\n\ndef launch_active(nactive, {sig}):\n"
+                "    for i in prange(nactive):\n"
+                f"        block_loop_jit(active[i], {rest})\n")
+
+    def __call__(self, nblocks, active, *args):
+        self._call(nblocks, active, *args)
+
+    def _launch(self, nblocks, active, *args):
+        if self.target.is_cuda:
+            cuda_launch(self._kernel, nblocks, CUDA_BLOCK_CELLS, active, *args)
+            return
+        blocks = np.flatnonzero(active).astype(np.int32)
+        if len(blocks):
+            self._kernel(len(blocks), blocks, *args)
 
 
 def _fill_item(i, a, value):
@@ -224,7 +340,7 @@ def _fill_item(i, a, value):
 
 @lru_cache(maxsize=None)
 def _filler(target):
-    return BlockLauncher(target, target.device(_fill_item), ("a", "value"), label="fill")
+    return ItemLauncher(target, target.device(_fill_item), ("a", "value"), label="fill")
 
 
 def fill(target, a, value):
@@ -232,3 +348,17 @@ def fill(target, a, value):
     reset inside a step that uploads nothing: :meth:`iceresist.backends.jit.Target.fill`)."""
     flat = a.reshape(a.size)
     _filler(target)(int(a.size), flat, a.dtype.type(value))
+
+
+def build_accumulate(target):
+    """``accumulate(a, i, j, v)``: a[i, j] += v; atomic on CUDA (where threads share the row)."""
+    if target.is_cuda:
+        # ``cuda`` must be a global of the function (not a closure cell) so that the simulator can swap it
+        ns = {"cuda": cuda_api()}
+        exec("def accumulate(a, i, j, v):\n    cuda.atomic.add(a, (i, j), v)\n", ns)
+        return target.device(ns["accumulate"])
+
+    def accumulate(a, i, j, v):
+        a[i, j] += v
+
+    return target.device(accumulate)

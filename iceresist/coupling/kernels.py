@@ -53,9 +53,10 @@ import math
 
 import numpy as np
 
-from iceresist.backends.jit import CPU_FASTMATH, CUDA_BLOCK_CELLS
-from iceresist.backends.launch import cuda_launch, jit_generated, profiled
-from iceresist.coupling.geometry import BOX, SPHERE
+from iceresist.backends import cache
+from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumulate
+from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions
+from iceresist.coupling.surface_kernels import build_surface_visits
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
@@ -75,149 +76,9 @@ POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
 REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
 REDIST_FS_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f", "phi", "h")
 MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "phi")
-#: Covered cells deeper than this (lattice units of signed distance) keep their phi: the gradient stencil of a
-#: cell outside reaches only covered cells within sqrt(3) of the surface.
-MIRROR_DEPTH = 2.0
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
 FILM_DEPTH = 2.0
-
-
-def build_geometry_functions(target, real):
-    """Small device functions: ``lookup`` of a global cell, ``sdf_at`` a world point, ``wall_velocity``."""
-    half, zero, big = real(0.5), real(0.0), real(1e30)
-    sphere_kind, box_kind = SPHERE, BOX
-    dev = target.device
-
-    @dev
-    def lookup(gx, gy, gz, grid, block_map):
-        """(block, cell) of global cell (gx, gy, gz); block -1 outside the domain or in no block."""
-        nx, ny, nz = grid[0], grid[1], grid[2]
-        if gx < 0 or gx >= nx:
-            if grid[3] == 0:
-                return -1, 0
-            gx = gx % nx
-        if gy < 0 or gy >= ny:
-            if grid[4] == 0:
-                return -1, 0
-            gy = gy % ny
-        if gz < 0 or gz >= nz:
-            if grid[5] == 0:
-                return -1, 0
-            gz = gz % nz
-        b = block_map[gx >> 3, gy >> 3, gz >> 3]
-        return b, (gx & 7) + 8 * ((gy & 7) + 8 * (gz & 7))
-
-    @dev
-    def offset(k, px, py, pz, body, grid):
-        """p - x_s (lattice units), nearest image on periodic axes."""
-        dx = px - body[k, 0]
-        dy = py - body[k, 1]
-        dz = pz - body[k, 2]
-        if grid[3] != 0:
-            L = real(grid[0])
-            dx -= L * real(math.floor(dx / L + half))
-        if grid[4] != 0:
-            L = real(grid[1])
-            dy -= L * real(math.floor(dy / L + half))
-        if grid[5] != 0:
-            L = real(grid[2])
-            dz -= L * real(math.floor(dz / L + half))
-        return dx, dy, dz
-
-    @dev
-    def sdf_at(k, px, py, pz, body, bint, planes, grid):
-        """Signed distance (lattice units) of world point p to body k, negative inside."""
-        dx, dy, dz = offset(k, px, py, pz, body, grid)
-        x = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
-        y = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
-        z = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
-        kind = bint[k, 0]
-        if kind == sphere_kind:
-            return math.sqrt(x * x + y * y + z * z) - body[k, 18]
-        if kind == box_kind:
-            qx = abs(x) - body[k, 18]
-            qy = abs(y) - body[k, 19]
-            qz = abs(z) - body[k, 20]
-            mx = max(qx, zero)
-            my = max(qy, zero)
-            mz = max(qz, zero)
-            return math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
-        d = -big
-        first = bint[k, 1]
-        for i in range(first, first + bint[k, 2]):
-            v = planes[i, 0] * x + planes[i, 1] * y + planes[i, 2] * z + planes[i, 3]
-            if v > d:
-                d = v
-        return d
-
-    @dev
-    def wall_velocity(k, px, py, pz, body, grid):
-        """Velocity v + omega x r of body k at world point p, and r = p - x_s."""
-        rx, ry, rz = offset(k, px, py, pz, body, grid)
-        ox, oy, oz = body[k, 15], body[k, 16], body[k, 17]
-        return (body[k, 12] + oy * rz - oz * ry, body[k, 13] + oz * rx - ox * rz,
-                body[k, 14] + ox * ry - oy * rx, rx, ry, rz)
-
-    return lookup, sdf_at, wall_velocity
-
-
-def build_accumulate(target):
-    """``accumulate(a, i, j, v)``: a[i, j] += v; atomic on CUDA (threads of one body share the row)."""
-    if target.is_cuda:
-        from numba import cuda
-
-        # ``cuda`` must be a global of the function (not a closure cell) so that the simulator can swap it
-        ns = {"cuda": cuda}
-        exec("def accumulate(a, i, j, v):\n    cuda.atomic.add(a, (i, j), v)\n", ns)
-        accumulate = target.device(ns["accumulate"])
-    else:
-        @target.device
-        def accumulate(a, i, j, v):
-            a[i, j] += v
-    return accumulate
-
-
-def build_refill_functions(target, real):
-    """Device functions the single-phase and the free-surface refill share.
-
-    * ``stable(b, c, flags0, owner, owner_prev)``: the cell is fluid in the forest and no body covered it in this
-      or the previous step, so its populations can be read;
-    * ``add_nonequilibrium(f, b, c, nb, nc, w)``: f[b, :, c] += w (f_n - f^eq(rho_n, u_n)) of the neighbour
-      (nb, nc), populations in the f - w form; returns rho_n (the refill of the module docstring).
-    """
-    zero, one, three = real(0.0), real(1.0), real(3.0)
-    c45, c15 = real(4.5), real(1.5)
-    fluid, nq = FL.FLUID, Q
-    CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
-    WR = W.astype(real)
-    dev = target.device
-
-    @dev
-    def stable(b, c, flags0, owner, owner_prev):
-        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
-
-    @dev
-    def add_nonequilibrium(f, b, c, nb, nc, w):
-        rho = one
-        jx = zero
-        jy = zero
-        jz = zero
-        for p in range(nq):
-            g = f[nb, p, nc]
-            rho += g
-            jx += CXR[p] * g
-            jy += CYR[p] * g
-            jz += CZR[p] * g
-        vx, vy, vz = jx / rho, jy / rho, jz / rho
-        uu = vx * vx + vy * vy + vz * vz
-        for p in range(nq):
-            cu = CXR[p] * vx + CYR[p] * vy + CZR[p] * vz
-            geq = WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
-            f[b, p, c] += w * (f[nb, p, nc] - geq)
-        return rho
-
-    return stable, add_nonequilibrium
 
 
 def build_visits(target, real, free_surface: bool = False):
@@ -472,106 +333,15 @@ def build_visits(target, real, free_surface: bool = False):
     return mark, links, classify_refill, redistribute, poison
 
 
-def _cpu_kernel(loop_name, loop_src, launch_name, launch_src, visit, variant):
-    """The CPU launcher: ``loop_src`` (serial, calling ``visit``) compiled once, ``launch_src`` (prange over it);
-    cached on disk by :mod:`iceresist.coupling.kcache` where the cache is on, else compiled in memory."""
-    import numba
-
-    from iceresist.coupling import kcache
-
-    cached = kcache.cpu_launcher(loop_name, loop_src, launch_name, launch_src, visit, variant)
-    if cached is not None:
-        return cached
-    ns = {"visit": visit}
-    exec(compile(loop_src, f"<iceresist {loop_name} cpu>", "exec"), ns)
-    ns = {"prange": numba.prange, f"{loop_name}_jit": numba.njit(ns[loop_name], fastmath=set(CPU_FASTMATH))}
-    exec(compile(launch_src, f"<iceresist {launch_name} cpu>", "exec"), ns)
-    return numba.njit(ns[launch_name], parallel=True, fastmath=set(CPU_FASTMATH))
+#: Modules whose source decides the compiled coupling code (visits, geometry, lattice constants, flags); the key
+#: of the kernel cache.
+KEY_MODULES = ("iceresist.coupling.kernels", "iceresist.coupling.surface_kernels", "iceresist.coupling.cellfunctions",
+               "iceresist.coupling.geometry", "iceresist.grid.flags", "iceresist.lattice", "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
 
 
-#: Threads per CUDA block of a per-body launch (:class:`BodyLauncher`): they stride over the body's cell box.
-BODY_THREADS = 128
-
-
-class BodyLauncher:
-    """``launcher(nbodies, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over every cell of the cell
-    box ``bint[k, 3:9]`` of every body k: CPU prange over bodies; CUDA one thread block per body, threads
-    striding over its cells."""
-
-    def __init__(self, target, visit, argnames, name="launch_bodies", variant=""):
-        self.target = target
-        self.label = name.removeprefix("launch_")
-        self._call = profiled(self.label, self._launch)
-        sig = ", ".join(argnames)
-        if target.is_cuda:
-            src = (f"def launch_bodies({sig}):\n"
-                   "    k = cuda.blockIdx.x\n"
-                   "    lx = bint[k, 3]\n    ly = bint[k, 4]\n    lz = bint[k, 5]\n"
-                   "    nx = bint[k, 6] - lx + 1\n    ny = bint[k, 7] - ly + 1\n    nz = bint[k, 8] - lz + 1\n"
-                   "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
-                   "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
-                   f"        visit(k, gx, gy, gz, {sig})\n")
-            self._kernel = jit_generated(target, src, "launch_bodies", {"visit": visit}, label=self.label,
-                                         threads=BODY_THREADS)
-        else:
-            # the visit is inlined into a per-body loop compiled once; the prange launcher calls that loop
-            loop = (f"def body_loop(k, {sig}):\n"
-                    "    for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
-                    "        for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
-                    "            for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
-                    f"                visit(k, gx, gy, gz, {sig})\n")
-            src = (f"def {name}(nbodies, {sig}):\n"
-                   "    for k in prange(nbodies):\n"
-                   f"        body_loop_jit(k, {sig})\n")
-            self._kernel = _cpu_kernel("body_loop", loop, name, src, visit, variant)
-
-    def __call__(self, nbodies, *args):
-        self._call(nbodies, *args)
-
-    def _launch(self, nbodies, *args):
-        if self.target.is_cuda:
-            cuda_launch(self._kernel, nbodies, BODY_THREADS, *args)
-        elif nbodies:
-            self._kernel(nbodies, *args)
-
-
-class ActiveLauncher:
-    """``launcher(nblocks, active, *rest)`` runs ``visit(b, c, *rest)`` for the 512 cells of each block b with
-    ``active[b] != 0`` (a flag per forest block, set on the target): on the CPU a prange over the list of those
-    blocks (a host-side scan of the flags, which live in host memory there); on CUDA one thread per cell of every
-    block, the blocks without the flag returning at once (the flags never leave the device)."""
-
-    def __init__(self, target, visit, argnames, name="launch_active", variant=""):
-        self.target = target
-        self.label = name.removeprefix("launch_")
-        self._call = profiled(self.label, self._launch)
-        rest = ", ".join(argnames[1:])
-        sig = ", ".join(argnames)
-        if target.is_cuda:
-            src = (f"def launch_active({sig}):\n"
-                   "    b = cuda.blockIdx.x\n"
-                   "    if active[b] != 0:\n"
-                   f"        visit(b, cuda.threadIdx.x, {rest})\n")
-            self._kernel = jit_generated(target, src, "launch_active", {"visit": visit}, label=self.label)
-        else:
-            loop = (f"def block_loop(b, {rest}):\n"
-                    f"    for c in range({CUDA_BLOCK_CELLS}):\n"
-                    f"        visit(b, c, {rest})\n")
-            src = (f"def {name}(nactive, {sig}):\n"
-                   "    for i in prange(nactive):\n"
-                   f"        block_loop_jit(active[i], {rest})\n")
-            self._kernel = _cpu_kernel("block_loop", loop, name, src, visit, variant)
-
-    def __call__(self, nblocks, active, *args):
-        self._call(nblocks, active, *args)
-
-    def _launch(self, nblocks, active, *args):
-        if self.target.is_cuda:
-            cuda_launch(self._kernel, nblocks, CUDA_BLOCK_CELLS, active, *args)
-            return
-        blocks = np.flatnonzero(active).astype(np.int32)
-        if len(blocks):
-            self._kernel(len(blocks), blocks, *args)
+def variant_of(real, h_lattice=None, free_surface: bool = False) -> str:
+    """The key of a launcher family: precision, free-surface flag and h lattice."""
+    return f"{np.dtype(real).name}|fs={bool(free_surface)}|{None if h_lattice is None else h_lattice.name}"
 
 
 _CACHE: dict = {}
@@ -584,26 +354,23 @@ def coupling_launchers(target, real, h_lattice=None):
     (:mod:`iceresist.coupling.surface_kernels`)."""
     key = (target.name, target.simulator, np.dtype(real).name, None if h_lattice is None else h_lattice.name)
     if key not in _CACHE:
-        from iceresist.coupling.kcache import variant_of
-
         fs = h_lattice is not None
-        v = variant_of(real, h_lattice, fs)
+        k = None if target.is_cuda else cache.fingerprint(variant_of(real, h_lattice, fs), KEY_MODULES)
         mark, links, refill, redist, poison = build_visits(target, real, free_surface=fs)
         launchers = {
-            "mark": BodyLauncher(target, mark, MARK_ARGS, "launch_mark", v),
-            "links": BodyLauncher(target, links, LINK_ARGS, "launch_links", v),
-            "poison": ActiveLauncher(target, poison, POISON_ARGS, "launch_poison", v),
+            "mark": BodyLauncher(target, mark, MARK_ARGS, label="mark", cache_key=k),
+            "links": BodyLauncher(target, links, LINK_ARGS, label="links", cache_key=k),
+            "poison": ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k),
         }
         if not fs:
-            launchers["refill"] = ActiveLauncher(target, refill, REFILL_ARGS, "launch_refill", v)
-            launchers["redistribute"] = ActiveLauncher(target, redist, REDIST_ARGS, "launch_redistribute", v)
+            launchers["refill"] = ActiveLauncher(target, refill, REFILL_ARGS, label="refill", cache_key=k)
+            launchers["redistribute"] = ActiveLauncher(target, redist, REDIST_ARGS, label="redistribute",
+                                                       cache_key=k)
         else:
-            from iceresist.coupling.surface_kernels import build_surface_visits
-
             refill_fs, redist_fs, mirror = build_surface_visits(target, real, h_lattice)
-            launchers["refill"] = ActiveLauncher(target, refill_fs, REFILL_FS_ARGS, "launch_refill_fs", v)
-            launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS, "launch_redistribute_fs",
-                                                       v)
-            launchers["mirror"] = BodyLauncher(target, mirror, MIRROR_ARGS, "launch_mirror", v)
+            launchers["refill"] = ActiveLauncher(target, refill_fs, REFILL_FS_ARGS, label="refill_fs", cache_key=k)
+            launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS, label="redistribute_fs",
+                                                       cache_key=k)
+            launchers["mirror"] = BodyLauncher(target, mirror, MIRROR_ARGS, label="mirror", cache_key=k)
         _CACHE[key] = launchers
     return _CACHE[key]

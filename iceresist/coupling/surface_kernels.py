@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from iceresist.coupling.kernels import MIRROR_DEPTH, build_geometry_functions, build_refill_functions
+from iceresist.coupling.cellfunctions import MIRROR_DEPTH, build_geometry_functions, build_refill_functions
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
 from iceresist.lbm.boundary import GHOST

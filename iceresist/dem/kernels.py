@@ -20,15 +20,16 @@ The CPU launcher runs the item in a ``prange`` loop; the CUDA launcher gives eac
 from __future__ import annotations
 
 import math
+from functools import partial
 
-import numba
+import numpy as np
 
-from iceresist.backends.launch import cuda_launch, profiled
-from iceresist.dem import kcache
+from iceresist.backends import cache
+from iceresist.backends.launch import ItemLauncher, profiled
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
-from iceresist.dem.search import THREADS, build_cell_hash, build_cell_index, build_grid_sort
+from iceresist.dem.search import build_cell_hash, build_cell_index, build_grid_sort
 
 DRIFT_ARGS = ["h", "pos", "vel", "vpred", "quat", "angmom", "omega", "inertia", "inv_meff", "kin", "pvel",
               "pomega", "force", "torque"]
@@ -38,6 +39,9 @@ CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mass", "kin
                 "hp_old", "hxi_old", "hn_old", "hp_new", "hxi_new", "hn_new", "sforce", "storque", "senergy",
                 "snew", "sover"]
 # (CPython passes calls with more than 30 arguments as *args, which numba cannot inline: keep lists short)
+#: Modules whose source decides the compiled DEM code (device functions, constants); the key of the kernel cache.
+KEY_MODULES = ("iceresist.dem.kernels", "iceresist.dem.contact", "iceresist.dem.hydro", "iceresist.dem.quaternion",
+               "iceresist.dem.search")
 GATHER_ARGS = ["h", "do_kick", "bfirst", "bcount", "sforce", "storque", "mass", "kin", "ext", "env", "pos",
                "quat", "vel", "omega", "angmom", "volume", "blen", "bhalf", "vfirst", "vcount", "voff", "vvol",
                "bcontact", "bcsum", "force", "torque", "inv_meff"]
@@ -357,61 +361,19 @@ def use_parallel(kind: str, n: int) -> bool:
     return n >= PARALLEL_FROM[kind]
 
 
-def make_launcher(target, item, argnames, name, kind, key=None):
-    """Compile ``name(n, *args)`` running ``item(i, *args)`` for i < n: prange on the CPU, a thread on CUDA.
-
-    On the CPU one prange kernel serves every launch; below ``PARALLEL_FROM[kind]`` items it runs with one
-    thread (``numba.set_num_threads(1)`` for the call: no wait for the workers, and the prange build ran the
-    contact pass about 1.5x faster on one thread than a plain ``range`` loop did). It compiles on its first call,
-    from the on-disk cache of :mod:`iceresist.dem.kcache` when ``key`` (its fingerprint) is given and the cache
-    is on."""
-    args = ", ".join(argnames)
-    if target.is_cuda:
-        from numba import cuda
-
-        src = f"def {name}(n, {args}):\n    i = cuda.grid(1)\n    if i < n:\n        item(i, {args})\n"
-        ns = {"cuda": cuda, "item": item}
-        exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-        kern = target.kernel(ns[name], threads=THREADS)
-
-        def launch(n, *a):
-            cuda_launch(kern, (n + THREADS - 1) // THREADS, THREADS, n, *a)
-    else:
-        kern = kcache.cpu_launcher(name, argnames, item, key) if key is not None else None
-        if kern is None:
-            src = f"def {name}(n, {args}):\n    for i in prange(n):\n        item(i, {args})\n"
-            ns = {"prange": numba.prange, "item": item}
-            exec(compile(src, f"<dem-launcher {name}>", "exec"), ns)
-            kern = target.kernel(ns[name])
-
-        def launch(n, *a):
-            if not n:
-                return
-            threads = numba.get_num_threads()
-            if threads == 1 or use_parallel(kind, n):
-                kern(n, *a)
-                return
-            numba.set_num_threads(1)
-            try:
-                kern(n, *a)
-            finally:
-                numba.set_num_threads(threads)
-
-        launch.kernel = kern
-    timed = profiled(name, launch)
-    timed.__dict__.update(launch.__dict__)  # ``kernel``: the compiled CPU launcher (its cache statistics)
-    timed.__name__ = name
-    return timed
-
-
 def build_launchers(target, real):
-    """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid)."""
-    drift, place, contact, gather = build_items(target, real)
-    key = None if target.is_cuda else kcache.fingerprint(real)
-    return {
-        "drift": make_launcher(target, drift, DRIFT_ARGS, "dem_drift", "drift", key),
-        "place": make_launcher(target, place, PLACE_ARGS, "dem_place", "place", key),
-        "contact": make_launcher(target, contact, CONTACT_ARGS, "dem_contact", "contact", key),
-        "gather": make_launcher(target, gather, GATHER_ARGS, "dem_gather", "gather", key),
-        "sort": profiled("dem_sort", build_grid_sort(target)),
-    }
+    """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid).
+
+    Each item runs over bodies or spheres (:class:`~iceresist.backends.launch.ItemLauncher`, labelled
+    ``dem_<kind>``); on the CPU one prange kernel serves every launch and, below ``PARALLEL_FROM[kind]`` items,
+    runs with one thread (no wait for the workers; the prange build ran the contact pass about 1.5x faster on one
+    thread than a plain ``range`` loop did). It compiles on its first call, from the on-disk kernel cache
+    (:mod:`iceresist.backends.cache`) where that is on."""
+    items = dict(zip(("drift", "place", "contact", "gather"), build_items(target, real)))
+    args = {"drift": DRIFT_ARGS, "place": PLACE_ARGS, "contact": CONTACT_ARGS, "gather": GATHER_ARGS}
+    key = None if target.is_cuda else cache.fingerprint(np.dtype(real).name, KEY_MODULES)
+    launchers = {kind: ItemLauncher(target, item, args[kind], label=f"dem_{kind}", cache_key=key,
+                                    parallel=partial(use_parallel, kind))
+                 for kind, item in items.items()}
+    launchers["sort"] = profiled("dem_sort", build_grid_sort(target))
+    return launchers

@@ -15,11 +15,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import cuda  # cuda.grid / cuda.atomic inside kernels (module global for the simulator)
 
-from iceresist.backends.jit import Target
+from iceresist.backends import cache
+from iceresist.backends.jit import Target, cuda_api
 from iceresist.backends.launch import cuda_launch
-from iceresist.dem import kcache
+
+cuda = cuda_api()  # cuda.grid / cuda.atomic inside the kernels below (a module global, for the simulator)
 
 P1, P2, P3 = 73856093, 19349663, 83492791
 SCAN_CHUNK = 256
@@ -72,7 +73,7 @@ def sort_cpu(n, key, start, count, cursor, order):
 def build_grid_sort(target: Target):
     """``sort(n, key, start, count, cursor, order)``: bucket counts, starts and sphere indices sorted by bucket."""
     if not target.is_cuda:
-        return kcache.cpu_function(sort_cpu)
+        return cache.cpu_function(sort_cpu)
 
     @target.kernel(threads=THREADS)
     def zero2(nb, a, b):

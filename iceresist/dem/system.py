@@ -451,11 +451,6 @@ class DEMSystem:
         """World-frame angular momenta (n_bodies, 3), kg m^2/s."""
         return self._get("angmom").astype(float)
 
-    @property
-    def angular_velocities(self) -> np.ndarray:
-        """World angular velocities omega = R I^-1 R^T L (n_bodies, 3), rad/s."""
-        return self._get("omega").astype(float)
-
     def body_angular_velocities(self) -> np.ndarray:
         """Angular velocities in each body's principal frame (n_bodies, 3), rad/s."""
         q, L = self.quaternions, self.angular_momenta
@@ -464,10 +459,6 @@ class DEMSystem:
         for b in range(len(q)):
             out[b] = (matrix_from_quaternion(q[b]).T @ L[b]) / inertia[b]
         return out
-
-    @property
-    def sphere_positions(self) -> np.ndarray:
-        return self._get("xs").astype(float)
 
     def kinetic_energy(self) -> float:
         """Translational plus rotational kinetic energy of the dynamic bodies, J."""
@@ -514,12 +505,6 @@ class DEMSystem:
         """Contact force and torque on a body (6,), N and N m, summed over the sub-steps since the last :meth:`step`
         without ``accumulate`` (or :meth:`reset_contact_sums`)."""
         return self._get("bcsum")[body].astype(float)
-
-    def mean_contact_torque_on(self, body: int) -> np.ndarray:
-        """Contact torque about the body's centre (N m) averaged like :meth:`mean_contact_force_on`."""
-        if self.last_substeps == 0:
-            return self.contact_torque_on(body)
-        return self._get("bcsum")[body, 3:].astype(float) / self.last_substeps
 
     def ice_force_on(self, body: int) -> np.ndarray:
         """Ice force on a (ship) body: the contact forces on its spheres, x y z in N (paper section 4.2)."""

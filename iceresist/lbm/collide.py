@@ -60,11 +60,3 @@ def build_collide_bgk(target, real):
           "c45": real(4.5), "c15": real(1.5)}
     ns.update({f"w{q}": real(W[q]) for q in range(Q)})
     return compile_source(src, "collide_bgk", ns, target.device)
-
-
-def build_macroscopic(target, real):
-    """``macroscopic(f, Fx, Fy, Fz) -> (rho, ux, uy, uz)`` with the half-force velocity shift."""
-    src = "def macroscopic(f, Fx, Fy, Fz):\n" + unpack() + moments_source()
-    src += "    return (rho, ux, uy, uz)\n"
-    ns = {"zero": real(0.0), "one": real(1.0), "half": real(0.5)}
-    return compile_source(src, "macroscopic", ns, target.device)

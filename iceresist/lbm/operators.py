@@ -32,7 +32,6 @@ def cpu_cell_rate(name: str, precision: str = "float32", cells: int = 1_000_000,
     """
     import time
 
-    import numba
     import numpy as np
 
     from iceresist.backends import jit
@@ -44,7 +43,7 @@ def cpu_cell_rate(name: str, precision: str = "float32", cells: int = 1_000_000,
     src += "        r = collide((" + ", ".join(f"f[i, {q}]" for q in range(Q)) + "), omega, Fx, Fy, Fz)\n"
     src += "".join(f"        fo[i, {q}] = r[{q}]\n" for q in range(Q))
     ns = {"collide": get_collide_builder(name)(jit.cpu, real)}
-    sweep = compile_source(src, "sweep", ns, lambda fn: numba.njit(fn, fastmath=set(jit.CPU_FASTMATH)))
+    sweep = compile_source(src, "sweep", ns, jit.cpu_jit)
 
     rng = np.random.default_rng(0)
     f = (W * 1e-3 * rng.standard_normal((cells, Q))).astype(real)

@@ -1,4 +1,4 @@
-"""The on-disk cache of the CPU DEM launchers: keyed file names, and a second process loads instead of compiling."""
+"""The on-disk kernel cache of the CPU launchers: keyed file names, and a second process loads instead of compiling."""
 
 import os
 import subprocess
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from iceresist.backends import jit
-from iceresist.dem import kcache
+from iceresist.backends import cache
 
 
 @jit.cpu.device
@@ -17,24 +17,33 @@ def _double(i, a):
     a[i] = 2.0 * i
 
 
+SRC = "def t_double(n, a):\n    for i in prange(n):\n        item(i, a)\n"
+
+
+def _launcher(key):
+    return cache.cpu_launcher("t_double", SRC, {"item": _double}, [("t_double", True)], key)
+
+
 def test_launchers_are_written_under_their_key_and_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("ICERESIST_CACHE", str(tmp_path))
-    kern = kcache.cpu_launcher("t_double", ["a"], _double, key="k1")
+    kern = _launcher("k1")
     a = np.zeros(5)
     kern(5, a)
     assert a.tolist() == [0, 2, 4, 6, 8]
     files = sorted(p.name for p in (tmp_path / "kernels").glob("t_double_*.py"))
     assert len(files) == 1
     assert list((tmp_path / "kernels" / "__pycache__").glob("*t_double_*.nbi"))  # numba saved the compile
-    kcache.cpu_launcher("t_double", ["a"], _double, key="k2")  # another fingerprint: another file
+    _launcher("k2")  # another fingerprint: another file
     assert len(list((tmp_path / "kernels").glob("t_double_*.py"))) == 2
     monkeypatch.setenv("ICERESIST_CACHE", "off")
-    assert kcache.cpu_launcher("t_double", ["a"], _double, key="k1") is None
+    assert _launcher("k1") is None
 
 
-def test_fingerprint_follows_precision():
-    assert kcache.fingerprint(np.float64) != kcache.fingerprint(np.float32)
-    assert kcache.fingerprint(np.float64) == kcache.fingerprint(np.float64)
+def test_fingerprint_follows_variant_and_sources():
+    mods = ("iceresist.dem.kernels",)
+    assert cache.fingerprint("float64", mods) != cache.fingerprint("float32", mods)
+    assert cache.fingerprint("float64", mods) == cache.fingerprint("float64", mods)
+    assert cache.fingerprint("float64", mods) != cache.fingerprint("float64", ("iceresist.coupling.kernels",))
 
 
 SCRIPT = textwrap.dedent("""
@@ -54,7 +63,7 @@ SCRIPT = textwrap.dedent("""
 def test_second_process_loads_the_dem_kernels_from_the_cache(capsys):
     import json
 
-    if kcache.cache_dir() is None:
+    if cache.cache_dir() is None:
         pytest.skip("the kernel cache is switched off (ICERESIST_CACHE=off)")
     exec(SCRIPT, {})  # this process: compiles (or loads) the launchers and saves them to the cache
     here = json.loads(capsys.readouterr().out.strip().splitlines()[-1])

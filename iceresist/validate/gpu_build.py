@@ -215,22 +215,6 @@ def trace(steps: int = 2) -> dict:
     return seen
 
 
-def record_transfers(records: int = 2) -> dict:
-    """Copies between host and device over ``records`` records (the model's step: several coupled LBM steps and the
-    mean loads on the hull) of the CI-sized tier-2 case on the ``cuda`` target, traced (kernels recorded, not run;
-    the first record, with the set-up, is not counted): ``{"records", "lbm_steps", "counts", "sites"}``."""
-    from iceresist.backends import transfers
-    from iceresist.models import build_model
-
-    with tracing():
-        model = build_model(check_scenes()["tier2-float32"], backend="cuda")
-        model.step(1)
-        with transfers.counting() as tally:
-            model.step(records)
-    return {"records": records, "lbm_steps": records * model.lbm_steps_per_record, "counts": dict(tally.counts),
-            "sites": str(tally)}
-
-
 # ---------------------------------------------------------------------------------------------- compile
 _PTXAS = {
     "registers": re.compile(r"Used (\d+) registers"),

@@ -1,0 +1,73 @@
+"""JIT flags and the compile calls of the backend layer (cf. PySDM's ``impl_numba/conf.py``).
+
+The lowest module of :mod:`iceresist.backends`: it imports numba and nothing of the engine but its errors, so
+that :mod:`~iceresist.backends.jit` (targets, host <-> device), :mod:`~iceresist.backends.launch` (launchers)
+and :mod:`~iceresist.backends.cache` (the kernel cache) all build on it. Kernel modules take what they need
+from those three and import no numba themselves.
+"""
+
+from __future__ import annotations
+
+import numba
+
+from iceresist.errors import InputError
+
+#: CPU fast-math flags: everything but ``nnan``/``ninf`` so NaN checks survive.
+CPU_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+#: Threads per block for one-thread-per-cell CUDA launches (8x8x8 cells = 512).
+CUDA_BLOCK_CELLS = 512
+
+#: The parallel loop of generated CPU launchers.
+prange = numba.prange
+
+
+def cpu_jit(fn, parallel: bool = False, cache: bool = False, **options):
+    """``numba.njit`` of ``fn`` with the project's fast-math flags (:data:`CPU_FASTMATH`)."""
+    return numba.njit(fn, parallel=parallel, fastmath=set(CPU_FASTMATH), cache=cache, **options)
+
+
+def cuda_api():
+    """The ``numba.cuda`` module (the simulator's where NUMBA_ENABLE_CUDASIM=1). A CUDA kernel that calls
+    ``cuda.grid``, ``cuda.atomic``, ... must find it as a module global: the simulator swaps that global for a
+    per-thread stand-in while the kernel runs."""
+    from numba import cuda
+
+    return cuda
+
+
+def cuda_kernel(fn, name: str, threads: int, **options):
+    """``numba.cuda.jit(fn, launch_bounds=threads, **options)``, tagged ``kernel_name = name`` (what the build
+    check and docs/PERFORMANCE.md call it) and ``kernel_threads = threads``.
+
+    The launch bound tells ptxas the largest block the kernel is launched with, so it keeps registers x threads
+    within the register file (spilling if it must) and the kernel always launches; without it ptxas assumes
+    1024 threads or none and may hand out more registers than a 512-thread block can hold."""
+    from numba import config, cuda
+
+    if not config.ENABLE_CUDASIM:  # the simulator takes no launch bounds
+        options["launch_bounds"] = threads
+    kern = cuda.jit(fn, **options)
+    kern.kernel_name = name
+    kern.kernel_threads = threads
+    return kern
+
+
+def max_threads() -> int:
+    """The most CPU threads numba's parallel loops may use in this process."""
+    return numba.config.NUMBA_NUM_THREADS
+
+
+def get_threads() -> int:
+    """The CPU threads numba's parallel loops use now."""
+    return numba.get_num_threads()
+
+
+def set_threads(n: int | None, option: str = "--threads"):
+    """Run numba's parallel loops on ``n`` CPU threads (None: leave as is); a count outside 1..max is refused
+    naming ``option``."""
+    if n is None:
+        return
+    if not 1 <= n <= max_threads():
+        raise InputError(f"{option}: must lie in 1..{max_threads()} (got {n})")
+    numba.set_num_threads(n)

@@ -1,0 +1,142 @@
+"""Device functions the coupling passes share, with and without a free surface.
+
+:mod:`iceresist.coupling.kernels` (the passes of a coupling step) and :mod:`iceresist.coupling.surface_kernels`
+(their free-surface forms) both build on these: the geometry of a body seen from a cell (``lookup``, ``sdf_at``,
+``wall_velocity``) and the refill of a cell a body uncovers (``stable``, ``add_nonequilibrium``). Conventions (lattice
+units, the ``body``/``bint``/``grid`` arrays) are those of :mod:`iceresist.coupling.kernels`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iceresist.coupling.geometry import BOX, SPHERE
+from iceresist.grid import flags as FL
+from iceresist.lattice import C, Q, W
+
+#: Covered cells deeper than this (lattice units of signed distance) keep their phi: the gradient stencil of a
+#: cell outside reaches only covered cells within sqrt(3) of the surface.
+MIRROR_DEPTH = 2.0
+
+
+def build_geometry_functions(target, real):
+    """Small device functions: ``lookup`` of a global cell, ``sdf_at`` a world point, ``wall_velocity``."""
+    half, zero, big = real(0.5), real(0.0), real(1e30)
+    sphere_kind, box_kind = SPHERE, BOX
+    dev = target.device
+
+    @dev
+    def lookup(gx, gy, gz, grid, block_map):
+        """(block, cell) of global cell (gx, gy, gz); block -1 outside the domain or in no block."""
+        nx, ny, nz = grid[0], grid[1], grid[2]
+        if gx < 0 or gx >= nx:
+            if grid[3] == 0:
+                return -1, 0
+            gx = gx % nx
+        if gy < 0 or gy >= ny:
+            if grid[4] == 0:
+                return -1, 0
+            gy = gy % ny
+        if gz < 0 or gz >= nz:
+            if grid[5] == 0:
+                return -1, 0
+            gz = gz % nz
+        b = block_map[gx >> 3, gy >> 3, gz >> 3]
+        return b, (gx & 7) + 8 * ((gy & 7) + 8 * (gz & 7))
+
+    @dev
+    def offset(k, px, py, pz, body, grid):
+        """p - x_s (lattice units), nearest image on periodic axes."""
+        dx = px - body[k, 0]
+        dy = py - body[k, 1]
+        dz = pz - body[k, 2]
+        if grid[3] != 0:
+            L = real(grid[0])
+            dx -= L * real(math.floor(dx / L + half))
+        if grid[4] != 0:
+            L = real(grid[1])
+            dy -= L * real(math.floor(dy / L + half))
+        if grid[5] != 0:
+            L = real(grid[2])
+            dz -= L * real(math.floor(dz / L + half))
+        return dx, dy, dz
+
+    @dev
+    def sdf_at(k, px, py, pz, body, bint, planes, grid):
+        """Signed distance (lattice units) of world point p to body k, negative inside."""
+        dx, dy, dz = offset(k, px, py, pz, body, grid)
+        x = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
+        y = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
+        z = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
+        kind = bint[k, 0]
+        if kind == sphere_kind:
+            return math.sqrt(x * x + y * y + z * z) - body[k, 18]
+        if kind == box_kind:
+            qx = abs(x) - body[k, 18]
+            qy = abs(y) - body[k, 19]
+            qz = abs(z) - body[k, 20]
+            mx = max(qx, zero)
+            my = max(qy, zero)
+            mz = max(qz, zero)
+            return math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
+        d = -big
+        first = bint[k, 1]
+        for i in range(first, first + bint[k, 2]):
+            v = planes[i, 0] * x + planes[i, 1] * y + planes[i, 2] * z + planes[i, 3]
+            if v > d:
+                d = v
+        return d
+
+    @dev
+    def wall_velocity(k, px, py, pz, body, grid):
+        """Velocity v + omega x r of body k at world point p, and r = p - x_s."""
+        rx, ry, rz = offset(k, px, py, pz, body, grid)
+        ox, oy, oz = body[k, 15], body[k, 16], body[k, 17]
+        return (body[k, 12] + oy * rz - oz * ry, body[k, 13] + oz * rx - ox * rz,
+                body[k, 14] + ox * ry - oy * rx, rx, ry, rz)
+
+    return lookup, sdf_at, wall_velocity
+
+
+def build_refill_functions(target, real):
+    """Device functions the single-phase and the free-surface refill share.
+
+    * ``stable(b, c, flags0, owner, owner_prev)``: the cell is fluid in the forest and no body covered it in this
+      or the previous step, so its populations can be read;
+    * ``add_nonequilibrium(f, b, c, nb, nc, w)``: f[b, :, c] += w (f_n - f^eq(rho_n, u_n)) of the neighbour
+      (nb, nc), populations in the f - w form; returns rho_n (the refill of the module docstring).
+    """
+    zero, one, three = real(0.0), real(1.0), real(3.0)
+    c45, c15 = real(4.5), real(1.5)
+    fluid, nq = FL.FLUID, Q
+    CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
+    WR = W.astype(real)
+    dev = target.device
+
+    @dev
+    def stable(b, c, flags0, owner, owner_prev):
+        return (flags0[b, c] & fluid) != 0 and owner[b, c] < 0 and owner_prev[b, c] < 0
+
+    @dev
+    def add_nonequilibrium(f, b, c, nb, nc, w):
+        rho = one
+        jx = zero
+        jy = zero
+        jz = zero
+        for p in range(nq):
+            g = f[nb, p, nc]
+            rho += g
+            jx += CXR[p] * g
+            jy += CYR[p] * g
+            jz += CZR[p] * g
+        vx, vy, vz = jx / rho, jy / rho, jz / rho
+        uu = vx * vx + vy * vy + vz * vz
+        for p in range(nq):
+            cu = CXR[p] * vx + CYR[p] * vy + CZR[p] * vz
+            geq = WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
+            f[b, p, c] += w * (f[nb, p, nc] - geq)
+        return rho
+
+    return stable, add_nonequilibrium

@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from iceresist.validate.gpu_build import REGISTER_FILE, float64_ops
+from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
 
 #: Kernels that must be in the check: each part of a tier-2 step and of tier 1 (LBM, free surface, coupling, DEM).
 EXPECTED = {
@@ -87,7 +87,8 @@ def test_float64_ops_counts_arithmetic_not_data_movement():
 RECORD_TRANSFERS = """
 import json
 from iceresist.backends import transfers
-from iceresist.validate.gpu_build import check_scenes, tracing
+from iceresist.backends.buildcheck import tracing
+from iceresist.validate.gpu_build import check_scenes
 from iceresist.models import build_model
 
 records = 2

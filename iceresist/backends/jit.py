@@ -15,7 +15,7 @@ Precision is a value ``real`` (``np.float32`` or ``np.float64``); builders type
 their constants with it (``real(0.5)``) so fp32 kernels never compute in fp64.
 
 Arrays cross between host and device only through the target (:meth:`Target.to_device`,
-:meth:`Target.to_host`), so the GPU build check (:mod:`iceresist.validate.gpu_build`) can stand host arrays
+:meth:`Target.to_host`), so the GPU build check (:mod:`iceresist.backends.buildcheck`) can stand host arrays
 in for device arrays on a machine without a GPU, and a transfer count sees every copy.
 
 NUMBA_ENABLE_CUDASIM must be set before numba is first imported for the CUDA

@@ -18,7 +18,7 @@ from the on-disk kernel cache (:mod:`iceresist.backends.cache`).
 
 Every CUDA kernel of the engine is compiled by :func:`~iceresist.backends.conf.cuda_kernel` (which names it) and
 launched by :func:`cuda_launch`: the one place a launch happens, so the GPU build check
-(:mod:`iceresist.validate.gpu_build`) can record each kernel's argument types, launches of no items included,
+(:mod:`iceresist.backends.buildcheck`) can record each kernel's argument types, launches of no items included,
 instead of running it.
 
 Every launcher has a ``label`` (``"f_update"``, ``"links"``, ``"dem_contact"``, ...), the same on both targets;

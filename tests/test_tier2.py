@@ -88,10 +88,11 @@ def test_tier2_case_file_is_what_the_report_reads(tiny_run):
     assert sw["duration_s"] == pytest.approx(m.geometry.prismatic_length_m / (np.sqrt(9.81 * 0.14) - 0.514),
                                              rel=1e-9)
     # units: dt from the Mach rule against sqrt(g h), gravity from dt (module docstring of iceresist.models.tier2)
-    u = m.units
-    assert u.lbm_dt_s == pytest.approx(0.1 * u.dx_m / np.sqrt(9.81 * 0.14), rel=1e-9)
-    assert u.g_lattice == pytest.approx(9.81 * u.lbm_dt_s ** 2 / u.dx_m, rel=1e-12)
-    assert u.tau == pytest.approx(0.5 + 3 * 1e-5 * u.lbm_dt_s / u.dx_m ** 2, rel=1e-12)
+    u = m.units  # the lattice's scales: dt is the LBM step, a record (the model's step) holds several
+    assert u.dt_s == m.lbm_dt_s == pytest.approx(0.1 * u.dx_m / np.sqrt(9.81 * 0.14), rel=1e-9)
+    assert m.dt_s == m.lbm_steps_per_record * u.dt_s
+    assert m.g_lattice == pytest.approx(9.81 * u.dt_s ** 2 / u.dx_m, rel=1e-12)
+    assert u.tau == pytest.approx(0.5 + 3 * 1e-5 * u.dt_s / u.dx_m ** 2, rel=1e-12)
 
 
 def test_tier2_keeps_the_water_and_pushes_the_cubes(tiny_run):

@@ -1,5 +1,5 @@
 """The validation report of a ``iceresist validate`` folder: ``report.html`` (self-contained) and ``report.pdf``,
-the stability map (``stability.png``) and the settling-sphere figure of docs/VALIDATION.md.
+the stability map (``stability.png``) and the settling-sphere figure of docs/notes/settling-sphere.md.
 
 Reads only the files the validation wrote (``DIR/ladder.csv``, ``DIR/stability.csv``, a settling-velocity
 CSV) and reduces them with :mod:`iceresist.post.convergence`; never runs a simulation. Uses the machinery of
@@ -199,7 +199,7 @@ def write_stability_map(out_dir) -> Path:
     return png
 
 
-# -- the settling sphere (docs/VALIDATION.md) --------------------------------------------------------------
+# -- the settling sphere (docs/notes/settling-sphere.md) --------------------------------------------------------------
 def settling_velocity_figure(curves: pd.DataFrame, path) -> Path:
     """Settling velocity against time, one line per ``label`` of ``curves`` (columns label, time_s, w_m_s,
     experiment, terminal_m_s: what :func:`iceresist.validate.cases.settling_sphere.write_curves` writes), with

@@ -114,7 +114,7 @@ def write_curves(curves: dict, path, case: str = "E1"):
     table.to_csv(path, index=False, float_format="%.8g")
 
 
-if __name__ == "__main__":  # python -m iceresist.validate.cases.settling_sphere OUT.csv [d ...]: VALIDATION.md
+if __name__ == "__main__":  # python -m iceresist.validate.cases.settling_sphere OUT.csv [d ...]: docs/notes/settling-sphere.md
     import sys
 
     ds = [float(a) for a in sys.argv[2:]] or [5.0, 6.0, 8.0]

@@ -47,17 +47,17 @@ def is_finished(path: Path) -> bool:
 
 def sweep_table(out_dir) -> pd.DataFrame:
     """The table of every finished case in ``out_dir``, in the order of the paper's matrix
-    (:data:`iceresist.ship.presets.CASES`), one row per case (:func:`~iceresist.post.case.analyse_case`)."""
-    from iceresist.ship.presets import CASES
+    (:data:`iceresist.ship.cases.CASES`), one row per case (:func:`~iceresist.post.case.analyse_case`)."""
+    from iceresist.ship.cases import CASES
 
     out = Path(out_dir)
     return pd.DataFrame([analyse_case(case_path(out, c)) for c in CASES if is_finished(case_path(out, c))])
 
 
 def preset_note(preset: str | None, tier: int) -> str:
-    """What the quick preset trades away (:data:`iceresist.ship.presets.FIDELITY_NOTES`; its tier-2 note too for
+    """What the quick preset trades away (:data:`iceresist.ship.cases.FIDELITY_NOTES`; its tier-2 note too for
     a tier-2 sweep, with the grid caveat); empty for the paper preset."""
-    from iceresist.ship.presets import FIDELITY_NOTES
+    from iceresist.ship.cases import FIDELITY_NOTES
 
     if preset != "quick":
         return ""

@@ -353,7 +353,7 @@ class Simulation:
         log.info("picked up from %s at iteration %d", path, self.model.iteration)
 
     #: ``run(pickup=LOADED)``: the model holds the checkpoint's state already (:meth:`load_checkpoint`).
-    LOADED = "loaded"
+    LOADED = object()
 
     def _pickup(self, pickup):
         if pickup is not self.LOADED:

@@ -9,7 +9,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.simulation import IterationInterval
-from iceresist.post.case import analyse_case, ice_free_width_m
+from iceresist.post.case import ice_free_width_m
 from iceresist.post.sweeptable import case_path, is_finished, sweep_table
 from iceresist.sweep import TINY_OVERRIDES, checkpoint_path, run_case, run_sweep
 

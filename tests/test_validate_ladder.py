@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from iceresist.post import convergence as C
 from iceresist.validate import ladder as L
 from iceresist.validate.result import CaseResult, relative_error
 
@@ -16,10 +17,10 @@ from iceresist.validate.result import CaseResult, relative_error
 # -- arithmetic ---------------------------------------------------------------------------------------------
 def test_observed_order_of_second_order_data_is_two():
     n = np.array([8.0, 16.0, 32.0, 64.0])
-    assert L.observed_order(n, 3.0 * n ** -2) == pytest.approx(2.0, abs=1e-12)
-    assert L.observed_order([10.0, 15.0, 23.0], 0.4 * np.array([10.0, 15.0, 23.0]) ** -1.3) == pytest.approx(1.3)
-    assert np.isnan(L.observed_order([8.0], [0.1]))
-    assert np.isnan(L.observed_order([8.0, 16.0], [0.1, 0.0]))       # a zero error carries no order
+    assert C.observed_order(n, 3.0 * n ** -2) == pytest.approx(2.0, abs=1e-12)
+    assert C.observed_order([10.0, 15.0, 23.0], 0.4 * np.array([10.0, 15.0, 23.0]) ** -1.3) == pytest.approx(1.3)
+    assert np.isnan(C.observed_order([8.0], [0.1]))
+    assert np.isnan(C.observed_order([8.0, 16.0], [0.1, 0.0]))       # a zero error carries no order
 
 
 @pytest.mark.parametrize("n", [(8.0, 16.0, 32.0), (10.0, 14.0, 20.0), (6.0, 8.0, 12.0)])
@@ -27,15 +28,15 @@ def test_richardson_recovers_order_and_limit_exactly(n):
     """f = f0 + C h^p: the three rungs give p and f0 to round-off (constant and varying refinement ratio)."""
     n = np.asarray(n)
     f = 1.7 - 0.3 * (1.0 / n) ** 1.6
-    p, f0 = L.richardson(n[::-1], f[::-1])          # any order of the rows
+    p, f0 = C.richardson(n[::-1], f[::-1])          # any order of the rows
     assert p == pytest.approx(1.6, rel=1e-8)
     assert f0 == pytest.approx(1.7, rel=1e-12)
 
 
 def test_richardson_refuses_oscillating_or_short_ladders():
-    assert np.isnan(L.richardson([8, 16, 32], [1.0, 1.2, 1.1])[1])          # differences change sign
-    assert np.isnan(L.richardson([8, 16, 32], [1.0, 1.1, 1.3])[1])          # differences grow: diverging
-    assert np.isnan(L.richardson([8, 16], [1.0, 1.1])[1])
+    assert np.isnan(C.richardson([8, 16, 32], [1.0, 1.2, 1.1])[1])          # differences change sign
+    assert np.isnan(C.richardson([8, 16, 32], [1.0, 1.1, 1.3])[1])          # differences grow: diverging
+    assert np.isnan(C.richardson([8, 16], [1.0, 1.1])[1])
 
 
 def _rows(case, res, err, wall, ladder="quick", value=None, reference=1.0):
@@ -50,13 +51,13 @@ def test_cheapest_runs_pick_the_least_wall_time_meeting_each_level():
     t = pd.concat([_rows("a", [8, 16, 32], [0.2, 0.04, 0.008], [1.0, 4.0, 16.0]),
                    _rows("b", [8, 16, 32], [0.09, 0.07, 0.06], [1.0, 2.0, 3.0]),
                    _rows("c", [8, 16, 32], [0.03, 0.02, 0.04], [5.0, 1.0, 9.0])])
-    c = L.cheapest_runs(t).set_index("case")
+    c = C.cheapest_runs(t).set_index("case")
     assert c.loc["a", "label_10"] == "16 cells" and c.loc["a", "wall_s_10"] == 4.0
     assert c.loc["a", "label_5"] == "16 cells"
     assert c.loc["a", "label_1"] == "32 cells" and c.loc["a", "error_1"] == 0.008
     assert c.loc["b", "label_10"] == "8 cells" and c.loc["b", "label_5"] == "" and np.isnan(c.loc["b", "wall_s_1"])
     assert c.loc["c", "label_5"] == "16 cells"                              # cheaper than the coarser rung
-    s = L.case_summary(L.with_errors(t)).set_index("case")
+    s = C.case_summary(C.with_errors(t)).set_index("case")
     assert s.loc["a", "monotone"] and not s.loc["c", "monotone"]
     assert s.loc["a", "observed_order"] == pytest.approx(np.log2(0.2 / 0.008) / 2, rel=0.05)
 
@@ -65,13 +66,13 @@ def test_self_referenced_case_measured_against_its_richardson_limit():
     n = np.array([10.0, 14.0, 20.0])
     f = 2.0 + 5.0 * (1 / n) ** 2
     t = _rows("ship", n, np.nan, [1.0, 2.0, 3.0], value=f, reference=np.nan)
-    e = L.with_errors(t)
+    e = C.with_errors(t)
     assert (e.reference_kind == "Richardson").all()
     assert np.allclose(e.reference, 2.0)
     assert np.allclose(e.error, np.abs(f - 2.0) / 2.0)
     assert np.allclose(e.error_vs_finest, np.abs(f - f[-1]) / f[-1]) and np.allclose(e.richardson_order, 2.0)
     # an oscillating ladder falls back on its finest rung
-    e2 = L.with_errors(_rows("ship", n, np.nan, [1.0, 2.0, 3.0], value=[2.1, 1.9, 2.0], reference=np.nan))
+    e2 = C.with_errors(_rows("ship", n, np.nan, [1.0, 2.0, 3.0], value=[2.1, 1.9, 2.0], reference=np.nan))
     assert (e2.reference_kind == "finest rung").all() and np.allclose(e2.error, [0.05, 0.05, 0.0])
 
 
@@ -99,7 +100,7 @@ def test_a_killed_ladder_keeps_its_rows_and_a_rerun_runs_only_the_rest(tmp_path)
     with pytest.raises(KeyboardInterrupt):
         L.run_ladders(tmp_path, modules={"fake": fake_case(calls, fail_at="n16")}, progress=False)
     assert calls == ["n4", "n8"]
-    assert list(L.load_table(tmp_path).label) == ["n4", "n8"]
+    assert list(C.load_table(tmp_path).label) == ["n4", "n8"]
     calls.clear()
     t = L.run_ladders(tmp_path, modules={"fake": fake_case(calls)}, progress=False)
     assert calls == ["n16"]
@@ -109,8 +110,8 @@ def test_a_killed_ladder_keeps_its_rows_and_a_rerun_runs_only_the_rest(tmp_path)
     assert calls == []
     L.run_ladders(tmp_path, quick=False, modules={"fake": fake_case(calls)}, progress=False)
     assert calls == ["n8", "n16", "n32"]                  # the full ladder is a ladder of its own
-    t = L.with_errors(L.load_table(tmp_path))
-    s = L.case_summary(t)
+    t = C.with_errors(C.load_table(tmp_path))
+    s = C.case_summary(t)
     assert np.allclose(s.observed_order, 2.0)
 
 
@@ -149,7 +150,7 @@ def test_report_writes_html_and_pdf_from_a_table(tmp_path):
     assert text.startswith("<!DOCTYPE html>") and "data:image/png;base64," in text
     assert "poiseuille" in text and "ship_tier1" in text and "Richardson" in text and "error vs finest" in text
     assert pdf.read_bytes()[:4] == b"%PDF"
-    md = markdown_table(L.load_table(tmp_path))
+    md = markdown_table(C.load_table(tmp_path))
     assert "| poiseuille | quick | 32 cells |" in md and "2.00 |" in md
 
 
@@ -171,7 +172,7 @@ def test_iceresist_validate_runs_the_ladders_then_draws_the_report_from_their_fi
     def fake_run_ladders(out, **kw):
         _rows("poiseuille", [8, 16, 32], [4e-3, 1e-3, 2.5e-4], [0.1, 0.8, 6.0]).to_csv(out + "/ladder.csv",
                                                                                       index=False)
-        return L.load_table(out)
+        return C.load_table(out)
 
     monkeypatch.setattr(L, "run_ladders", fake_run_ladders)
     assert main(["validate", "--out", str(tmp_path), "--cases", "poiseuille"]) == 0
@@ -215,7 +216,7 @@ def quick_ladder(case, tmp_path):
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        table = L.with_errors(L.run_ladders(tmp_path, cases=case, progress=False))
+        table = C.with_errors(L.run_ladders(tmp_path, cases=case, progress=False))
     finally:
         numba.set_num_threads(threads)
     return table, table.sort_values("resolution").error.to_numpy()
@@ -227,7 +228,7 @@ def test_quick_ladder_error_falls_as_resolution_rises(case, tmp_path):
     falls at every rung, with an observed order near 2."""
     table, e = quick_ladder(case, tmp_path)
     assert len(e) >= 3 and np.all(np.diff(e) < 0), e
-    p = L.observed_order(table.resolution, table.error)
+    p = C.observed_order(table.resolution, table.error)
     assert 1.5 < p < 3.0, (p, e)
 
 

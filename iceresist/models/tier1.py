@@ -35,7 +35,7 @@ class Tier1Model(ShipModel):
 
         size = scene.domain.size_m or tuple(n * scene.domain.dx_m for n in scene.domain.cells)
         self._set_up_ship(scene, size)
-        g, sh, ice, con = self.geometry, scene.ship, scene.ice, self.contact
+        g, ice, con = self.geometry, scene.ice, self.contact
         self.backend = backend or scene.numerics.backend
         self.precision = precision or "float64"
         self.dem = self._make_dem(backend=self.backend, precision=self.precision,

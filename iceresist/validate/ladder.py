@@ -20,16 +20,7 @@ from pathlib import Path
 import pandas as pd
 
 from iceresist.errors import InputError
-from iceresist.post.convergence import (  # noqa: F401 - the reduction of the ladders lives in post
-    TABLE_NAME,
-    THRESHOLDS,
-    case_summary,
-    cheapest_runs,
-    load_table,
-    observed_order,
-    richardson,
-    with_errors,
-)
+from iceresist.post.convergence import TABLE_NAME, load_table
 
 log = logging.getLogger(__name__)
 

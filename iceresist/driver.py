@@ -64,6 +64,9 @@ class Outputs:
     checkpoint_final: bool = True
     #: Model steps between watchdog checks; None: the model's default (:func:`iceresist.watchdog.default_interval`).
     watchdog_every: int | None = None
+    #: Extra time-series columns ``{name: func(model) -> float}`` beside ``model.diagnostics()`` (e.g. the mode
+    #: amplitude of a validation case).
+    probes: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -73,6 +76,13 @@ class RunResult:
     path: Path
     sim: Simulation
     watchdog: object
+
+
+def _with_probes(probes: dict) -> Callable | None:
+    """The diagnostics of a time-series row: ``model.diagnostics()`` and the ``probes`` columns."""
+    if not probes:
+        return None
+    return lambda model: {**model.diagnostics(), **{k: float(f(model)) for k, f in probes.items()}}
 
 
 def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, outputs: Outputs | None = None,
@@ -134,7 +144,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
             field_units = {k: v for k, v in model.field_units(lattice_units).items() if k in outputs.fields}
             sim.output_writers["fields"] = FieldWriter(rf, outputs.fields_schedule, list(outputs.fields),
                                                        units=field_units)
-        sim.output_writers["timeseries"] = TimeSeriesWriter(rf, outputs.timeseries)
+        sim.output_writers["timeseries"] = TimeSeriesWriter(rf, outputs.timeseries, _with_probes(outputs.probes))
         if checkpoint_path is not None:
             sim.output_writers["checkpointer"] = Checkpointer(checkpoint_path, outputs.checkpoint,
                                                               write_final=outputs.checkpoint_final, runfile=rf,
@@ -156,7 +166,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
             # killed after its last checkpoint loses the steps and the time after it); mlups: this leg's rate
             rf.write_meta(iteration=model.iteration, time_s=model.time_s, steps=int(model.iteration),
                           wall_time_s=wall_before_s + sim.wall_time_s + build_s, build_time_s=build_s,
-                          step_time_s=sim.step_time_s, mlups=sim.mlups,
+                          step_time_s=sim.step_time_s, first_step_s=sim.first_step_s, mlups=sim.mlups,
                           stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged,
                           finished=sim.completed,
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))

@@ -247,6 +247,11 @@ class Simulation:
         self.start_iteration: int | None = None  # where the last run() started (after its pickup)
         self.wall_time_s = 0.0
         self.step_time_s = 0.0
+        #: wall time (s) and steps of the first chunk of the last :meth:`run`, the one that compiles the kernels
+        #: (or loads them from the cache): ``step_time_s - first_step_s`` over ``steps_done - first_steps`` steps
+        #: is the pace of the compiled kernels
+        self.first_step_s = 0.0
+        self.first_steps = 0
         self._chunk_cap = 1
         self._start_wall = time.perf_counter()
 
@@ -421,6 +426,8 @@ class Simulation:
                 t0 = time.perf_counter()
                 self.model.step(n)
                 dt_wall = time.perf_counter() - t0
+                if self.steps_done == first:
+                    self.first_step_s, self.first_steps = dt_wall, n
                 self.step_time_s += dt_wall
                 self.steps_done += n
                 # grow the chunk towards ~0.2 s of wall time so wall-time schedules and the bar stay responsive

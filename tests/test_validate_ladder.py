@@ -82,7 +82,7 @@ def fake_case(calls: list, fail_at=None):
     def ladder(quick):
         return [{"label": f"n{n}", "resolution": float(n)} for n in ((4, 8, 16) if quick else (8, 16, 32))]
 
-    def run(params, *, backend="cpu", precision="float32"):
+    def run(params, *, backend="cpu", precision="float32", out_dir=None):
         if params["label"] == fail_at:
             raise KeyboardInterrupt
         calls.append(params["label"])

@@ -122,7 +122,7 @@ def run_ladders(out_dir, *, quick: bool = True, cases=None, backend: str = "cpu"
         bar.set_description(f"{name} {params['label']}")
         t0 = time.perf_counter()
         try:
-            res = available[name].run(params, backend=backend, precision=precision)
+            res = available[name].run(params, backend=backend, precision=precision, out_dir=out)
         except InputError:
             raise
         except Exception as exc:  # one failing rung is reported and the ladder goes on

@@ -7,10 +7,12 @@ A case module in :mod:`iceresist.validate.cases` defines::
     def ladder(quick: bool) -> list[dict]
         # parameter sets from coarse to fine (at least three); each holds a "label" (e.g. "16 cells/wavelength")
         # and a "resolution" (cells across the case's characteristic length, used for the observed order)
-    def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult
+    def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult
 
-``run`` times itself (wall time of the stepping, compilation excluded where the case can separate it) and
-returns the relative error of the case's headline quantity against its reference.
+``run`` builds the rung's scene and model and runs them through the one driver
+(:func:`iceresist.validate.rung.run_rung`) into ``OUT_DIR/runs/NAME/LABEL.h5`` (``out_dir`` None: a scratch
+folder), then reduces that run to the relative error of the case's headline quantity against its reference and
+the run time (the stepping at the pace of the compiled kernels, :attr:`~iceresist.validate.rung.Rung.run_time_s`).
 """
 
 from __future__ import annotations

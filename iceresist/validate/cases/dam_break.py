@@ -98,7 +98,7 @@ def front_position(phi: np.ndarray, rows: int = 1) -> float:
     return best
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """Run one rung: Z(T) sampled every 0.05 T; the error of Z at the measured T <= t_compare in ``extra``."""
     p = {**DEFAULTS, **params}
     a = float(p["cells_per_column"])

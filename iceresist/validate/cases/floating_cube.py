@@ -135,7 +135,7 @@ def simulate(n: int, periods: float, *, release_draft: float = 0.8, sample_every
     return np.array(rows), model, steps, wall
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float64") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float64", out_dir=None) -> CaseResult:
     """One rung: the submerged fraction over the last estimated period against 0.95."""
     n = int(params["resolution"])
     series, model, steps, wall = simulate(n, params["periods"], release_draft=params["release_draft"],

@@ -10,11 +10,11 @@ u_x(y) against the parabola F / (2 nu) y (N - y) (the set-up of tests/test_poise
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
 from iceresist.validate.result import CaseResult
+from iceresist.validate.rung import run_rung, scene_of
 
 NAME = "poiseuille"
 REFERENCE = ("analytic parabola u_x(y) = F/(2 nu) y (N - y) of the force-driven channel; error = relative L2 "
@@ -36,29 +36,39 @@ def steps_for(n: int) -> int:
     return int(math.ceil(math.log(1.0 / DECAY) * n * n / (NU * math.pi ** 2)))
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
-    from iceresist.backends.jit import resolve_backend
-    from iceresist.grid import BlockForest, Face
-    from iceresist.lbm.solver import LBMSolver
+def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
+    """The scene of a rung (lattice units): 8 x N x 8 cells, periodic in x and z, walls at y = 0 and y = N, tau
+    0.8, the force density of centre-line speed ``U_MAX``, run for :func:`steps_for` steps."""
+    n = int(params["n"])
+    return scene_of({
+        "scene": {"name": f"{NAME}-{n}", "description": f"force-driven Poiseuille flow, {n} cells across",
+                  "units": "lattice"},
+        "domain": {"cells": [8, n, 8], "faces": {"x_min": "periodic", "x_max": "periodic", "y_min": "wall",
+                                                 "y_max": "wall", "z_min": "periodic", "z_max": "periodic"}},
+        "fluid": {"body_force_N_m3": [8.0 * NU * U_MAX / n ** 2, 0.0, 0.0],
+                  "operator": params.get("operator", "cumulant")},
+        "numerics": {"tau": TAU, "u_max_m_s": U_MAX, "precision": precision, "backend": backend},
+        "run": {"steps": steps_for(n)},
+        "output": {"fields": ["u"]},
+    }, f"{NAME} {params['label']}")
+
+
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
+    """One rung from rest through the driver; the profile of the final u against the parabola."""
+    from iceresist.models import FluidModel
 
     n = int(params["n"])
-    force = 8.0 * NU * U_MAX / n ** 2
-    fo = BlockForest.uniform((8, n, 8), faces={"y-": Face("wall"), "y+": Face("wall")})
-    s = LBMSolver(fo, tau=TAU, force=(force, 0.0, 0.0), operator=params.get("operator", "cumulant"),
-                  precision=precision, target=resolve_backend(backend))
-    s.step(1)                       # compile outside the timed loop
-    s.synchronize()
-    s.initialize(u=(0.0, 0.0, 0.0))
+    sc = scene(params, backend=backend, precision=precision)
     steps = steps_for(n)
-    t0 = time.perf_counter()
-    s.step(steps)
-    s.synchronize()
-    wall = time.perf_counter() - t0
+    rung = run_rung(FluidModel(sc), sc, out_dir, NAME, params, steps=steps, sample_every=max(1, steps // 20),
+                    fields=("u",))
+    force = sc.fluid.body_force_N_m3[0]
     y = np.arange(n) + 0.5
     exact = force / (2 * NU) * y * (n - y)
-    prof = s.macroscopic()[1][0].mean(axis=(0, 2))
+    prof = rung.fields["u"][..., 0].mean(axis=(0, 2))
     err = float(np.sqrt(np.sum((prof - exact) ** 2) / np.sum(exact ** 2)))
-    return CaseResult(case=NAME, label=params["label"], resolution=float(n), cells=fo.cells, steps=steps,
-                      wall_s=wall, quantity="relative L2 distance of u_x(y) from the parabola", value=err,
+    return CaseResult(case=NAME, label=params["label"], resolution=float(n), cells=8 * n * 8, steps=rung.steps,
+                      wall_s=rung.run_time_s, quantity="relative L2 distance of u_x(y) from the parabola", value=err,
                       reference=0.0, error=err, backend=backend, precision=precision,
-                      extra={"u_centre_lattice": float(prof[n // 2]), "u_max_exact_lattice": float(exact.max())})
+                      extra={"u_centre_lattice": float(prof[n // 2]), "u_max_exact_lattice": float(exact.max()),
+                             "result_file": str(rung.path)})

@@ -88,7 +88,7 @@ def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float
     return np.array(t), np.array(w), fo.cells, steps, wall
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung: the largest settling velocity against the measured terminal velocity."""
     case = params["case"]
     t, w, cells, steps, wall = settle(case, params["resolution"], u_lattice=params["u_lattice"],

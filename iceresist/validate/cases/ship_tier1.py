@@ -48,7 +48,7 @@ def overrides(params: dict) -> dict:
     return ov
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One tier-1 run through :func:`iceresist.sweep.run_case` into a scratch folder (the DEM runs in float64,
     as every tier-1 run: ``precision`` is recorded, not used)."""
     from iceresist.post.case import analyse_case

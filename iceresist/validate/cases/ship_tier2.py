@@ -108,7 +108,7 @@ def warm_up(backend: str, precision: str) -> float:
     return time.perf_counter() - t0
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One tier-2 run through :func:`iceresist.sweep.run_case` into a scratch folder (the LBM in ``precision``,
     the DEM in float64), after :func:`warm_up` (its seconds in ``extra["compile_s"]``)."""
     from iceresist.io.hdf5 import RunFile

@@ -38,7 +38,7 @@ def ladder(quick: bool) -> list[dict]:
             for d in ds]
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     from iceresist.backends.jit import resolve_backend
     from iceresist.coupling import FluidStructureCoupling, Sphere
     from iceresist.units import Units

@@ -110,7 +110,7 @@ def build(params: dict, *, backend: str = "cpu", precision: str = "float32") -> 
     return fs, th
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """Run one rung; the period error against linear theory, with the decay rate in ``extra``."""
     p = {**DEFAULTS, **params}
     fs, th = build(p, backend=backend, precision=precision)

@@ -50,7 +50,7 @@ def kinetic_energy(rho, u) -> float:
     return float(0.5 * np.mean(rho * np.sum(u * u, axis=0)))
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32") -> CaseResult:
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     from iceresist.backends.jit import resolve_backend
     from iceresist.grid.forest import BlockForest
     from iceresist.lbm.solver import LBMSolver

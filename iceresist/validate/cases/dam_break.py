@@ -22,14 +22,12 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from pathlib import Path
 
 import numpy as np
 
-from iceresist.freesurface.fluid import FreeSurfaceFluid
-from iceresist.grid.forest import BlockForest, Face
 from iceresist.validate.result import CaseResult
+from iceresist.validate.rung import run_rung, scene_of
 
 log = logging.getLogger(__name__)
 
@@ -63,24 +61,38 @@ def gravity(params: dict) -> float:
     return p["front_speed"] ** 2 / (8.0 * p["cells_per_column"])
 
 
-def build(params: dict, *, backend: str = "cpu", precision: str = "float32") -> FreeSurfaceFluid:
-    """The initialised :class:`FreeSurfaceFluid` of a rung."""
-    from iceresist.backends import jit
-
+def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
+    """The scene of a rung (lattice units): the column of width a and height 2 a against the wall x = 0
+    (``free_surface.column_length_m``), the rest of the floor dry, walls of kind ``walls`` at x and z, periodic
+    y, gravity from the front speed, run for ``t_end``."""
     p = {**DEFAULTS, **params}
     a = int(p["cells_per_column"])
     nx = 8 * math.ceil(p["length_columns"] * a / 8)
     nz = 8 * math.ceil((2 * a + 6) / 8)
-    ny = int(p["ny"])
-    walls = {k: Face(p["walls"]) for k in ("x-", "x+", "z-", "z+")}
-    forest = BlockForest.uniform((nx, ny, nz), walls)
-    target = jit.cuda() if backend == "cuda" else jit.cpu
-    fs = FreeSurfaceFluid(forest, tau=p["tau"], gravity_lattice=gravity(p), depth_cells=2.0 * a,
-                          mobility=p["mobility"], operator=p["operator"], precision=precision, target=target)
-    x = np.arange(nx) + 0.5
-    surface = np.where(x < a, 2.0 * a, -4.0)
-    fs.initialize(surface=np.broadcast_to(surface[:, None], (nx, ny)))
-    return fs
+    faces = {k: p["walls"] for k in ("x_min", "x_max", "z_min", "z_max")}
+    faces.update(y_min="periodic", y_max="periodic")
+    return scene_of({
+        "scene": {"name": f"{NAME}-{a}", "description": f"collapse of a water column a = {a} cells, n^2 = 2",
+                  "units": "lattice"},
+        "domain": {"cells": [nx, int(p["ny"]), nz], "faces": faces},
+        "fluid": {"gravity_m_s2": [0.0, 0.0, -gravity(p)], "operator": p["operator"]},
+        "numerics": {"tau": p["tau"], "precision": precision, "backend": backend},
+        "run": {"steps": steps_for(p)},
+        "output": {"fields": []},
+        "free_surface": {"water_depth_m": 2.0 * a, "column_length_m": float(a), "mobility_lattice": p["mobility"],
+                         "interface_width_cells": 3.0, "h_lattice": "D3Q15", "f_pool_margin": 0.25},
+    }, f"{NAME} {p.get('label', a)}")
+
+
+def steps_per_T(params: dict) -> float:
+    """Steps per unit of T = t sqrt(2 g / a)."""
+    p = {**DEFAULTS, **params}
+    return math.sqrt(float(p["cells_per_column"]) / (2.0 * gravity(p)))
+
+
+def steps_for(params: dict) -> int:
+    p = {**DEFAULTS, **params}
+    return int(math.ceil(p["t_end"] * steps_per_T(p)))
 
 
 def front_position(phi: np.ndarray, rows: int = 1) -> float:
@@ -99,40 +111,34 @@ def front_position(phi: np.ndarray, rows: int = 1) -> float:
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    """Run one rung: Z(T) sampled every 0.05 T; the error of Z at the measured T <= t_compare in ``extra``."""
+    """Run one rung through the driver, Z(T) sampled every 0.05 T; the error of Z at the measured T <= t_compare
+    in ``extra``."""
+    from iceresist.models import FreeSurfaceModel
+
     p = {**DEFAULTS, **params}
     a = float(p["cells_per_column"])
-    fs = build(p, backend=backend, precision=precision)
-    t_unit = math.sqrt(a / (2.0 * gravity(p)))          # steps per unit of T = t sqrt(2 g / a)
-    steps = int(math.ceil(p["t_end"] * t_unit))
-    sample = max(1, int(round(0.05 * t_unit)))
+    sc = scene(p, backend=backend, precision=precision)
+    t_unit = steps_per_T(p)
     rows = int(p["front_rows"]) if p["front_rows"] else max(2, int(a) // 4)
-    fs.step(1)                                          # compile outside the timing
-    phi = fs.phi()
-    ts, zs, zn = [1.0 / t_unit], [front_position(phi) / a], [front_position(phi, rows) / a]
-    t0 = time.perf_counter()
-    n = 1
-    while n < steps:
-        fs.step(sample)
-        n += sample
-        phi = fs.phi()
-        ts.append(n / t_unit)
-        zs.append(front_position(phi) / a)
-        zn.append(front_position(phi, rows) / a)
-    fs.fluid.synchronize()
-    wall = time.perf_counter() - t0
-    ts, zs = np.array(ts), np.array(zs)
+    rung = run_rung(FreeSurfaceModel(sc), sc, out_dir, NAME, {**p, "label": p.get("label", f"a = {int(a)} cells")},
+                    steps=steps_for(p), sample_every=max(1, int(round(0.05 * t_unit))),
+                    probes={"Z": lambda m: front_position(m.fluid.phi()) / a,
+                            "Z_nose": lambda m: front_position(m.fluid.phi(), rows) / a})
+    ts = rung.timeseries["iteration"] / t_unit
+    zs, zn = rung.timeseries["Z"], rung.timeseries["Z_nose"]
     t_ref, z_ref = measurements()
     keep = t_ref <= p["t_compare"] + 1e-9
     z_sim = np.interp(t_ref, ts, zs)
     err = np.abs(z_sim - z_ref) / z_ref
     worst = int(np.argmax(np.where(keep, err, -1.0)))
-    extra = dict(T=ts.tolist(), Z=zs.tolist(), Z_nose=zn, T_ref=t_ref.tolist(), Z_ref=z_ref.tolist(), Z_sim=z_sim.tolist(),
-                 error_at_ref=err.tolist(), g=gravity(p), tau=p["tau"], operator=p["operator"],
-                 mobility=p["mobility"], steps_per_T=t_unit, volume=fs.volume())
+    extra = dict(T=ts.tolist(), Z=zs.tolist(), Z_nose=zn.tolist(), T_ref=t_ref.tolist(), Z_ref=z_ref.tolist(),
+                 Z_sim=z_sim.tolist(), error_at_ref=err.tolist(), g=gravity(p), tau=p["tau"], operator=p["operator"],
+                 mobility=p["mobility"], steps_per_T=t_unit, volume=float(rung.timeseries["water_volume_m3"][-1]),
+                 result_file=str(rung.path))
     log.info("dam break a = %d: Z errors %s at T = %s", int(a), np.round(err, 3), t_ref)
     return CaseResult(case=NAME, label=p.get("label", f"a = {int(a)} cells"),
-                      resolution=float(p.get("resolution", a)), cells=fs.forest.cells, steps=n, wall_s=wall,
+                      resolution=float(p.get("resolution", a)), cells=int(np.prod(sc.shape_cells())),
+                      steps=rung.steps, wall_s=rung.run_time_s,
                       quantity=f"surge front Z = x/a at T = {t_ref[worst]:.3f} (worst of T <= {p['t_compare']})",
                       value=float(z_sim[worst]), reference=float(z_ref[worst]), error=float(err[worst]),
                       backend=backend, precision=precision, extra=extra)

@@ -22,13 +22,11 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 
 import numpy as np
 
-from iceresist.freesurface.fluid import FreeSurfaceFluid
-from iceresist.grid.forest import BlockForest, Face
 from iceresist.validate.result import CaseResult, relative_error
+from iceresist.validate.rung import run_rung, scene_of
 
 log = logging.getLogger(__name__)
 
@@ -92,53 +90,75 @@ def mode_amplitude(surface: np.ndarray, k: float) -> float:
     return float(2.0 / zs.size * np.sum((zs - zs.mean()) * np.cos(k * x)))
 
 
-def build(params: dict, *, backend: str = "cpu", precision: str = "float32") -> tuple[FreeSurfaceFluid, dict]:
-    """The initialised :class:`FreeSurfaceFluid` of a rung and its :func:`theory`."""
-    from iceresist.backends import jit
-
+def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
+    """The scene of a rung (lattice units): one wavelength along periodic x, ``ny`` cells along periodic y, walls
+    at the bottom and the lid, still depth h, gravity from the target period."""
     p = {**DEFAULTS, **params}
     th = theory(p)
     nx = int(p["cells_per_wavelength"])
     nz = 8 * math.ceil((th["h"] + th["a"] + 6.0) / 8)
-    forest = BlockForest.uniform((nx, int(p["ny"]), nz), {"z-": Face("wall"), "z+": Face("wall")})
-    target = jit.cuda() if backend == "cuda" else jit.cpu
-    fs = FreeSurfaceFluid(forest, tau=p["tau"], gravity_lattice=th["g"], depth_cells=th["h"],
-                          mobility=p["mobility"], operator=p["operator"], precision=precision, target=target)
+    return scene_of({
+        "scene": {"name": f"{NAME}-{nx}", "description": f"standing gravity wave, {nx} cells per wavelength",
+                  "units": "lattice"},
+        "domain": {"cells": [nx, int(p["ny"]), nz],
+                   "faces": {"x_min": "periodic", "x_max": "periodic", "y_min": "periodic", "y_max": "periodic",
+                             "z_min": "wall", "z_max": "wall"}},
+        "fluid": {"gravity_m_s2": [0.0, 0.0, -th["g"]], "operator": p["operator"]},
+        "numerics": {"tau": p["tau"], "precision": precision, "backend": backend},
+        "run": {"steps": steps_for(p)},
+        "output": {"fields": ["u"]},
+        "free_surface": {"water_depth_m": th["h"], "mobility_lattice": p["mobility"], "interface_width_cells": 3.0,
+                         "h_lattice": "D3Q15", "f_pool_margin": 0.25},
+    }, f"{NAME} {p.get('label', nx)}")
+
+
+def steps_for(params: dict) -> int:
+    p = {**DEFAULTS, **params}
+    return int(round(p["periods"] * theory(p)["period_steps"]))
+
+
+def build(params: dict, *, backend: str = "cpu", precision: str = "float32"):
+    """The scene of a rung, its model with the surface z_s = h + a cos(k x) at rest over hydrostatic water, and
+    its :func:`theory`."""
+    from iceresist.models import FreeSurfaceModel
+
+    p = {**DEFAULTS, **params}
+    th = theory(p)
+    sc = scene(p, backend=backend, precision=precision)
+    model = FreeSurfaceModel(sc)
+    nx, ny, _ = model.shape_cells
     x = np.arange(nx) + 0.5
-    surface = np.broadcast_to((th["h"] + th["a"] * np.cos(th["k"] * x))[:, None], (nx, int(p["ny"])))
-    fs.initialize(surface=surface)
-    return fs, th
+    model.fluid.initialize(surface=np.broadcast_to((th["h"] + th["a"] * np.cos(th["k"] * x))[:, None], (nx, ny)))
+    model.volume0_cells = model.fluid.volume()
+    return sc, model, th
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    """Run one rung; the period error against linear theory, with the decay rate in ``extra``."""
+    """Run one rung through the driver, the mode amplitude sampled 40 times a period; the period error against
+    linear theory, with the decay rate in ``extra``."""
     p = {**DEFAULTS, **params}
-    fs, th = build(p, backend=backend, precision=precision)
-    steps = int(round(p["periods"] * th["period_steps"]))
-    fs.step(1)                                   # compiles every kernel outside the timing
-    amp = [mode_amplitude(fs.surface_height(), th["k"])]
+    sc, model, th = build(p, backend=backend, precision=precision)
+    steps = steps_for(p)
     sample = max(1, int(th["period_steps"] // 40))
-    t0 = time.perf_counter()
-    for _ in range(steps // sample):
-        fs.step(sample)
-        amp.append(mode_amplitude(fs.surface_height(), th["k"]))
-    fs.fluid.synchronize()
-    wall = time.perf_counter() - t0
-    t = 1.0 + sample * np.arange(len(amp))
-    amp = np.array(amp)
+    rung = run_rung(model, sc, out_dir, NAME, {**p, "label": p.get("label", f"{p['cells_per_wavelength']} cells")},
+                    steps=steps, sample_every=sample, fields=("u",),
+                    probes={"mode_amplitude_cells": lambda m: mode_amplitude(m.fluid.surface_height(), th["k"])},
+                    initial=f"surface z_s = h + a cos(k x), a = {th['a']:.6g} cells, at rest over hydrostatic water")
+    t = rung.timeseries["iteration"].astype(float)
+    amp = rung.timeseries["mode_amplitude_cells"]
     omega, gamma, a0 = fit_damped_cosine(t, amp, th["omega"])
     period = 2.0 * math.pi / omega
-    _, u = fs.macroscopic()
     extra = dict(omega=omega, omega_theory=th["omega"], decay_per_step=gamma, decay_lamb=th["decay"],
                  log_decrement=gamma * period, log_decrement_lamb=th["decay"] * th["period_steps"],
-                 amplitude0=a0, g=th["g"], tau=p["tau"], operator=p["operator"], volume=fs.volume(),
-                 max_u_final=float(np.nanmax(np.abs(u))), mach=th["a"] * th["omega"] * math.sqrt(3.0),
-                 t=t.tolist(), amplitude=amp.tolist())
+                 amplitude0=a0, g=th["g"], tau=p["tau"], operator=p["operator"],
+                 volume=float(rung.timeseries["water_volume_m3"][-1]),
+                 max_u_final=float(np.nanmax(np.abs(rung.fields["u"]))), mach=th["a"] * th["omega"] * math.sqrt(3.0),
+                 t=t.tolist(), amplitude=amp.tolist(), result_file=str(rung.path))
     log.info("standing wave %s: period %.1f steps vs %.1f (%.2f %%), decay %.3g vs Lamb %.3g per step",
              p.get("label", ""), period, th["period_steps"], 100 * relative_error(period, th["period_steps"]),
              gamma, th["decay"])
     return CaseResult(case=NAME, label=p.get("label", f"{p['cells_per_wavelength']} cells/wavelength"),
-                      resolution=float(p.get("resolution", p["cells_per_wavelength"])), cells=fs.forest.cells,
-                      steps=steps, wall_s=wall, quantity="period (steps)", value=period,
+                      resolution=float(p.get("resolution", p["cells_per_wavelength"])), cells=model.cells,
+                      steps=rung.steps, wall_s=rung.run_time_s, quantity="period (steps)", value=period,
                       reference=th["period_steps"], error=relative_error(period, th["period_steps"]),
                       backend=backend, precision=precision, extra=extra)

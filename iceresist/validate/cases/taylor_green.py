@@ -10,11 +10,11 @@ O(k^2) lattice error of the diagonal mode and the residual nonlinear transfer at
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
 from iceresist.validate.result import CaseResult, relative_error
+from iceresist.validate.rung import run_rung, scene_of
 
 NAME = "taylor_green"
 REFERENCE = ("lattice viscosity nu = (tau - 1/2)/3 against nu fitted to the energy decay E ~ exp(-6 nu k^2 t) "
@@ -46,40 +46,51 @@ def vortex(n: int, amplitude: float):
     return 1.0 + 3.0 * p, u
 
 
-def kinetic_energy(rho, u) -> float:
-    return float(0.5 * np.mean(rho * np.sum(u * u, axis=0)))
+def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
+    """The scene of a rung (lattice units): a periodic N^3 box, tau 0.7, run for :func:`steps_for` steps."""
+    n = int(params["n"])
+    return scene_of({
+        "scene": {"name": f"{NAME}-{n}", "description": f"Taylor-Green vortex, {n} cells per wavelength, Re "
+                                                        f"{REYNOLDS:g}", "units": "lattice"},
+        "domain": {"cells": [n, n, n], "faces": {f: "periodic" for f in ("x_min", "x_max", "y_min", "y_max",
+                                                                          "z_min", "z_max")}},
+        "fluid": {"operator": params.get("operator", "cumulant")},
+        "numerics": {"tau": TAU, "u_max_m_s": amplitude_of(n), "precision": precision, "backend": backend},
+        "run": {"steps": steps_for(n)},
+    }, f"{NAME} {params['label']}")
+
+
+def amplitude_of(n: int) -> float:
+    """U = Re nu k (lattice units)."""
+    return REYNOLDS * NU * 2.0 * math.pi / n
+
+
+def steps_for(n: int) -> int:
+    """Steps of ``E_FOLDINGS`` e-folding times of the energy, 1 / (6 nu k^2) each."""
+    k = 2.0 * math.pi / n
+    return int(math.ceil(E_FOLDINGS / (6.0 * NU * k * k)))
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    from iceresist.backends.jit import resolve_backend
-    from iceresist.grid.forest import BlockForest
-    from iceresist.lbm.solver import LBMSolver
+    """One rung through the driver: the vortex set on the model, its kinetic energy sampled ``SAMPLES`` times,
+    nu fitted to the log of the energy after the first sample (the initial layer of the stress)."""
+    from iceresist.models import FluidModel
 
     n = int(params["n"])
     k = 2.0 * math.pi / n
-    amplitude = REYNOLDS * NU * k
-    fo = BlockForest.uniform((n, n, n))
-    s = LBMSolver(fo, tau=TAU, operator=params.get("operator", "cumulant"), precision=precision,
-                  target=resolve_backend(backend))
-    s.step(1)                       # compile outside the timed loop
-    s.synchronize()
+    amplitude = amplitude_of(n)
+    sc = scene(params, backend=backend, precision=precision)
+    model = FluidModel(sc)
     rho, u = vortex(n, amplitude)
-    s.initialize(rho, u)
-    steps = int(math.ceil(E_FOLDINGS / (6.0 * NU * k * k)))
-    every = max(1, steps // SAMPLES)
-    t, e = [0.0], [kinetic_energy(rho, u)]
-    wall = 0.0
-    while s.iteration < steps:
-        t0 = time.perf_counter()
-        s.step(min(every, steps - s.iteration))
-        s.synchronize()
-        wall += time.perf_counter() - t0
-        r, v = s.macroscopic()
-        t.append(float(s.iteration))
-        e.append(kinetic_energy(r, v))
-    slope = np.polyfit(np.asarray(t[1:]), np.log(np.asarray(e[1:])), 1)[0]   # first sample: initial layer
+    model.solver.initialize(rho, u)
+    steps = steps_for(n)
+    rung = run_rung(model, sc, out_dir, NAME, params, steps=steps, sample_every=max(1, steps // SAMPLES),
+                    initial=f"Taylor-Green vortex (Brachet et al. 1983), amplitude {amplitude:.6g}, k = 2 pi / {n}")
+    t, e = rung.timeseries["iteration"].astype(float), rung.timeseries["kinetic_energy_J"]
+    slope = np.polyfit(t[1:], np.log(e[1:]), 1)[0]   # first sample: initial layer
     nu_fit = -slope / (6.0 * k * k)
-    return CaseResult(case=NAME, label=params["label"], resolution=float(n), cells=fo.cells, steps=steps,
-                      wall_s=wall, quantity="lattice viscosity from the decay rate", value=float(nu_fit),
+    return CaseResult(case=NAME, label=params["label"], resolution=float(n), cells=n ** 3, steps=rung.steps,
+                      wall_s=rung.run_time_s, quantity="lattice viscosity from the decay rate", value=float(nu_fit),
                       reference=NU, error=relative_error(nu_fit, NU), backend=backend, precision=precision,
-                      extra={"amplitude_lattice": amplitude, "energy_ratio": e[-1] / e[0]})
+                      extra={"amplitude_lattice": amplitude, "energy_ratio": float(e[-1] / e[0]),
+                             "result_file": str(rung.path)})

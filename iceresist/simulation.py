@@ -278,9 +278,14 @@ class Simulation:
 
     @property
     def mlups(self) -> float:
-        """Million cell updates per second over the time spent stepping (compilation of the first step included)."""
+        """Million cell updates per second of the compiled kernels: over the stepping after the first chunk of the
+        last :meth:`run` (which compiles the kernels or loads them from the cache, ``first_step_s``), over all of
+        it while nothing came after that chunk."""
         # a model step may hold several lattice steps (tier 2: one record = lbm_steps_per_record LBM steps)
-        return mlups(self.model.lattice_updates_per_step, self.steps_done, self.step_time_s)
+        steps, seconds = self.steps_done - self.first_steps, self.step_time_s - self.first_step_s
+        if steps <= 0 or seconds <= 0:
+            steps, seconds = self.steps_done, self.step_time_s
+        return mlups(self.model.lattice_updates_per_step, steps, seconds)
 
     def _check_stop(self):
         m = self.model

@@ -1,6 +1,7 @@
 """The time loop: schedules, stop criteria, NaN checker, crash safety, bitwise restart. A small fake model."""
 
 import shutil
+import time
 
 import h5py
 import numpy as np
@@ -235,3 +236,19 @@ def test_a_run_without_a_bar_logs_its_progress(monkeypatch, caplog):
     shares = [float(line.split(", ")[2].split(" %")[0]) for line in lines]
     assert shares == sorted(shares) and 0 < shares[0] and shares[-1] <= 100
     assert all(" of 200 steps" in line and "min to go" in line for line in lines)
+
+
+def test_mlups_leaves_out_the_first_compiling_step():
+    """A first step that takes 0.3 s (a kernel compiling) is timed apart: MLUPS is the pace of the rest."""
+    class Compiling(LogisticModel):
+        def step(self, n=1):
+            if self.iteration == 0:
+                time.sleep(0.3)
+            super().step(n)
+
+    sim = Simulation(Compiling(), stop_iteration=40, progress=False)
+    sim.run()
+    assert sim.first_steps == 1 and sim.first_step_s >= 0.3
+    rest_s = sim.step_time_s - sim.first_step_s
+    assert rest_s < 0.1
+    assert sim.mlups == pytest.approx(sim.model.cells * 39 / rest_s / 1e6, rel=1e-9)

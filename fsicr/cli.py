@@ -76,7 +76,9 @@ def _ship_from_args(args, with_power: bool):
         data["lower_waterline"] = {**(base if isinstance(base, dict) else {}), **lower}
     ship, file_class, file_meta = ship_from_mapping(data, where)
     meta.update(file_meta)
-    text = args.ice_class or file_class
+    if args.ice_class is not None and not args.ice_class.strip():
+        raise FsicrInputError(f"--class: empty; give one of {', '.join(ICE_CLASSES)}")
+    text = args.ice_class if args.ice_class is not None else file_class
     if text is None:
         raise FsicrInputError(f"ice class missing: give --class ({', '.join(ICE_CLASSES)}) or ice_class in the ship file")
     return ship, parse_ice_class(text), meta
@@ -85,38 +87,33 @@ def _ship_from_args(args, with_power: bool):
 def _cmd_resistance(args) -> int:
     ship, cls, meta = _ship_from_args(args, with_power=False)
     results = r_ch_at_waterlines(ship, cls)
-    if args.json:
-        upper = results[0]
-        out = {
-            "command": "resistance",
-            "name": meta.get("name", ""),
-            "ice_class": cls,
-            "r_ch_N": upper.r_ch_N,
-            "r_ch_kN": upper.r_ch_kN,
-            "r_ch_N_by_waterline": {r.waterline: r.r_ch_N for r in results},
-            "waterlines": [r.to_dict() for r in results],
-            "warnings": [w for r in results for w in r.warnings],
-        }
-        print(json.dumps(out, indent=2))
-    else:
-        print(report.format_resistance_report(results, meta))
+    upper = results[0]
+    out = _json({
+        "command": "resistance",
+        "name": meta.get("name", ""),
+        "ice_class": cls,
+        "r_ch_N": upper.r_ch_N,
+        "r_ch_kN": upper.r_ch_kN,
+        "r_ch_N_by_waterline": {r.waterline: r.r_ch_N for r in results},
+        "waterlines": [r.to_dict() for r in results],
+        "warnings": [w for r in results for w in r.warnings],
+    }, indent=2)                                   # refuses a result that is not finite, in text mode too
+    print(out if args.json else report.format_resistance_report(results, meta))
     return 0
 
 
 def _cmd_power(args) -> int:
     ship, cls, meta = _ship_from_args(args, with_power=True)
     result = required_power(ship, cls)
-    if args.json:
-        print(json.dumps({"command": "power", "name": meta.get("name", ""), **result.to_dict()}, indent=2))
-    else:
-        print(report.format_power_report(result, meta))
+    out = _json({"command": "power", "name": meta.get("name", ""), **result.to_dict()}, indent=2)
+    print(out if args.json else report.format_power_report(result, meta))
     return 0
 
 
 def _cmd_compare(args) -> int:
     c = compare_table2()
     if args.json:
-        print(json.dumps({"command": "compare", **c}, indent=2))
+        print(_json({"command": "compare", **c}, indent=2))
     else:
         print(report.format_compare(c))
     return 0
@@ -125,7 +122,7 @@ def _cmd_compare(args) -> int:
 def _cmd_ships(args) -> int:
     ships = {name: str(path) for name, path in sorted(builtin_ships().items())}
     if args.json:
-        print(json.dumps({"command": "ships", "ships": ships}, indent=2))
+        print(_json({"command": "ships", "ships": ships}, indent=2))
     else:
         print("\n".join(f"{name:<14s} {path}" for name, path in ships.items()))
     return 0
@@ -148,6 +145,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print one JSON object")
     s.set_defaults(func=_cmd_ships)
     return p
+
+
+def _json(obj, **kw) -> str:
+    """Strict JSON (no Infinity or NaN, which JSON does not have): a result that is not finite is refused."""
+    try:
+        return json.dumps(obj, allow_nan=False, **kw)
+    except ValueError:
+        raise FsicrInputError("the result is not finite (an input far outside a ship's dimensions?); check the "
+                              "values given") from None
 
 
 def main(argv=None) -> int:

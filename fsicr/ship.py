@@ -64,8 +64,16 @@ def _check_number(value, field: str, prefix: str) -> float:
     return float(value)
 
 
+#: Physical bounds of a ship, model or full scale (not the rules' range of validity, which gives warnings):
+#: lengths from 1 cm (a model at 1:100) to 1 km, bow waterline areas up to 1 km^2. Outside them the formulas
+#: overflow or divide by (nearly) zero, and the input is a slip of units or digits.
+LENGTH_RANGE_M = (0.01, 1000.0)
+AREA_MAX_M2 = 1.0e6
+
+
 def _check_waterline_values(values: dict, prefix: str = "") -> None:
     """Physical sanity of one waterline's dimensions (not the rules' range of validity)."""
+    lo, hi = LENGTH_RANGE_M
     for field, value in values.items():
         if value is None:
             continue
@@ -74,11 +82,14 @@ def _check_waterline_values(values: dict, prefix: str = "") -> None:
             if not 0.0 < v <= 90.0:
                 raise FsicrInputError(f"{_label(field, prefix)}: angle must be in (0, 90] degrees, got {v:g}")
         elif field == "LPAR_m":
-            if v < 0.0:
-                raise FsicrInputError(f"{_label(field, prefix)}: length must be >= 0 m, got {v:g}")
-        elif v <= 0.0:
-            unit = "m^2" if field.endswith("_m2") else "m"
-            raise FsicrInputError(f"{_label(field, prefix)}: must be > 0 {unit}, got {v:g}")
+            if not 0.0 <= v <= hi:
+                raise FsicrInputError(f"{_label(field, prefix)}: length must be in [0, {hi:g}] m, got {v:g}")
+        elif field.endswith("_m2"):
+            if not 0.0 < v <= AREA_MAX_M2:
+                raise FsicrInputError(f"{_label(field, prefix)}: must be in (0, {AREA_MAX_M2:g}] m^2, got {v:g}")
+        elif not lo <= v <= hi:
+            raise FsicrInputError(f"{_label(field, prefix)}: must be in [{lo:g}, {hi:g}] m (a ship at model or "
+                                  f"full scale), got {v:g}")
 
 
 @dataclass(frozen=True)
@@ -132,8 +143,10 @@ class Ship:
             raise FsicrInputError(f"{_label('bulbous_bow')}: must be true or false, got {self.bulbous_bow!r}")
         if self.Dp_m is not None:
             dp = _check_number(self.Dp_m, "Dp_m", "")
-            if dp <= 0.0:
-                raise FsicrInputError(f"{_label('Dp_m')}: propeller diameter must be > 0 m, got {dp:g}")
+            lo, hi = LENGTH_RANGE_M
+            if not lo <= dp <= hi:
+                raise FsicrInputError(f"{_label('Dp_m')}: propeller diameter must be in [{lo:g}, {hi:g}] m, "
+                                      f"got {dp:g}")
         if isinstance(self.n_propellers, bool) or self.n_propellers not in KE_TABLE:
             raise FsicrInputError(f"{_label('n_propellers')}: must be 1, 2 or 3, got {self.n_propellers!r}")
         if self.propulsion not in PROPULSION_KINDS:
@@ -142,6 +155,10 @@ class Ship:
             )
         if self.lower is not None and not isinstance(self.lower, LowerWaterline):
             raise FsicrInputError(f"lower: must be a LowerWaterline, got {type(self.lower).__name__}")
+        if self.lower is not None and self.lower.T_m > self.T_m:
+            raise FsicrInputError(f"{_label('T_m', 'lower-')}: the lower ice waterline ({self.lower.T_m:g} m) lies "
+                                  f"deeper than the upper one ({_label('T_m')} = {self.T_m:g} m); the lower ice "
+                                  f"waterline is the lightest draught: give a value <= {self.T_m:g}")
 
     @property
     def phi1_effective_deg(self) -> float:

@@ -83,6 +83,9 @@ def read_ship_file(text: str) -> dict[str, Any]:
             return tomllib.load(fh)
     except tomllib.TOMLDecodeError as exc:
         raise FsicrInputError(f"ship file {text!r}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise FsicrInputError(f"ship file {text!r}: not a text file (byte {exc.start} is not UTF-8); give a TOML "
+                              f"ship file such as fsicr/ships/b063_bow_a.toml") from None
     except OSError as exc:
         raise FsicrInputError(f"ship file {text!r}: cannot be read: {exc.strerror}") from None
 

@@ -222,15 +222,15 @@ def test_every_range_reported():
 @pytest.mark.parametrize(
     "changes, message",
     [
-        ({"L_m": 0.0}, "L_m (--L): must be > 0 m"),
-        ({"B_m": -1.0}, "B_m (--B): must be > 0 m"),
+        ({"L_m": 0.0}, "L_m (--L): must be in [0.01, 1000] m"),
+        ({"B_m": -1.0}, "B_m (--B): must be in [0.01, 1000] m"),
         ({"alpha_deg": 0.0}, "alpha_deg (--alpha): angle must be in (0, 90]"),
         ({"phi2_deg": 95.0}, "phi2_deg (--phi2): angle must be in (0, 90]"),
         ({"T_m": "abc"}, "T_m (--T): must be a number"),
         ({"Awf_m2": float("nan")}, "Awf_m2 (--Awf): must be a finite number"),
         ({"n_propellers": 4}, "must be 1, 2 or 3"),
         ({"propulsion": "sail"}, "propulsion (--propulsion): must be one of cp, fp, electric, hydraulic"),
-        ({"Dp_m": 0.0}, "Dp_m (--Dp): propeller diameter must be > 0 m"),
+        ({"Dp_m": 0.0}, "Dp_m (--Dp): propeller diameter must be in [0.01, 1000] m"),
     ],
 )
 def test_ship_rejects_bad_values(changes, message):
@@ -240,7 +240,7 @@ def test_ship_rejects_bad_values(changes, message):
 
 
 def test_lower_waterline_rejects_bad_values():
-    with pytest.raises(FsicrInputError, match=r"lower_T_m \(--lower-T\): must be > 0 m"):
+    with pytest.raises(FsicrInputError, match=r"lower_T_m \(--lower-T\): must be in \[0.01, 1000\] m"):
         LowerWaterline(T_m=-2.0)
 
 

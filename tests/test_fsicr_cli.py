@@ -127,7 +127,7 @@ def test_python_dash_m_fsicr():
 
 def _file(tmp_path, text):
     path = tmp_path / "ship.toml"
-    path.write_text(text)
+    path.write_bytes(text.encode("utf-8", "surrogateescape"))    # surrogate escapes: bytes that are not UTF-8
     return str(path)
 
 
@@ -138,11 +138,20 @@ alpha_deg = 30.0\nphi1_deg = 30.0\nphi2_deg = 30.0\n"""
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["resistance", "--ship", BOW_A, "--L", "-5"], "L_m (--L): must be > 0 m, got -5"),
-        (["resistance", "--ship", BOW_A, "--L", "0"], "L_m (--L): must be > 0 m, got 0"),
+        (["resistance", "--ship", BOW_A, "--L", "-5"], "L_m (--L): must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--L", "0"], "L_m (--L): must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--L", "1e200"], "L_m (--L): must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--T", "1e300"], "T_m (--T): must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--B", "1e-300"], "B_m (--B): must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--L", "1e308", "--json"], "L_m (--L): must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--Awf", "1e300"], "Awf_m2 (--Awf): must be in (0, 1e+06] m^2"),
+        (["power", "--ship", BOW_A, "--Dp", "1e-320"], "Dp_m (--Dp): propeller diameter must be in [0.01, 1000] m"),
+        (["resistance", "--ship", BOW_A, "--class", ""], "--class: empty; give one of IA Super, IA, IB, IC"),
+        (["resistance", "--ship", BOW_A, "--lower-T", "99"], "lower_T_m (--lower-T): the lower ice waterline (99 m) "
+                                                             "lies deeper than the upper one (T_m (--T) = 11 m)"),
         (["resistance", "--ship", BOW_A, "--alpha", "95"], "alpha_deg (--alpha): angle must be in (0, 90] degrees"),
         (["resistance", "--ship", BOW_A, "--phi2", "0"], "phi2_deg (--phi2): angle must be in (0, 90] degrees"),
-        (["resistance", "--ship", BOW_A, "--lower-T", "-1"], "lower_T_m (--lower-T): must be > 0 m"),
+        (["resistance", "--ship", BOW_A, "--lower-T", "-1"], "lower_T_m (--lower-T): must be in [0.01, 1000] m"),
         (["resistance", "--ship", BOW_A, "--class", "ID"], "unknown class 'ID'; allowed: IA Super, IA, IB, IC"),
         (["resistance", "--class", "IA", *SHIP_FLAGS[2:]], "missing field 'L_m' (--L)"),
         (["resistance", "--ship", BOW_A, "--L", "abc"], "argument --L: must be a number, got 'abc'"),
@@ -172,7 +181,9 @@ def test_bad_input_gives_one_line_and_status_2(capsys, argv, message):
         (GOOD + "[lower_waterline]\nL_m = 70.0\n", "missing field 'lower_waterline.T_m' (--lower-T)"),
         (GOOD + "[lower_waterline]\nT_m = 9.0\nbeam = 3.0\n", "unknown key 'lower_waterline.beam'"),
         (GOOD + "L_m = 80.0\n", "not valid TOML"),
-        (GOOD.replace("T_m = 11.0", "T_m = -11.0"), "T_m (--T): must be > 0 m, got -11"),
+        (GOOD.replace("T_m = 11.0", "T_m = -11.0"), "T_m (--T): must be in [0.01, 1000] m"),
+        (GOOD.replace("L_m = 76.0", "L_m = 1e200"), "L_m (--L): must be in [0.01, 1000] m"),
+        ("\udcff\udcfe\x00\x01binary", "not a text file (byte 0 is not UTF-8)"),
     ],
 )
 def test_bad_ship_file_gives_one_line_and_status_2(capsys, tmp_path, text, message):

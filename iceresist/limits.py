@@ -15,6 +15,8 @@ Limits and where they come from (measured numbers: docs/VALIDATION.md, "Stabilit
 * **DEM**: the sub-step follows from the stiffness (:mod:`iceresist.dem.system`, ``2 sqrt(m/k)``); refused are a
   total sub-step count above :data:`MAX_DEM_SUBSTEPS` and a hull that moves more than
   :data:`SHIP_TRAVEL_PER_SUBSTEP` sphere radii in one sub-step (contacts would be skipped).
+* **Memory**: a scene whose LBM populations alone (two buffers of 27 per cell) exceed the memory free on this
+  machine is refused before anything is allocated (:func:`check_memory`).
 * **Ice**: cubes denser than the water cannot float; more cubes than the touching limit of the channel cannot be
   placed without overlap.
 
@@ -139,6 +141,41 @@ def check_fluid(scene, units) -> None:
 
 
 # -- ice and DEM ----------------------------------------------------------------------------------------
+def available_memory_bytes() -> int | None:
+    """Memory free for a new process (``MemAvailable`` of /proc/meminfo; None where it cannot be read)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def populations_bytes(cells: int, precision: str) -> int:
+    """Bytes of the LBM populations of ``cells`` cells: two buffers of 27 values (the least a run allocates)."""
+    return int(cells) * 2 * 27 * (4 if precision == "float32" else 8)
+
+
+def check_memory(scene, precision: str | None = None, available: int | None = None) -> None:
+    """Refuse a scene whose populations alone need more memory than is free (``available`` bytes, default the
+    machine's), naming ``domain`` and a cell count that fits."""
+    precision = precision or scene.numerics.precision
+    free = available if available is not None else available_memory_bytes()
+    shape = scene.shape_cells()
+    cells = math.prod(shape)
+    need = populations_bytes(cells, precision)
+    if free is None or need <= free:
+        return
+    fits = free // populations_bytes(1, precision)
+    side = max(8, int(fits ** (1.0 / 3.0)) // 8 * 8)
+    raise InputError(f"{scene.source_name}: domain: {shape[0]}x{shape[1]}x{shape[2]} cells need at least {need / 2 ** 30:.3g} GiB for "
+                     f"the LBM populations ({precision}), {free / 2 ** 30:.3g} GiB are free: use at most "
+                     f"{fits:.3g} cells (e.g. {side}x{side}x{side}, a coarser domain.dx_m or a smaller "
+                     f"domain.size_m)")
+
+
 def check_ice_floats(ice_density_kg_m3: float, water_density_kg_m3: float) -> None:
     """Ice denser than (or as dense as) the water cannot float: refuse, naming a density that would."""
     if ice_density_kg_m3 < water_density_kg_m3:

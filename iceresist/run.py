@@ -17,6 +17,8 @@ from pathlib import Path
 
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
+from iceresist.io.paths import check_output_dir
+from iceresist.limits import check_memory
 from iceresist.scene.load import load_scene, preset_names
 from iceresist.scene.schema import Scene
 from iceresist.simulation import IterationInterval, TimeInterval, WallTimeInterval
@@ -82,6 +84,8 @@ def cmd_run(args) -> int:
         if args.steps < 0:
             raise InputError(f"--steps: must be >= 0 (got {args.steps})")
         scene = _override(scene, "run", steps=args.steps, end_time_s=None)
+    check_output_dir(args.output if args.output is not None else scene.output.directory,
+                     "--output" if args.output is not None else "output.directory")
     h5_path, chk_path = result_paths(scene, args.output)
     pickup = args.pickup
     if pickup:
@@ -94,6 +98,7 @@ def cmd_run(args) -> int:
     elif h5_path.exists() and not args.force:
         raise InputError(f"{h5_path}: a result already exists; use --force to overwrite it or --pickup to continue it")
 
+    check_memory(scene, args.precision)
     model = build_model(scene, backend=args.backend, precision=args.precision)
     stop, outputs = scene_outputs(scene)
     result = run_model(model, scene, h5_path, chk_path, stop=stop, outputs=outputs, pickup=pickup,

@@ -31,6 +31,8 @@ import pandas as pd
 
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S
 from iceresist.errors import InputError
+from iceresist.io.paths import check_output_dir
+from iceresist.models.fluid import resolve_target
 from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, sweep_table
 from iceresist.post.sweeptable import stored_meta as _stored_meta
 from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
@@ -89,9 +91,24 @@ def resolve_cases(cases) -> list[str]:
     if cases is None or cases == "all" or cases == ["all"]:
         return list(CASES)
     if isinstance(cases, str):
-        cases = [c for c in cases.split(",") if c]
+        cases = [c.strip() for c in cases.split(",") if c.strip()]
+    if not cases:
+        raise InputError(f"--cases: no case named; give 'all' or case names such as {next(iter(CASES))}")
     names = [get_case(c).name for c in cases]
     return [c for c in CASES if c in names]
+
+
+def read_sweep_info(path: Path) -> dict:
+    """The ``sweep.json`` of a sweep folder; one that is not a JSON object names the file and the fix."""
+    try:
+        info = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise InputError(f"{path}: not a sweep description ({type(exc).__name__}); move it away or use another "
+                         f"--output folder") from None
+    if not isinstance(info, dict):
+        raise InputError(f"{path}: not a sweep description (not a JSON object); move it away or use another "
+                         f"--output folder")
+    return info
 
 
 def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "auto", progress: bool = False,
@@ -165,12 +182,13 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     names = resolve_cases(cases)
-    out = Path(out_dir)
+    out = check_output_dir(out_dir, "--output")
+    resolve_target(backend, "--backend")
     out.mkdir(parents=True, exist_ok=True)
     info = {"preset": fidelity, "tier": tier, "cases": names, "overrides": overrides or {}}
     info_path = out / "sweep.json"
     if info_path.is_file():
-        old = json.loads(info_path.read_text())
+        old = read_sweep_info(info_path)
         if (old.get("preset"), old.get("tier"), old.get("overrides", {})) != (fidelity, tier, overrides or {}):
             raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}: "
                              f"use another --output folder")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from iceresist import cli
+from iceresist.errors import InputError
 from iceresist.io import RunFile
 from iceresist.models.base import Model
 from iceresist.run import add_run_arguments
@@ -67,6 +68,42 @@ def test_bad_scenes_exit_2_with_one_line(tmp_path, main, edit, needle):
     rc, err = main(p, "--output", tmp_path / "out")
     _one_line_error(rc, err, str(p), needle) if "multiple of 8" not in needle else _one_line_error(rc, err, needle)
     assert not (tmp_path / "out" / "poiseuille.h5").exists()
+
+
+@pytest.mark.parametrize("edit, needle", [
+    (('name = "poiseuille"', 'name = ".."'), "scene.name: must start with a letter, digit or '_'"),
+    (('[output]', '[output]\ndirectory = ""'), "output.directory: must not be empty"),
+    (('[output]', '[output]\ndirectory = "  "'), "output.directory: must not be blank"),
+    (("size_m = [0.008, 0.008, 0.016]", "cells = [4096, 4096, 4096]"), "domain: 4096x4096x4096 cells need at least"),
+])
+def test_bad_names_folders_and_sizes_exit_2_before_anything_is_built(tmp_path, main, edit, needle, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    p = tmp_path / "s.toml"
+    p.write_text(POISEUILLE.replace(*edit))
+    assert edit[0] in POISEUILLE
+    rc, err = main(p)
+    _one_line_error(rc, err, needle)
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["s.toml"]
+
+
+def test_memory_check_names_a_size_that_fits():
+    from iceresist.limits import check_memory
+    from iceresist.scene import load_scene
+
+    scene = load_scene("poiseuille")                      # 8 x 8 x 16 cells: 221 kB of float32 populations
+    check_memory(scene, "float32", available=2 ** 20)
+    with pytest.raises(InputError, match=r"domain: 8x8x16 cells need at least 0.000206 GiB .* use at most 925 cells \(e.g. 8x8x8"):
+        check_memory(scene, "float32", available=200_000)
+
+
+def test_output_folders_that_cannot_hold_a_result_exit_2_and_keep_what_is_there(tmp_path, main):
+    (tmp_path / "f").write_text("keep")
+    _one_line_error(*main("poiseuille", "--output", tmp_path / "f"), "--output:", "is a file, not a folder")
+    _one_line_error(*main("poiseuille", "--output", tmp_path / "f" / "sub"), "--output:", "which is a file")
+    _one_line_error(*main("poiseuille", "--output", ""), "--output: empty")
+    _one_line_error(*main("poiseuille", "--output", "/proc/iceresist/out"), "--output:", "cannot be made")
+    assert (tmp_path / "f").read_text() == "keep"
+    assert not __import__("os").path.exists("/proc/iceresist")
 
 
 def test_missing_file_and_bad_flags(tmp_path, main):

@@ -54,7 +54,7 @@ def test_load_scene_from_a_file(tmp_path):
     (("[numerics]", "[numerics]\ntau = 0.6"), "numerics.tau: only lattice-unit scenes give tau"),
     (("[numerics]", '[numerics]\nprecision = "float16"'), "numerics.precision: must be one of 'float32' or 'float64'"),
     (("[numerics]", "[numerics]\nmach = 0.5"), "numerics.mach: must be <= 0.3 (got 0.5)"),
-    (('name = "poiseuille"', 'name = "a b"'), "scene.name: may hold only letters"),
+    (('name = "poiseuille"', 'name = "a b"'), "scene.name: must start with a letter, digit or '_' and hold only letters"),
     (('z_max = "wall"', 'z_max = { kind = "wall", velocity_m_s = [1, 0, 0] }'),
      "domain.faces.z_max.velocity_m_s: only a moving_wall or velocity_inlet face has a velocity"),
     (('z_max = "wall"', 'z_max = { kind = "moving_wall", velocity_m_s = [0, 0, 0.01] }'),

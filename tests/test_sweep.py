@@ -204,6 +204,42 @@ def test_refusals(tmp_path):
         run_sweep("quick", 3, tmp_path)
 
 
+@pytest.mark.parametrize("cases", ["", ",", " , "])
+def test_no_cases_is_refused_before_anything_is_written(tmp_path, cases):
+    with pytest.raises(InputError, match="--cases: no case named; give 'all' or case names such as A-c50-v1.0"):
+        run_sweep("quick", 1, tmp_path / "s", cases)
+    assert not (tmp_path / "s").exists()
+
+
+def test_output_that_is_a_file_or_under_one_is_refused(tmp_path):
+    (tmp_path / "f").write_text("keep")
+    for out, why in ((tmp_path / "f", "is a file, not a folder"), (tmp_path / "f" / "s", "which is a file")):
+        with pytest.raises(InputError, match=f"--output: .*{why}"):
+            run_sweep("quick", 1, out, ["A-c68-v1.0"])
+    assert (tmp_path / "f").read_text() == "keep"
+
+
+def test_cuda_without_a_gpu_names_the_flag(tmp_path, monkeypatch):
+    from iceresist.backends import jit
+
+    monkeypatch.setattr(jit, "cuda_available", lambda: False)
+    monkeypatch.setattr(jit, "_HOST_STAND_IN", False)
+    with pytest.raises(InputError, match="--backend: backend 'cuda' asked for but no CUDA GPU is visible"):
+        run_sweep("quick", 1, tmp_path / "s", ["A-c68-v1.0"], backend="cuda")
+    assert not (tmp_path / "s").exists()
+
+
+@pytest.mark.parametrize("text", ["{bad", "[1, 2]", "\udcff\udcfe"])
+def test_a_corrupt_sweep_json_names_the_file_and_is_kept(tmp_path, text):
+    out = tmp_path / "s"
+    out.mkdir()
+    (out / "sweep.json").write_bytes(text.encode("utf-8", "surrogateescape"))
+    before = (out / "sweep.json").read_bytes()
+    with pytest.raises(InputError, match="sweep.json: not a sweep description"):
+        run_sweep("quick", 1, out, ["A-c68-v1.0"])
+    assert (out / "sweep.json").read_bytes() == before
+
+
 def test_cli_errors_exit_2(tmp_path, capsys):
     import argparse
 

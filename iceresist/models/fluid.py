@@ -24,14 +24,14 @@ FOREST_FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_mi
 BLOCK = 8
 
 
-def resolve_target(backend: str):
-    """The compile target of a backend name; a CUDA request without a GPU is an input error."""
+def resolve_target(backend: str, key: str = "numerics.backend"):
+    """The compile target of a backend name; a CUDA request without a GPU is an input error naming ``key``."""
     from iceresist.backends import jit
 
     try:
         return jit.resolve_backend(backend)
     except (RuntimeError, ValueError) as exc:
-        raise InputError(f"numerics.backend: {exc}") from None
+        raise InputError(f"{key}: {exc}") from None
 
 
 def forest_faces(scene: Scene, units: Units) -> dict:

@@ -80,7 +80,11 @@ def _describe(err) -> tuple[str, bool]:
     if t == "literal_error":
         return f"must be one of {ctx.get('expected', '')}", True
     if t == "string_pattern_mismatch":
-        return "may hold only letters, digits, '_', '.' and '-'", True
+        if ctx.get("pattern") == r"\S":
+            return "must not be blank; give a folder, e.g. \"runs\"", True
+        return "must start with a letter, digit or '_' and hold only letters, digits, '_', '.' and '-'", True
+    if t == "string_too_short":
+        return "must not be empty", True
     if t in ("too_short", "too_long"):
         n = ctx.get("min_length") if t == "too_short" else ctx.get("max_length")
         return f"must have {n} items" if isinstance(err.get("input"), (list, tuple)) else \

@@ -63,8 +63,9 @@ class CaseBase(_Section):
 class SceneInfo(_Section):
     """``[scene]``: what the case is and which unit system its numbers are in."""
 
-    name: str = Field("scene", pattern=r"^[A-Za-z0-9_.-]+$", max_length=100,
-                      description="Case name; names the result file `<name>.h5`. Letters, digits, `_ . -`.")
+    name: str = Field("scene", pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$", max_length=100,
+                      description="Case name; names the result file `<name>.h5`. Letters, digits, `_ . -`, "
+                                  "starting with a letter, digit or `_`.")
     description: str = Field("", description="Free text stored in the result file.")
     units: Literal["physical", "lattice"] = Field(
         "physical", description="`physical`: SI units. `lattice`: every number in lattice units (dx = dt = rho0 = 1).")
@@ -207,7 +208,8 @@ class RunSettings(_Section):
 class Output(_Section):
     """``[output]``: where results go and how often."""
 
-    directory: str = Field("runs", description="Result folder (relative to the working directory).")
+    directory: str = Field("runs", min_length=1, pattern=r"\S",
+                           description="Result folder (relative to the working directory).")
     fields: list[Literal[FIELD_NAMES]] = Field(["rho", "u", "flags"], description="Fields in each snapshot: "
                                                + ", ".join(f"`{n}`" for n in FIELD_NAMES) + ".")
     fields_every_steps: int | None = Field(None, ge=1, description="Snapshot every N steps (and at the end). "

@@ -39,6 +39,9 @@ from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
 
 log = logging.getLogger(__name__)
 
+#: The lock file of a sweep folder (:func:`folder_lock`).
+LOCK_NAME = ".sweep.lock"
+
 #: Scene overrides of the CI-sized sweep (a 0.3 m channel crossed in 0.75 s): the machinery, not the physics.
 TINY_OVERRIDES = {"ice": {"channel_length_m": 0.3}, "run": {"end_time_s": 0.75}, "contact": {"sample_interval_s": 0.002},
                   "ship": {"steady_window_m": [4.1, 4.3], "sphere_band_m": 0.03, "sphere_spacing_m": 0.05}}
@@ -66,9 +69,45 @@ def checkpoint_path(out_dir, case: str) -> Path:
 
 
 def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
-    """The meta of ``partial`` when a killed run of the same scene can continue from ``checkpoint``, else None."""
+    """The meta of ``partial`` when a killed run of the same scene can continue from ``checkpoint``, else None.
+
+    A checkpoint that cannot be read (truncated by a full disk, a kill during a copy) cannot be continued and
+    would fail every rerun: it is moved aside (kept, ``*.unreadable-N``) with a warning, and the case starts
+    again from the beginning."""
     meta = _stored_meta(partial) if checkpoint.is_file() else None
-    return meta if meta is not None and meta.get("scene_toml") == scene_text else None
+    if meta is None or meta.get("scene_toml") != scene_text:
+        return None
+    from iceresist.io.checkpoint import read_checkpoint
+
+    try:
+        read_checkpoint(checkpoint)
+    except InputError as exc:
+        kept = set_aside(checkpoint)
+        log.warning("%s; the case starts again from the beginning (the checkpoint is kept as %s)", exc, kept.name)
+        return None
+    return meta
+
+
+def set_aside(path: Path) -> Path:
+    """Rename ``path`` to the first free ``<name>.unreadable-N``; returns the new path."""
+    n = 1
+    while path.with_name(f"{path.name}.unreadable-{n}").exists():
+        n += 1
+    new = path.with_name(f"{path.name}.unreadable-{n}")
+    path.replace(new)
+    return new
+
+
+def keep_foreign_file(path: Path) -> None:
+    """A file under a case's result name that is not a case result (random bytes, another program's HDF5) would be
+    replaced by the case's run: move it aside first, with a warning, so nothing the user put there is lost."""
+    if not path.exists():
+        return
+    meta = _stored_meta(path)
+    if meta is not None and "case" in meta:
+        return
+    kept = set_aside(path)
+    log.warning("%s: not a case result of iceresist; kept as %s, and the case runs", path, kept.name)
 
 
 def check_same_scene(path: Path, scene_text: str) -> None:
@@ -185,6 +224,32 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
     out = check_output_dir(out_dir, "--output")
     resolve_target(backend, "--backend")
     out.mkdir(parents=True, exist_ok=True)
+    lock = folder_lock(out)
+    try:
+        return _run_sweep_locked(fidelity, tier, out, names, backend=backend, progress=progress,
+                                 overrides=overrides, callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+    finally:
+        lock.release()
+
+
+def folder_lock(out: Path):
+    """The acquired exclusive lock of a sweep folder (``.sweep.lock``; the caller releases it, and the system does
+    when the process dies): a second sweep into the same folder is refused in one line instead of both writing
+    the same case files."""
+    from filelock import FileLock, Timeout
+
+    lock = FileLock(out / LOCK_NAME, timeout=0)
+    try:
+        lock.acquire()
+    except Timeout:
+        raise InputError(f"--output: another sweep is running in {out} (lock {out / LOCK_NAME}); wait for it to "
+                         f"finish or use another --output folder") from None
+    return lock
+
+
+def _run_sweep_locked(fidelity: str, tier: int, out: Path, names: list, *, backend, progress, overrides, callbacks,
+                      checkpoint_schedule) -> pd.DataFrame:
+    """:func:`run_sweep` inside the folder's lock."""
     info = {"preset": fidelity, "tier": tier, "cases": names, "overrides": overrides or {}}
     info_path = out / "sweep.json"
     if info_path.is_file():
@@ -193,6 +258,8 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
             raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}: "
                              f"use another --output folder")
         info["cases"] = [c for c in CASES if c in set(old.get("cases", [])) | set(names)]
+    for case in names:
+        keep_foreign_file(case_path(out, case))
     finished = [c for c in CASES if is_finished(case_path(out, c))]  # running one case finishes no other
     for case in finished:  # every case the table would read, before anything runs or is written
         check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)

@@ -132,6 +132,61 @@ def test_case_stopped_by_a_callback_is_not_finished(tmp_path):
         assert h5["meta"].attrs["legs"] == 2
 
 
+def test_a_truncated_checkpoint_restarts_the_case_and_is_kept(tiny_sweep, tmp_path, caplog):
+    """Killed after its checkpoint at record 20, the checkpoint cut to half its bytes: the rerun warns, keeps the
+    checkpoint as *.unreadable-1 and runs the case from the start to the uninterrupted table."""
+    _, reference = tiny_sweep
+    case = CASES[0]
+
+    def kill(sim):
+        if sim.model.iteration >= 30:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep("quick", 1, tmp_path, [case], backend="cpu", overrides=TINY_OVERRIDES,
+                  callbacks={"kill": (kill, 10)}, checkpoint_schedule=IterationInterval(20))
+    chk = checkpoint_path(tmp_path, case)
+    data = chk.read_bytes()
+    chk.write_bytes(data[: len(data) // 2])
+    with caplog.at_level("WARNING"):
+        table = run_sweep("quick", 1, tmp_path, [case], backend="cpu", overrides=TINY_OVERRIDES)
+    assert "the case starts again from the beginning" in caplog.text
+    assert chk.with_name(chk.name + ".unreadable-1").read_bytes() == data[: len(data) // 2]
+    with h5py.File(case_path(tmp_path, case), "r") as h5:
+        assert h5["meta"].attrs["legs"] == 1
+    pd.testing.assert_frame_equal(table.drop(columns=VARYING), reference.drop(columns=VARYING).iloc[:1],
+                                  check_exact=True)
+
+
+def test_a_foreign_file_in_a_case_place_is_kept_and_a_broken_result_named(tmp_path, caplog):
+    from iceresist.sweep import keep_foreign_file
+
+    path = case_path(tmp_path, CASES[0])
+    path.parent.mkdir(parents=True)
+    path.write_bytes(b"\x89HDF not really" * 10)
+    with caplog.at_level("WARNING"):
+        keep_foreign_file(path)
+    assert not path.exists() and "not a case result of iceresist" in caplog.text
+    assert path.with_name(path.name + ".unreadable-1").read_bytes() == b"\x89HDF not really" * 10
+    with h5py.File(path, "w") as h5:                       # marked finished, holds nothing
+        h5.create_group("meta").attrs.update({"finished": True, "case": CASES[0]})
+    with pytest.raises(InputError, match="marked finished but not a readable case result.*move it away"):
+        sweep_table(tmp_path)
+
+
+def test_a_second_sweep_into_a_locked_folder_is_refused(tmp_path):
+    from iceresist.sweep import folder_lock
+
+    tmp_path.joinpath("s").mkdir()
+    lock = folder_lock(tmp_path / "s")
+    try:
+        with pytest.raises(InputError, match="--output: another sweep is running in"):
+            run_sweep("quick", 1, tmp_path / "s", [CASES[0]], backend="cpu", overrides=TINY_OVERRIDES)
+    finally:
+        lock.release()
+    assert sorted(p.name for p in (tmp_path / "s").iterdir()) == [".sweep.lock"]
+
+
 def test_checkpoint_of_another_scene_is_not_continued(tmp_path):
     """A partial case whose scene has changed since (here: the channel length) runs again from its start."""
     case = CASES[0]

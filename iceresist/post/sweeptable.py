@@ -51,7 +51,18 @@ def sweep_table(out_dir) -> pd.DataFrame:
     from iceresist.ship.cases import CASES
 
     out = Path(out_dir)
-    return pd.DataFrame([analyse_case(case_path(out, c)) for c in CASES if is_finished(case_path(out, c))])
+    return pd.DataFrame([_analyse(case_path(out, c)) for c in CASES if is_finished(case_path(out, c))])
+
+
+def _analyse(path: Path) -> dict:
+    """:func:`analyse_case`, a file that is not a whole case result named in one line."""
+    from iceresist.errors import InputError
+
+    try:
+        return analyse_case(path)
+    except (KeyError, OSError, ValueError, IndexError) as exc:
+        raise InputError(f"{path}: marked finished but not a readable case result ({type(exc).__name__}: {exc}); "
+                         f"move it away and run the sweep again to redo the case") from None
 
 
 def preset_note(preset: str | None, tier: int) -> str:

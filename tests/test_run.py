@@ -210,6 +210,19 @@ def test_existing_result_is_kept_unless_force(tmp_path, main, fake_model):
 from iceresist.models import build_model as _real_build_model  # noqa: E402
 
 
+def test_three_legs_are_all_on_record(tmp_path, main, fake_model):
+    """Two continuations of one result: legs_json holds every leg, with the iteration each started from."""
+    import json
+
+    assert main("poiseuille", "--output", tmp_path, "--steps", "300")[0] == 0
+    assert main("poiseuille", "--output", tmp_path, "--steps", "600", "--pickup")[0] == 0
+    assert main("poiseuille", "--output", tmp_path, "--steps", "900", "--pickup")[0] == 0
+    with RunFile(tmp_path / "poiseuille.h5") as rf:
+        m = rf.meta
+    assert m["legs"] == 3 and m["steps"] == 900
+    assert [(g["leg"], g["from_iteration"]) for g in json.loads(m["legs_json"])] == [(1, 0), (2, 300), (3, 600)]
+
+
 def test_pickup_continues_a_result(tmp_path, main, fake_model):
     assert main("poiseuille", "--output", tmp_path, "--steps", "700")[0] == 0
     assert main("poiseuille", "--output", tmp_path, "--steps", "1200", "--pickup")[0] == 0

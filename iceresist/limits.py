@@ -105,14 +105,15 @@ def check_lattice_speed_for_operator(scene, units) -> None:
     limit = min(LATTICE_SPEED_MAX[op], MACH_LATTICE_CEILING)
     if u_lat <= limit * (1.0 + 1e-9):
         return
+    fastest, speed = scene.fastest()
     if scene.is_lattice:
-        fix = f"scale the speeds in the scene down by {_g(limit / u_lat)}"
-        key = "lattice speed"
+        fix = f"scale the speeds in the scene down by {_g(limit / u_lat)} (e.g. {fastest} <= {_g(speed * limit / u_lat)})"
+        key = fastest
     else:
         fix = f"use numerics.dt_s <= {_g(units.dt_s * limit / u_lat)} s (or leave it out)"
         key = "numerics.dt_s"
-    raise StabilityError(f"{key}: the largest speed is {_g(u_lat)} in lattice units, above the limit {_g(limit)} "
-                         f"of the {op} operator: {fix}")
+    raise StabilityError(f"{key}: the largest speed ({fastest} = {_g(speed)}) is {_g(u_lat)} in lattice units, "
+                         f"above the limit {_g(limit)} of the {op} operator: {fix}")
 
 
 def check_step_count(scene, dt_s: float, *, dt_key: str = "numerics.dt_s") -> int:

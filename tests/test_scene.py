@@ -95,7 +95,7 @@ def test_unstable_settings_are_refused_at_load():
     with pytest.raises(StabilityError, match="above the limit 0.1"):
         parse_scene(BASE.replace("[numerics]", "[numerics]\ndt_s = 0.5"))
     cav = preset_text("cavity")
-    with pytest.raises(StabilityError, match="largest speed in the scene is 0.2"):
+    with pytest.raises(StabilityError, match=r"domain.faces.z_max.velocity_m_s = 0.2 \(the largest speed in the scene\) is 0.2"):
         parse_scene(cav.replace("velocity_m_s = [0.05, 0.0, 0.0]", "velocity_m_s = [0.2, 0.0, 0.0]"))
 
 

@@ -63,7 +63,13 @@ def build_scene(n_cubes=4096, spheres_per_edge=3, backend="cpu", precision="floa
 
 
 def run(args) -> list[dict]:
-    s, ship = build_scene(args.n, getattr(args, "spheres_per_edge", 3), args.backend, args.precision)
+    """One measurement per precision (``args.precision``: one name, or the dispatcher's list of them)."""
+    precisions = [args.precision] if isinstance(args.precision, str) else list(args.precision)
+    return [measure(args, p) for p in precisions]
+
+
+def measure(args, precision: str) -> dict:
+    s, ship = build_scene(args.n, getattr(args, "spheres_per_edge", 3), args.backend, precision)
     dt = getattr(args, "dt", 2e-3)
     t0 = time.perf_counter()
     s.step(dt)  # warm-up: compiles the kernels
@@ -77,14 +83,14 @@ def run(args) -> list[dict]:
     seconds = time.perf_counter() - t0
     substeps = s.substeps_taken - sub0
     ns = s.n_spheres
-    return [{
-        "name": "dem", "backend": s.describe()["backend"], "precision": args.precision, "bodies": s.n_bodies,
+    return {
+        "name": "dem", "backend": s.describe()["backend"], "precision": precision, "bodies": s.n_bodies,
         "spheres": ns, "steps": args.steps, "substeps": substeps, "substep_s": s.substep_s(),
         "seconds": seconds, "compile_seconds": compile_s,
         "sphere_steps_per_s": ns * substeps / seconds,
         "contacts_per_s": contacts / seconds,
         "contacts_last": s.contact_count(), "ice_force_N": s.ice_force_on(ship).tolist(),
-    }]
+    }
 
 
 def main(argv=None):

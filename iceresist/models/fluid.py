@@ -51,8 +51,9 @@ def check_block_shape(shape_cells) -> None:
     for axis, n in zip("xyz", shape_cells):
         if n % BLOCK:
             lo, hi = max(BLOCK, n // BLOCK * BLOCK), (n // BLOCK + 1) * BLOCK
+            use = f"{lo}" if lo == hi else f"{lo} or {hi}"
             raise InputError(f"domain: {n} cells along {axis} is not a multiple of {BLOCK} (blocks of 8x8x8 cells): "
-                             f"use {lo} or {hi} cells (change domain.cells, or domain.size_m / domain.dx_m)")
+                             f"use {use} cells (change domain.cells, or domain.size_m / domain.dx_m)")
 
 
 class FluidModel(Model):

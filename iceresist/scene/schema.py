@@ -33,7 +33,7 @@ FIELD_NAMES = ("rho", "u", "pressure", "flags", "phi", "surface")
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_default=True)
+    model_config = ConfigDict(extra="forbid", validate_default=True, allow_inf_nan=False)
 
 
 def _norm(v) -> float:
@@ -447,23 +447,29 @@ class Scene(_Section):
     def shape_cells(self) -> tuple[int, int, int]:
         return self.domain.shape_cells()
 
-    def largest_speed_m_s(self) -> float:
-        """The largest speed the scene names: faces, initial flow, ship, bodies and ``numerics.u_max_m_s``."""
-        speeds = [_norm(f.velocity_m_s) for _, f in self.domain.faces.items()]
-        speeds.append(_norm(self.fluid.initial_velocity_m_s))
+    def fastest(self) -> tuple[str, float]:
+        """(key, speed): the scene key that names the largest speed (faces, initial flow, ship, bodies,
+        ``numerics.u_max_m_s``), and that speed; messages about the speed name the key the user wrote."""
+        speeds = [(f"domain.faces.{n}.velocity_m_s", _norm(f.velocity_m_s)) for n, f in self.domain.faces.items()]
+        speeds.append(("fluid.initial_velocity_m_s", _norm(self.fluid.initial_velocity_m_s)))
         if self.ship is not None:
-            speeds.append(self.ship.speed_m_s)
-        speeds += [_norm(b.velocity_m_s) for b in self.bodies]
+            speeds.append(("ship.speed_m_s", self.ship.speed_m_s))
+        speeds += [(f"bodies[{i}].velocity_m_s", _norm(b.velocity_m_s)) for i, b in enumerate(self.bodies)]
         if self.numerics.u_max_m_s is not None:
-            speeds.append(self.numerics.u_max_m_s)
-        return max(speeds)
+            speeds.append(("numerics.u_max_m_s", self.numerics.u_max_m_s))
+        return max(speeds, key=lambda ks: ks[1])
+
+    def largest_speed_m_s(self) -> float:
+        """The largest speed the scene names (:meth:`fastest`)."""
+        return self.fastest()[1]
 
     def units(self) -> Units:
         """Lattice scales of this scene; raises StabilityError when it cannot run stably."""
         n = self.numerics
         if self.is_lattice:
             u = Units.lattice(tau=n.tau, nu=self.fluid.nu_m2_s, min_tau_excess=n.min_tau_excess)
-            check_lattice_velocity(self.largest_speed_m_s(), n.mach, what="the largest speed in the scene")
+            key, speed = self.fastest()
+            check_lattice_velocity(speed, n.mach, what=f"{key} = {speed:g} (the largest speed in the scene)")
             return u
         g = _norm(self.fluid.gravity_m_s2) or 9.81
         depth = self.free_surface.water_depth_m if self.free_surface is not None else None

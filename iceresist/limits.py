@@ -53,6 +53,12 @@ MAX_DEM_SUBSTEPS = 20_000_000
 #: Largest hull travel in one DEM sub-step, in sphere radii (beyond it a hull sphere passes half way through an
 #: ice sphere between two contact evaluations).
 SHIP_TRAVEL_PER_SUBSTEP = 0.5
+#: Largest overlap of a floe struck at the hull's speed, v sqrt(m/k) (the peak of an undamped spring of stiffness
+#: k stopping the mass m), in sphere radii: beyond it the spheres of the two bodies pass through one another and
+#: the contact force throws them apart. Measured on the quick tier-1 case A-c68-v1.0 (k = 5000 N/m, 2-core x86
+#: VM): 2.06 and 3.0 m/s (0.72 and 1.05 radii) run to the end; 3.5, 4.0 and 4.8 m/s (1.24-1.7 radii) run away
+#: within 32-70 records. The paper's fastest case, 2 knots, overlaps 0.36 radii.
+IMPACT_OVERLAP_MAX = 1.0
 
 
 def _g(x: float) -> str:
@@ -254,11 +260,32 @@ def check_tier1(model) -> None:
             f"(2 sqrt(m/k) x contact.dem_safety), {total:.3g} sub-steps in all, above the maximum "
             f"{MAX_DEM_SUBSTEPS:.0e}: use contact.stiffness_N_m <= {_g(k_ok)} or a shorter run.end_time_s")
     radius = model.cube.sphere_radius_m
+    from iceresist.scene.schema import Contact
+
+    # name first the key far from its usual value: a spring ten times softer than the default, else the speed
+    soft = k < 0.1 * Contact.model_fields["stiffness_N_m"].default
+    overlap = model.speed_m_s * math.sqrt(model.cube.mass_kg / k)
+    if overlap > IMPACT_OVERLAP_MAX * radius:
+        ratio = IMPACT_OVERLAP_MAX * radius / overlap
+        fixes = [f"ship.speed_m_s <= {_g(model.speed_m_s * ratio)}", f"contact.stiffness_N_m >= {_g(k / ratio ** 2)}"]
+        if soft:
+            fixes.reverse()
+        raise StabilityError(
+            f"{fixes[0].split(' ')[0]}: a floe struck at {_g(model.speed_m_s)} m/s would overlap the hull by "
+            f"{_g(overlap)} m (v sqrt(m/k), m = {_g(model.cube.mass_kg)} kg, k = {_g(k)} N/m), more than "
+            f"{IMPACT_OVERLAP_MAX:g} of the sphere radius {_g(radius)} m (the bodies would pass through one "
+            f"another): use {fixes[0]} or {fixes[1]}")
     travel = model.speed_m_s * model.substep_s
     if travel > SHIP_TRAVEL_PER_SUBSTEP * radius:
-        v_ok = SHIP_TRAVEL_PER_SUBSTEP * radius / model.substep_s
+        ratio = SHIP_TRAVEL_PER_SUBSTEP * radius / travel        # the sub-step must shrink by this factor
+        v_ok, safety_ok, k_ok = model.speed_m_s * ratio, model.contact.dem_safety * ratio, k / ratio ** 2
+        fixes = [f"ship.speed_m_s <= {_g(v_ok)}", f"contact.dem_safety <= {_g(safety_ok)}",
+                 f"contact.stiffness_N_m >= {_g(k_ok)}"]
+        key = "contact.stiffness_N_m" if soft else "ship.speed_m_s"
+        if soft:
+            fixes = fixes[2:] + fixes[:2]
         raise StabilityError(
-            f"ship.speed_m_s: {_g(model.speed_m_s)} m/s moves the hull {_g(travel)} m per DEM sub-step, more than "
-            f"{SHIP_TRAVEL_PER_SUBSTEP:g} of the sphere radius {_g(radius)} m (contacts would be missed): use "
-            f"ship.speed_m_s <= {_g(v_ok)} or contact.dem_safety <= "
-            f"{_g(model.contact.dem_safety * v_ok / model.speed_m_s)}")
+            f"{key}: the hull moves {_g(travel)} m per DEM sub-step ({_g(model.speed_m_s)} m/s x "
+            f"{model.substep_s:.3g} s, the sub-step of k = {_g(k)} N/m), more than {SHIP_TRAVEL_PER_SUBSTEP:g} of "
+            f"the sphere radius {_g(radius)} m (contacts would be missed): use {fixes[0]}, or {fixes[1]}, or "
+            f"{fixes[2]}")

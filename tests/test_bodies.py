@@ -216,21 +216,28 @@ density_kg_m3 = 2000.0
     assert row["heavy_vz_m_s"] == pytest.approx(-0.5 * g * dt, rel=1e-3)
     model.step(9)
     row = model.diagnostics()
-    assert abs(row["even_vz_m_s"]) < 1e-3 * abs(row["heavy_vz_m_s"])
+    # the flow the heavy sphere drives reaches the other (measured 2 % of its speed); a buoyancy of the wrong
+    # sign would pull the even one down at 2 g, faster than the heavy one
+    assert abs(row["even_vz_m_s"]) < 0.05 * abs(row["heavy_vz_m_s"])
     assert row["heavy_vz_m_s"] < -5 * 0.5 * g * dt          # still falling, faster
 
 
 def test_a_box_held_at_half_submergence_feels_archimedes():
     """Free surface: a 40 mm cube held fixed with its bottom 20 mm under the still level (faces on cell faces)
-    feels rho g V_submerged = 1000 x 9.81 x 0.04 x 0.04 x 0.02 = 0.314 N from the water, within 3 %."""
+    feels rho g V_submerged = 1000 x 9.81 x 0.04 x 0.04 x 0.02 = 0.314 N from the water: the mean of the force
+    over steps 20-300 within 3 % (measured +0.7 %; placing the cube starts a slosh of about 7 %, period about
+    100 steps, so a single reading is not enough)."""
     text = TANK.replace("cells = [16, 16, 24]", "cells = [24, 24, 24]").replace(
         'size_m = [0.03, 0.03, 0.03]\nposition_m = [0.04, 0.04, 0.05]\ndensity_kg_m3 = 900.0',
         'size_m = [0.04, 0.04, 0.04]\nposition_m = [0.06, 0.06, 0.06]\nmotion = "fixed"')
     model = build_model(parse_scene(text))
-    model.step(40)
-    fz = model.diagnostics()["floe_Fz_N"]
+    model.step(20)
+    fz = []
+    for _ in range(28):
+        model.step(10)
+        fz.append(model.diagnostics()["floe_Fz_N"])
     archimedes = 1000.0 * 9.81 * 0.04 * 0.04 * 0.02
-    assert fz == pytest.approx(archimedes, rel=0.03)
+    assert np.mean(fz) == pytest.approx(archimedes, rel=0.03)
 
 
 @pytest.mark.parametrize("k", [0, 1])

@@ -324,16 +324,17 @@ class BodiesModel(Model):
 
     def fields(self) -> dict[str, np.ndarray]:
         """Fluid only: rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge), flags (uint8; a cell a body
-        covers is GHOST), NaN in solids and bodies. Free surface: as :class:`FreeSurfaceModel` (rho0, u = 0 and
-        pressure 0 in the gas and the bodies), with phi and surface."""
+        covers is GHOST); rho0, u = 0 and pressure 0 in solids and bodies (the field writer takes a NaN for a
+        blow-up). Free surface: as :class:`FreeSurfaceModel` (rho0, u = 0 and pressure 0 in the gas and the
+        bodies), with phi and surface (0 in a column without a crossing of phi = 1/2)."""
         from iceresist.grid import flags as FL
 
         u = self.units
         if not self.free_surface:
             rho_lat, u_lat = self.solver.macroscopic()
             now = self._dense_mask(self._fluid_now())
-            rho_lat = np.where(now, rho_lat, np.nan)
-            u_lat = np.where(now[None], u_lat, np.nan)
+            rho_lat = np.where(now, rho_lat, 1.0)
+            u_lat = np.where(now[None], u_lat, 0.0)
             flags = self.forest.to_dense(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64))
             return {"rho": u.density_to_physical(rho_lat),
                     "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
@@ -345,11 +346,12 @@ class BodiesModel(Model):
         u_lat = np.where(liquid[None], u_lat, 0.0)
         fl = self.fb.fluid
         flags = np.asarray(fl._host(fl.fluid.flags)).astype(np.float64)
-        surface = fl.surface_height()
+        surface = np.nan_to_num(fl.surface_height(), nan=0.0)
         return {"rho": u.density_to_physical(rho_lat),
                 "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
-                "flags": self.forest.to_dense(flags).astype(np.uint8), "phi": phi,
+                "flags": np.nan_to_num(self.forest.to_dense(flags), nan=FL.SOLID).astype(np.uint8),
+                "phi": np.nan_to_num(phi, nan=0.0),
                 "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
 
     def field_units(self, lattice: bool) -> dict[str, str]:

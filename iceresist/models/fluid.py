@@ -111,10 +111,16 @@ class FluidModel(Model):
         self.solver.step(n)
 
     def fields(self) -> dict[str, np.ndarray]:
-        """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)), flags (uint8); NaN in solids."""
+        """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)), flags (uint8); in solid
+        cells (``domain.pad_to_blocks``) rho0, u = 0 and pressure 0, so that the field writer's NaN check sees only
+        a blow-up."""
         from iceresist.grid import flags as FL
 
         rho_lat, u_lat = self.solver.macroscopic()
+        solid = ~np.isfinite(rho_lat) & np.nan_to_num(self.forest.to_dense((~self.forest.fluid).astype(np.float64)),
+                                                       nan=1.0).astype(bool)
+        rho_lat = np.where(solid, 1.0, rho_lat)
+        u_lat = np.where(solid[None], 0.0, u_lat)
         u = self.units
         flags = self.forest.to_dense(self.forest.flags.astype(np.float64))
         return {"rho": u.density_to_physical(rho_lat),

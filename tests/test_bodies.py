@@ -187,11 +187,10 @@ dx_m = 0.001
 nu_m2_s = 1.0e-4
 rho_kg_m3 = 1000.0
 gravity_m_s2 = [0.0, 0.0, -9.81]
-operator = "bgk"
 [numerics]
 dt_s = 0.001
 u_max_m_s = 0.01
-precision = "float64"
+precision = "float32"
 [run]
 steps = 10
 [[bodies]]

@@ -41,7 +41,7 @@ def test_load_scene_from_a_file(tmp_path):
 
 @pytest.mark.parametrize("edit, expected", [
     (("dx_m = 0.001", "dx_m = -1"), "scene.toml: domain.dx_m: must be > 0 (got -1)"),
-    (("dx_m = 0.001", "dx_m = 0.001\ndxx = 3"), "scene.toml: domain.dxx: unknown key (allowed: size_m, cells, dx_m, faces)"),
+    (("dx_m = 0.001", "dx_m = 0.001\ndxx = 3"), "scene.toml: domain.dxx: unknown key (allowed: size_m, cells, dx_m, faces, pad_to_blocks)"),
     (("[fluid]", "[fluids]"), "scene.toml: fluids: unknown key (allowed: scene, domain, fluid,"),
     (("nu_m2_s = 1.0e-6", 'nu_m2_s = "water"'), 'scene.toml: fluid.nu_m2_s: must be a number (got "water")'),
     (('x_min = "periodic"', 'x_min = "periodc"'), "domain.faces.x_min.kind: must be one of 'periodic', 'wall'"),

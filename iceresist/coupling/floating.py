@@ -54,29 +54,31 @@ class FloatingBodies:
     ``rho_kg_m3``: water density; ``operator`` ("bgk" or "cumulant"), ``precision``, ``target`` as in
     :class:`~iceresist.lbm.solver.LBMSolver`; ``mobility``, ``width``: the phase field (eqs. 9-10);
     ``dem``: a :class:`~iceresist.dem.DEMSystem` with contact parameters and walls of your own (its gravity
-    must be (0, 0, -9.81)), default one with the tank floor as a wall; ``contact_film``: the fluid pressure on
-    faces in contact (:class:`~iceresist.coupling.FluidStructureCoupling`).
+    must be (0, 0, -``g_m_s2``)), default one with the tank floor as a wall; ``contact_film``: the fluid pressure
+    on faces in contact (:class:`~iceresist.coupling.FluidStructureCoupling`); ``h_lattice``: the velocity set of
+    the phase-field populations; ``g_m_s2``: gravity (m/s^2; with ``g_lattice`` it sets dt, so that a scene in
+    lattice units, g = g_lattice and dx = 1, gets dt = 1).
     """
 
     def __init__(self, shape_cells, *, depth_m: float, dx_m: float, tau: float = 0.55, g_lattice: float = 1e-3,
                  rho_kg_m3: float = 1000.0, operator: str = "bgk", precision: str = "float64", target=jit.cpu,
                  mobility: float = 0.05, width: float = 3.0, dem: DEMSystem | None = None,
-                 contact_film: bool = True):
+                 contact_film: bool = True, h_lattice: str = "D3Q15", g_m_s2: float = GRAVITY_M_S2):
         shape = tuple(int(v) for v in shape_cells)
         if len(shape) != 3 or any(v <= 0 or v % 8 for v in shape):
             raise InputError(f"shape_cells must be three positive multiples of 8, got {shape_cells!r}")
         if not 0 < g_lattice <= 0.01:
             raise InputError(f"g_lattice must lie in (0, 0.01] (lattice units), got {g_lattice}")
         self.dx_m = float(dx_m)
-        self.dt_s = math.sqrt(g_lattice * self.dx_m / GRAVITY_M_S2)
+        self.dt_s = math.sqrt(g_lattice * self.dx_m / float(g_m_s2))
         self.units = Units.from_lattice(self.dx_m, self.dt_s, float(rho_kg_m3), tau)
         self.depth_cells = float(depth_m) / self.dx_m
         self.forest = BlockForest.uniform(shape, {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
         self.fluid = FreeSurfaceFluid(self.forest, tau=tau, gravity_lattice=g_lattice, depth_cells=self.depth_cells,
-                                      mobility=mobility, width=width, operator=operator, precision=precision,
-                                      target=target, f_pool_margin=None)
+                                      mobility=mobility, width=width, h_lattice=h_lattice, operator=operator,
+                                      precision=precision, target=target, f_pool_margin=None)
         if dem is None:     # on the fluid's target, so that the coupling reads and writes the bodies there
-            dem = DEMSystem(backend="cuda" if target.is_cuda else "cpu", gravity_m_s2=(0.0, 0.0, -GRAVITY_M_S2))
+            dem = DEMSystem(backend="cuda" if target.is_cuda else "cpu", gravity_m_s2=(0.0, 0.0, -float(g_m_s2)))
             dem.add_wall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
         self.dem = dem
         self.contact_film = bool(contact_film)

@@ -7,6 +7,7 @@ model                      what it holds                                        
 :class:`FreeSurfaceModel`  LBM + phase field (eqs. 1-11)                           ``[free_surface]``
 :class:`Tier1Model`        DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
 :class:`Tier2Model`        free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
+:class:`BodiesModel`       LBM (free surface optional) + DEM + coupling            ``[[bodies]]`` (no ship)
 =========================  ======================================================  =============================
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
@@ -17,17 +18,22 @@ from __future__ import annotations
 
 from iceresist.errors import InputError
 from iceresist.models.base import Model
+from iceresist.models.bodies import BodiesModel
 from iceresist.models.fluid import FluidModel, FreeSurfaceModel
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "Tier1Model", "Tier2Model", "build_model"]
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
 
 
 def build_model(scene, *, backend: str | None = None, precision: str | None = None) -> Model:
     """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
-    alone), and tier-1 and tier-2 ship scenes ([ship] + [ice])."""
+    alone), tier-1 and tier-2 ship scenes ([ship] + [ice]) and scenes of rigid bodies ([[bodies]], with or
+    without [free_surface] and [contact])."""
     if scene.ship is not None and scene.ice is not None:
+        if scene.bodies:
+            raise InputError(f"{scene.source_name}: bodies: a ship scene takes no extra [[bodies]] yet; remove "
+                             f"the [[bodies]] tables (or the [ship] and [ice] sections)")
         model = Tier2Model if scene.ship.tier == 2 else Tier1Model
         return model(scene, backend=backend, precision=precision)
     extra = scene.optional_sections()
@@ -35,6 +41,8 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     if wants and scene.free_surface is None:
         raise InputError(f"output.fields: {', '.join(wants)} need a [free_surface] section; "
                          f"remove them from output.fields")
+    if scene.bodies and set(extra) <= {"free_surface", "contact", "bodies"}:
+        return BodiesModel(scene, backend=backend, precision=precision)
     if extra == ["free_surface"]:
         return FreeSurfaceModel(scene, backend=backend, precision=precision)
     if extra:

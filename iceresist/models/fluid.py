@@ -56,6 +56,20 @@ def check_block_shape(shape_cells) -> None:
                              f"use {use} cells (change domain.cells, or domain.size_m / domain.dx_m)")
 
 
+def padding_solid(scene: Scene):
+    """``solid(x, y, z)`` of the cells beyond the box that ``domain.pad_to_blocks`` adds (None where there are
+    none): the grid is :meth:`~iceresist.scene.schema.Domain.padded_cells`, the box its first
+    :meth:`~iceresist.scene.schema.Domain.shape_cells`."""
+    n = scene.domain.shape_cells()
+    if tuple(scene.domain.padded_cells()) == tuple(n):
+        return None
+
+    def outside_box(x, y, z):
+        return (x >= n[0]) | (y >= n[1]) | (z >= n[2])
+
+    return outside_box
+
+
 class FluidModel(Model):
     """The LBM fluid alone: a uniform block forest and an :class:`~iceresist.lbm.solver.LBMSolver`.
 
@@ -68,7 +82,7 @@ class FluidModel(Model):
         self.scene = scene
         self.units = scene.units()
         u = self.units
-        self.shape_cells = scene.shape_cells()
+        self.shape_cells = scene.domain.padded_cells()
         check_block_shape(self.shape_cells)
         from iceresist.limits import check_fluid
 
@@ -79,7 +93,7 @@ class FluidModel(Model):
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
-        self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u))
+        self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u), solid=padding_solid(scene))
         fl = scene.fluid
         self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
                                    for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
@@ -98,10 +112,16 @@ class FluidModel(Model):
         self.solver.step(n)
 
     def fields(self) -> dict[str, np.ndarray]:
-        """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)), flags (uint8); NaN in solids."""
+        """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)), flags (uint8); in solid
+        cells (``domain.pad_to_blocks``) rho0, u = 0 and pressure 0, so that the field writer's NaN check sees only
+        a blow-up."""
         from iceresist.grid import flags as FL
 
         rho_lat, u_lat = self.solver.macroscopic()
+        solid = ~np.isfinite(rho_lat) & np.nan_to_num(self.forest.to_dense((~self.forest.fluid).astype(np.float64)),
+                                                       nan=1.0).astype(bool)
+        rho_lat = np.where(solid, 1.0, rho_lat)
+        u_lat = np.where(solid[None], 0.0, u_lat)
         u = self.units
         flags = self.forest.to_dense(self.forest.flags.astype(np.float64))
         return {"rho": u.density_to_physical(rho_lat),

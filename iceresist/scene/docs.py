@@ -162,10 +162,11 @@ written.
 * **Optional sections** (`[free_surface]`, `[ship]`, `[ice]`, `[contact]`,
   `[[bodies]]`): a scene that leaves them out allocates nothing for them.
   `iceresist run` runs fluid-only scenes, free-surface scenes
-  (`[free_surface]` alone) and ship scenes (`[ship]` with `[ice]`:
+  (`[free_surface]` alone), ship scenes (`[ship]` with `[ice]`:
   `ship.tier = 1` is the DEM with water models, `ship.tier = 2` the coupled
-  LBM-DEM, which also needs `[free_surface]`); any other combination is
-  refused with a message.
+  LBM-DEM, which also needs `[free_surface]`) and body scenes (`[[bodies]]`,
+  with or without `[free_surface]` and `[contact]`, no ship; see "Bodies"
+  below); any other combination is refused with a message.
 * **Tank blockage (tier 2).** The hull's midship section fills a part m of
   the tank's wet section (width x `free_surface.water_depth_m`). Above
   Schijf's limiting speed (depth Froude number 0.47 at the paper's m = 0.20,
@@ -186,10 +187,52 @@ written.
 |---|---|
 | `meta` (attributes) | scene TOML text, version, git revision, backend, device, precision, cells, steps, wall time, MLUPS, units, stop reason |
 | `fields/<iteration>/rho`, `u`, `pressure`, `flags` (free surface also `phi`, `surface`) | snapshots, float32 (flags uint8), stored `[z, y, x]` (`u`: `[z, y, x, 3]`) as ParaView reads them; attributes `iteration`, `time_s`, `units` |
-| `timeseries/iteration`, `time_s`, `mass_kg`, `kinetic_energy_J`, `max_speed_m_s`, `max_lattice_speed` (free surface also `water_volume_m3`, `water_volume_drift`, `surface_mean_m`, `f_rows_in_use`) | one row every `output.timeseries_every_steps` |
+| `timeseries/iteration`, `time_s`, `mass_kg`, `kinetic_energy_J`, `max_speed_m_s`, `max_lattice_speed` (free surface also `water_volume_m3`, `water_volume_drift`, `surface_mean_m`, `f_rows_in_use`; bodies: the per-body columns of "Bodies") | one row every `output.timeseries_every_steps` |
 
 Read a field back in the engine's `[x, y, z]` order with
 `iceresist.io.RunFile(path).read_field(iteration, "u")`.
+
+## Bodies
+
+A scene with `[[bodies]]` and no ship runs boxes and spheres in the fluid
+(`iceresist.models.BodiesModel`): the LBM, the DEM and the coupling of the
+paper (interpolated bounce-back, momentum exchange, eqs. 16-21).
+
+* `motion = "free"`: the body moves under gravity, the fluid force and the
+  contacts (`density_kg_m3` sets its mass); `"fixed"`: at rest;
+  `"prescribed"`: moves at `velocity_m_s`. Fixed and prescribed bodies push
+  the fluid and the free bodies and are not moved by either.
+* Without `[free_surface]` the box's faces are the scene's (inlets, outlets,
+  periodic, walls); gravity (`fluid.gravity_m_s2`) acts on the bodies and the
+  fluid adds the buoyancy -rho V g to each (the flow carries no hydrostatic
+  pressure). `domain.pad_to_blocks` keeps a box that is not whole blocks.
+* With `[free_surface]` the domain is a closed tank (every face a `wall`) of
+  still water at `free_surface.water_depth_m`; the buoyancy is the water's
+  hydrostatic pressure. Populations are kept in every block.
+* The domain's wall faces are contact planes. Without `[contact]` the DEM
+  keeps its own contact law; with it, its stiffness, restitution, friction
+  (`friction_ice_ice` between free bodies, `friction_ice_hull` against fixed
+  and prescribed ones and walls) and sub-step apply.
+* Refused with one line: a body reaching outside the domain, bodies
+  overlapping at t = 0, a free body without `density_kg_m3`, a fixed body
+  with a velocity, bodies in a ship scene.
+
+The time series holds, per body `<name>`, every `output.timeseries_every_steps`:
+
+| column | content |
+|---|---|
+| `<name>_x_m`, `_y_m`, `_z_m` | centre of mass (m) |
+| `<name>_vx_m_s`, `_vy_m_s`, `_vz_m_s` | velocity (m/s) |
+| `<name>_Fx_N`, `_Fy_N`, `_Fz_N` | force of the fluid on the body (N): the momentum exchange averaged over two steps (eq. 20), the buoyancy included |
+| `<name>_Tx_N_m`, `_Ty_N_m`, `_Tz_N_m` | torque of the fluid about the centre of mass (N m, eq. 21) |
+
+and the fluid's `mass_kg`, `kinetic_energy_J`, `max_speed_m_s`,
+`max_lattice_speed` over the cells that are fluid now (with a free surface
+also `water_volume_m3`, `water_volume_drift` and `water_level_m`, the mean
+height of the surface over the columns no body reaches). A lattice-unit scene
+writes every column in lattice units. The three reference cases with bodies
+are scene files that run as they stand:
+`iceresist/validate/scenes/{sphere_drag,floating_cube,settling_sphere}.toml`.
 
 ## Key reference
 
@@ -256,6 +299,89 @@ friction_ice_hull = 0.1
 """
 
 
+#: Complete ``[[bodies]]`` scenes (title, TOML) for docs/SCENES.md; tests/test_bodies.py parses them.
+BODY_EXAMPLES = [("A fixed sphere in a channel (bodies, SI units)", """# A 10 mm sphere held fixed in a water channel at 10 mm/s (Re = 100): velocity inlet, pressure outlet, periodic
+# sides. Its drag is sphere_Fx_N of the time series.
+[scene]
+name = "sphere_in_channel"
+
+[domain]
+size_m = [0.16, 0.08, 0.08]
+dx_m = 0.002
+
+[domain.faces]
+x_min = { kind = "velocity_inlet", velocity_m_s = [0.01, 0.0, 0.0] }
+x_max = "pressure_outlet"
+y_min = "periodic"
+y_max = "periodic"
+z_min = "periodic"
+z_max = "periodic"
+
+[fluid]
+nu_m2_s = 1.0e-6
+initial_velocity_m_s = [0.01, 0.0, 0.0]
+
+[run]
+end_time_s = 60.0
+
+[output]
+fields = ["u", "pressure", "flags"]
+fields_every_s = 10.0
+timeseries_every_steps = 10
+
+[[bodies]]
+name = "sphere"
+shape = "sphere"
+radius_m = 0.005
+position_m = [0.04, 0.04, 0.04]
+motion = "fixed"
+"""), ("A floating box (bodies with a free surface)", """# A 40 mm ice block (900 kg/m^3) released in still water 60 mm deep, in a closed tank: it heaves and settles
+# at 90 % of its height under the level (floe_z_m, floe_Fz_N, water_level_m of the time series).
+[scene]
+name = "floating_box"
+
+[domain]
+cells = [24, 24, 24]
+dx_m = 0.005
+
+[domain.faces]
+x_min = "wall"
+x_max = "wall"
+y_min = "wall"
+y_max = "wall"
+z_min = "wall"
+z_max = "wall"
+
+[fluid]
+nu_m2_s = 5.0e-6
+gravity_m_s2 = [0.0, 0.0, -9.81]
+operator = "bgk"
+
+[numerics]
+dt_s = 0.0007
+mach = 0.2
+
+[run]
+end_time_s = 1.0
+
+[output]
+fields = ["u", "flags", "phi"]
+fields_every_s = 0.1
+timeseries_every_steps = 5
+
+[free_surface]
+water_depth_m = 0.06
+
+[[bodies]]
+name = "floe"
+shape = "box"
+size_m = [0.04, 0.04, 0.04]
+position_m = [0.06, 0.06, 0.06]
+density_kg_m3 = 900.0
+motion = "free"
+""")]
+
+
 def scenes_markdown() -> str:
     """The whole of docs/SCENES.md."""
     out = [INTRO, reference_markdown(), "## Complete examples\n\n"]
@@ -264,6 +390,8 @@ def scenes_markdown() -> str:
                        ("still_tank", "Still water in a closed tank (free surface), lattice units"),
                        ("dam_break", "Dam break in a flume (free surface), lattice units")):
         out.append(f"### `{name}` — {what}\n\n```toml\n{preset_text(name).rstrip()}\n```\n\n")
+    for title, text in BODY_EXAMPLES:
+        out.append(f"### {title}\n\n```toml\n{text.rstrip()}\n```\n\n")
     out.append(f"### A ship in a brash-ice channel (all sections)\n\n```toml\n{FULL_EXAMPLE.rstrip()}\n```\n")
     return "".join(out)
 

@@ -132,6 +132,10 @@ class Domain(_Section):
         None, description="Number of cells [n_x, n_y, n_z] (instead of size_m).")
     dx_m: float | None = Field(None, gt=0, description="Cell size (m). Required in physical units; 1 in lattice units.")
     faces: Faces = Field(Faces(), description="Boundary conditions, see `[domain.faces]`.")
+    pad_to_blocks: bool = Field(False, description="Round the grid up to whole 8x8x8 blocks with solid cells "
+                                "beyond x_max, y_max and z_max, so that the box keeps its size at any dx_m (the "
+                                "solid cells are a no-slip wall at the box's edge: a face that is padded must be "
+                                "a `wall`). Fluid scenes, with or without `[[bodies]]`; not with `[free_surface]`.")
 
     @model_validator(mode="after")
     def _one_extent(self):
@@ -139,7 +143,20 @@ class Domain(_Section):
             raise ValueError("cells: give exactly one of cells and size_m")
         if self.size_m is not None and self.dx_m is None:
             raise ValueError("dx_m: size_m needs the cell size dx_m")
+        if self.pad_to_blocks:
+            for axis, n in zip("xyz", self.shape_cells()):
+                face = getattr(self.faces, f"{axis}_max")
+                if n % 8 and face.kind != "wall":
+                    raise ValueError(f"faces.{axis}_max: the grid is padded with solid cells beyond {axis}_max "
+                                     f"({n} cells along {axis}), which act as a no-slip wall: set "
+                                     f"{axis}_max = \"wall\", or give a multiple of 8 cells along {axis}")
         return self
+
+    def padded_cells(self) -> tuple[int, int, int]:
+        """The grid's cells along x, y, z: :meth:`shape_cells`, rounded up to whole 8-cell blocks where
+        ``pad_to_blocks`` is set."""
+        shape = self.shape_cells()
+        return tuple(-(-n // 8) * 8 for n in shape) if self.pad_to_blocks else shape
 
     def shape_cells(self) -> tuple[int, int, int]:
         """(n_x, n_y, n_z): ``cells``, or ``size_m / dx_m`` rounded to whole cells."""

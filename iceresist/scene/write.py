@@ -28,11 +28,14 @@ def _line(key: str, value) -> str:
 
 
 def to_toml(data: dict) -> str:
-    """TOML text of a scene dict (sections of scalars, lists and inline tables). TOML has no null: a key whose
-    value is None is left out, which gives it its default (None for every optional scene key)."""
+    """TOML text of a scene dict (sections of scalars, lists and inline tables; a list of tables, such as
+    ``bodies``, as ``[[section]]`` tables). TOML has no null: a key whose value is None is left out, which gives it
+    its default (None for every optional scene key)."""
     lines = []
     for section, values in data.items():
-        lines.append(f"[{section}]")
-        lines += [_line(k, v) for k, v in values.items() if v is not None]
-        lines.append("")
+        for header, table in ((f"[[{section}]]", t) for t in values) if isinstance(values, list) else \
+                [(f"[{section}]", values)]:
+            lines.append(header)
+            lines += [_line(k, v) for k, v in table.items() if v is not None]
+            lines.append("")
     return "\n".join(lines)

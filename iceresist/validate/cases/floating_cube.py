@@ -1,7 +1,8 @@
 """Reference case: a 41 mm ice cube (950 kg/m^3) released at the surface of still water floats at 95 % of its
 height (Archimedes: submerged fraction = rho_ice / rho_water).
 
-The cube (the paper's ice piece, section 3) is released from rest with its bottom ``release_draft`` of its
+The set-up is the scene file iceresist/validate/scenes/floating_cube.toml (8 cells per edge); a rung sets its
+resolution over it and runs it through the driver. The cube (the paper's ice piece, section 3) is released from rest with its bottom ``release_draft`` of its
 height under the still-water level, in a closed tank three cube widths square and four high, water 2.5 cube
 heights deep. The free-surface LBM (BGK, phase field, eq. 11), the DEM and the coupling of
 :class:`~iceresist.coupling.floating.FloatingBodies` carry it; buoyancy is the hydrostatic pressure of the
@@ -52,14 +53,15 @@ def period_estimate_s(edge_m: float = EDGE_M, added_mass: float = 0.0, tank_widt
     return 2 * math.pi * math.sqrt(FRACTION * edge_m * (1 + added_mass) * (w2 - 1) / (w2 * G))
 
 
-def build(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: float = 1e-3,
-          precision: str = "float64", backend: str = "cpu"):
-    """The tank with one cube of ``n`` cells per edge, released at ``release_draft`` of its height under the
-    still-water level; returns the :class:`~iceresist.coupling.floating.FloatingBodies` model (started)."""
-    from iceresist.backends import jit
-    from iceresist.coupling import Box
-    from iceresist.coupling.floating import FloatingBodies
-    from iceresist.dem import box
+def scene(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: float = 1e-3,
+          precision: str = "float64", backend: str = "cpu", steps: int = 1):
+    """The scene of the tank with one cube of ``n`` cells per edge: the scene file
+    (iceresist/validate/scenes/floating_cube.toml, 8 cells per edge) with the cell size, the tank (three cube
+    widths square, four high, in whole blocks), the time step sqrt(g_lattice dx / g), the viscosity of ``tau``,
+    the still-water level and the cube's release point (its bottom ``release_draft`` of its height under the
+    still level) set over it, run for ``steps`` steps."""
+    from iceresist.validate.rung import scene_of
+    from iceresist.validate.scenes import scene_data
 
     dx = EDGE_M / n
     nxy = int(math.ceil(3 * n / 8) * 8)
@@ -68,13 +70,36 @@ def build(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: f
     # still-water level (cells) chosen so that the level of the floating state lies on a cell face
     final = math.floor(2.5 * n) + 0.0
     level0 = final - (FRACTION - release_draft) * n ** 3 / area
-    model = FloatingBodies((nxy, nxy, nz), depth_m=level0 * dx, dx_m=dx, tau=tau, g_lattice=g_lattice,
-                           rho_kg_m3=RHO_WATER, operator="bgk", precision=precision,
-                           target=jit.resolve_backend(backend))
-    centre = (0.5 * nxy * dx, 0.5 * nxy * dx, (level0 - release_draft * n + 0.5 * n) * dx)
-    model.add_body(Box((EDGE_M,) * 3), box((EDGE_M,) * 3, RHO_ICE), position_m=centre)
-    model.start()
-    return model
+    dt = math.sqrt(g_lattice * dx / G)
+    data = scene_data(NAME)
+    data["scene"].update(name=f"{NAME}-{n}", description=f"41 mm ice cube released at {release_draft:g} draft, "
+                         f"{n} cells per edge")
+    data["domain"].update(cells=[nxy, nxy, nz], dx_m=dx)
+    data["fluid"].update(nu_m2_s=(tau - 0.5) * dx * dx / (3.0 * dt), rho_kg_m3=RHO_WATER)
+    # the lattice speed of the shallow-water wave, sqrt(g_lattice h / dx), under the Mach limit
+    data["numerics"].update(dt_s=dt, precision=precision, backend=backend,
+                            mach=min(0.3, max(0.2, 1.1 * math.sqrt(g_lattice * level0))))
+    data["run"] = {"steps": int(steps)}
+    data["free_surface"]["water_depth_m"] = level0 * dx
+    data["bodies"][0].update(size_m=[EDGE_M] * 3, density_kg_m3=RHO_ICE,
+                             position_m=[0.5 * nxy * dx, 0.5 * nxy * dx, (level0 - release_draft * n + 0.5 * n) * dx])
+    return scene_of(data, f"{NAME} {n} cells/edge")
+
+
+def steps_for(periods: float, dt_s: float) -> int:
+    """Steps of ``periods`` estimated heave periods (added mass 0.5)."""
+    return int(periods * period_estimate_s(added_mass=0.5) / dt_s)
+
+
+def build(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: float = 1e-3,
+          precision: str = "float64", backend: str = "cpu"):
+    """The tank with one cube of ``n`` cells per edge, released at ``release_draft`` of its height under the
+    still-water level; returns the :class:`~iceresist.coupling.floating.FloatingBodies` (started) of the model
+    that :func:`scene` builds."""
+    from iceresist.models import build_model
+
+    return build_model(scene(n, release_draft=release_draft, tau=tau, g_lattice=g_lattice, precision=precision,
+                             backend=backend)).fb
 
 
 def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshold: float = 0.05) -> dict:
@@ -116,12 +141,12 @@ def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshol
 
 
 def simulate(n: int, periods: float, *, release_draft: float = 0.8, sample_every: int = 5, **kw):
-    """Run the cube for ``periods`` estimated periods (C_a = 0.5); the time series (t_s, submerged fraction,
-    fluid force z N, water volume relative change), the model, the steps and the wall time of the stepping
-    (the first step, which compiles, excluded)."""
+    """Run the cube for ``periods`` estimated periods (C_a = 0.5), stepping :func:`build`'s model here; the time
+    series (t_s, submerged fraction, fluid force z N, water volume relative change), the model, the steps and the
+    wall time of the stepping (the first step, which compiles, excluded)."""
     model = build(n, release_draft=release_draft, **kw)
     v0 = model.water_volume_m3()
-    steps = int(periods * period_estimate_s(added_mass=0.5) / model.dt_s)
+    steps = steps_for(periods, model.dt_s)
     model.step(1)
     t0 = time.perf_counter()
     rows = []
@@ -136,21 +161,32 @@ def simulate(n: int, periods: float, *, release_draft: float = 0.8, sample_every
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float64", out_dir=None) -> CaseResult:
-    """One rung: the submerged fraction over the last estimated period against 0.95."""
+    """One rung through the driver (:func:`iceresist.validate.rung.run_rung`, a row every 5 steps): the submerged
+    fraction, (water_level_m - cube bottom) / edge, over the last estimated period against 0.95 (the row of the
+    release, t = 0, left out)."""
+    from iceresist.models import build_model
+    from iceresist.validate.rung import run_rung
+
     n = int(params["resolution"])
-    series, model, steps, wall = simulate(n, params["periods"], release_draft=params["release_draft"],
-                                          backend=backend, precision=precision)
-    t, frac = series[:, 0], series[:, 1]
+    sc = scene(n, release_draft=params["release_draft"], backend=backend, precision=precision)
+    model = build_model(sc)
+    steps = steps_for(params["periods"], model.dt_s)
+    rung = run_rung(model, sc, out_dir, NAME, params, steps=steps, sample_every=5)
+    ts = rung.timeseries
+    keep = ts["iteration"] > 0
+    t = ts["time_s"][keep]
+    frac = (ts["water_level_m"][keep] - (ts["cube_z_m"][keep] - 0.5 * EDGE_M)) / EDGE_M
     heave = heave_analysis(t, frac, period_estimate_s(added_mass=0.5))
     mean = heave["mean"]
     t0 = period_estimate_s()
     weight = RHO_ICE * EDGE_M ** 3 * G
     return CaseResult(case=NAME, label=params["label"], resolution=float(n), cells=model.forest.cells, steps=steps,
-                      wall_s=wall, quantity="submerged fraction", value=mean, reference=FRACTION,
+                      wall_s=rung.run_time_s, quantity="submerged fraction", value=mean, reference=FRACTION,
                       error=relative_error(mean, FRACTION), backend=backend, precision=precision,
                       extra={"period_s": heave["period_s"], "natural_period_s": heave["natural_period_s"],
                              "period_no_added_mass_s": t0, "half_period_decay": heave["half_ratio"],
                              "damping_ratio": heave["damping_ratio"],
                              "added_mass_implied": (heave["natural_period_s"] / t0) ** 2 - 1,
-                             "force_over_weight": float(series[-1, 2] / weight),
-                             "volume_drift": float(np.abs(series[:, 3]).max())})
+                             "force_over_weight": float(ts["cube_Fz_N"][-1] / weight),
+                             "volume_drift": float(np.abs(ts["water_volume_drift"]).max()),
+                             "result_file": str(rung.path)})

@@ -10,7 +10,9 @@ the wall slows it).
 Full ladder (GPU): case E2 at d = 8, 12, 16 cells, cumulant, 1.2 s. Quick ladder (2-core x86 VM): case E1
 (Re 1.5) at d = 5, 6, 8 cells, BGK, 2.0 s (E1 peaks at about 1.5 s; at 0.8 s it is still 1.5 % below its
 peak; the bottom slows it from about 2.5 s); the box is the experiment's to the nearest cell (solid cells fill
-the grid up to whole blocks).
+the grid up to whole blocks: ``domain.pad_to_blocks``). The set-up is the scene file
+iceresist/validate/scenes/settling_sphere.toml (E1 at 6 cells per diameter); a rung sets its case and resolution
+over it and runs it through the driver.
 """
 
 from __future__ import annotations
@@ -19,7 +21,6 @@ import time
 
 import numpy as np
 
-from iceresist.backends import jit
 from iceresist.validate.result import CaseResult, relative_error
 
 NAME = "settling_sphere"
@@ -42,65 +43,84 @@ def ladder(quick: bool) -> list[dict]:
              "t_end_s": 1.2, "u_lattice": 0.04} for d in (8, 12, 16)]
 
 
-def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
-           backend: str = "cpu", precision: str = "float32"):
-    """Settling velocity history (t_s, w_m_s) of case ``case`` at ``d_cells`` cells per diameter, with the cell
-    count, the number of steps and the wall time of the stepping (first step, which compiles, excluded)."""
-    from iceresist.coupling import FluidStructureCoupling, Sphere
-    from iceresist.units import Units
-    from iceresist.dem import DEMSystem, sphere
-    from iceresist.grid.forest import BlockForest, Face
-    from iceresist.lbm.solver import LBMSolver
+def scene(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
+          backend: str = "cpu", precision: str = "float32"):
+    """The scene of case ``case`` at ``d_cells`` cells per diameter: the scene file
+    (iceresist/validate/scenes/settling_sphere.toml, E1 at 6 cells per diameter) with the case's oil, the cell size
+    d / d_cells, the time step u_lattice dx / u_terminal, the operator, the run length int(t_end_s / dt) and the
+    sphere's release point (the middle of the box of whole cells, 120 mm above the floor) set over it.
+
+    The box is the experiment's to the nearest cell, walls half a cell beyond the last fluid cell (half-way
+    bounce-back); ``domain.pad_to_blocks`` rounds the grid up to whole blocks with solid cells, so that every rung
+    of a ladder sees the same box (rounding the box itself up to blocks widened it by up to 20 %, and the wall
+    effect at d / L = 0.15 with it)."""
+    from iceresist.validate.rung import scene_of
+    from iceresist.validate.scenes import scene_data
 
     rho_f, mu, u_ref = CASES[case]
     d = DIAMETER_M
     dx = d / d_cells
     dt = u_lattice * dx / u_ref
-    # the experiment's box to the nearest cell, walls half a cell beyond the last fluid cell (half-way
-    # bounce-back); the grid is rounded up to whole blocks and the surplus cells are solid, so that every rung
-    # of a ladder sees the same box (rounding the box itself up to blocks widened it by up to 20 %, and the
-    # wall effect at d / L = 0.15 with it)
     n = [int(round(L / dx)) for L in BOX_M]
-    shape = tuple(int(np.ceil(k / 8) * 8) for k in n)
+    data = scene_data(NAME)
+    data["scene"].update(name=f"{NAME}-{case}-{d_cells:g}", description=f"ten Cate {case}, 15 mm nylon sphere in "
+                         f"silicone oil, {d_cells:g} cells per diameter")
+    data["domain"].update(size_m=list(BOX_M), dx_m=dx, pad_to_blocks=True)
+    data["fluid"].update(nu_m2_s=mu / rho_f, rho_kg_m3=rho_f, operator=operator)
+    data["numerics"].update(dt_s=dt, u_max_m_s=u_ref, precision=precision, backend=backend)
+    data["run"] = {"steps": int(t_end_s / dt)}
+    data["bodies"][0].update(radius_m=d / 2, density_kg_m3=RHO_SPHERE,
+                             position_m=[n[0] * dx / 2, n[1] * dx / 2, RELEASE_HEIGHT_M + d / 2])
+    return scene_of(data, f"{NAME} {case} {d_cells:g} cells/diameter")
 
-    def outside_box(x, y, z):
-        return (x >= n[0]) | (y >= n[1]) | (z >= n[2])
 
-    fo = BlockForest.uniform(shape, faces={k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")},
-                             solid=outside_box)
-    tau = 3 * (mu / rho_f) * dt / dx ** 2 + 0.5
-    solver = LBMSolver(fo, tau=tau, operator=operator, precision=precision, target=jit.resolve_backend(backend))
-    solver.initialize()
-    dem = DEMSystem()
-    dem.add_body(sphere(d / 2, RHO_SPHERE), position_m=(n[0] * dx / 2, n[1] * dx / 2, RELEASE_HEIGHT_M + d / 2))
-    dem.add_wall((0, 0, 0), (0, 0, 1))
-    cp = FluidStructureCoupling(solver, dem, [Sphere(d / 2)], Units.from_lattice(dx, dt, rho_f, tau))
-    steps = int(t_end_s / dt)
+def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
+           backend: str = "cpu", precision: str = "float32"):
+    """Settling velocity history (t_s, w_m_s) of case ``case`` at ``d_cells`` cells per diameter, a value every
+    step, with the cell count, the number of steps and the wall time of the stepping (first step, which compiles,
+    excluded): the model of :func:`scene` stepped here, outside the driver."""
+    from iceresist.models import build_model
+
+    sc = scene(case, d_cells, u_lattice=u_lattice, t_end_s=t_end_s, operator=operator, backend=backend,
+               precision=precision)
+    model = build_model(sc)
+    steps = int(sc.run.steps)
     t, w = [], []
     wall = 0.0
     for i in range(steps):
         t0 = time.perf_counter()
-        cp.step(1)
+        model.step(1)
         if i > 0:
             wall += time.perf_counter() - t0
-        t.append(dem.time_s)
-        w.append(-dem.velocities[0, 2])
-    return np.array(t), np.array(w), fo.cells, steps, wall
+        t.append(model.dem.time_s)
+        w.append(-model.dem.velocities[0, 2])
+    return np.array(t), np.array(w), model.forest.cells, steps, wall
+
+
+#: Steps between time-series rows of a rung (the peak velocity is read from them).
+SAMPLE_EVERY = 1
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    """One rung: the largest settling velocity against the measured terminal velocity."""
+    """One rung through the driver (:func:`iceresist.validate.rung.run_rung`): the largest settling velocity of
+    the time series (``-sphere_vz_m_s``, a row every step) against the measured terminal velocity."""
+    from iceresist.models import build_model
+    from iceresist.validate.rung import run_rung
+
     case = params["case"]
-    t, w, cells, steps, wall = settle(case, params["resolution"], u_lattice=params["u_lattice"],
-                                      t_end_s=params["t_end_s"], operator=params["operator"], backend=backend,
-                                      precision=precision)
+    sc = scene(case, params["resolution"], u_lattice=params["u_lattice"], t_end_s=params["t_end_s"],
+               operator=params["operator"], backend=backend, precision=precision)
+    model = build_model(sc)
+    rung = run_rung(model, sc, out_dir, NAME, params, steps=int(sc.run.steps), sample_every=SAMPLE_EVERY)
+    t, w = rung.timeseries["time_s"], -rung.timeseries["sphere_vz_m_s"]
     u_ref = CASES[case][2]
     value = float(w.max())
-    return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]), cells=cells,
-                      steps=steps, wall_s=wall, quantity="terminal velocity (m/s)", value=value, reference=u_ref,
+    return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]),
+                      cells=int(model.forest.cells), steps=rung.steps, wall_s=rung.run_time_s,
+                      quantity="terminal velocity (m/s)", value=value, reference=u_ref,
                       error=relative_error(value, u_ref), backend=backend, precision=precision,
                       extra={"experiment": case, "operator": params["operator"],
-                             "t_peak_s": float(t[int(np.argmax(w))])})
+                             "t_peak_s": float(t[int(np.argmax(w))]), "result_file": str(rung.path)})
 
 
 def write_curves(curves: dict, path, case: str = "E1"):

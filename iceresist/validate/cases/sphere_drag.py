@@ -1,16 +1,18 @@
 """Fixed sphere in uniform flow: drag coefficient against Schiller-Naumann (the kind of set-up of
 tests/test_sphere_drag.py, in smaller boxes: that test uses a 12 x 8 x 8 d box with the sphere 4 d behind the inlet).
 
-Velocity inlet at x-, pressure outlet at x+, periodic sides; the sphere (a kinematic DEM body at rest, coupled
-by interpolated bounce-back and momentum exchange, paper eqs. 16-19) sits 3 diameters behind the inlet. The quick
+Velocity inlet at x-, pressure outlet at x+, periodic sides; the sphere (a fixed body of the scene, coupled
+by interpolated bounce-back and momentum exchange, paper eqs. 16-19) sits 3 diameters behind the inlet. The set-up
+is the scene file iceresist/validate/scenes/sphere_drag.toml (the middle quick rung); a rung sets its resolution
+over it and runs it through the driver. The quick
 box (8 x 4 x 4 d) repeats the sphere every 4 d sideways, which is most of its 18-24 % error (docs/VALIDATION.md).
-Re = U d / nu = 10, U = 0.1 (lattice). The run lasts 16 d / U and C_d is the mean over its last quarter.
+Re = U d / nu = 10, U = 0.1 (lattice). The run lasts 16 d / U and C_d is the mean of the time series' fluid force
+(a row every 1/80 of the run) over its last quarter.
 """
 
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
@@ -38,40 +40,50 @@ def ladder(quick: bool) -> list[dict]:
             for d in ds]
 
 
-def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    from iceresist.backends.jit import resolve_backend
-    from iceresist.coupling import FluidStructureCoupling, Sphere
-    from iceresist.units import Units
-    from iceresist.dem import DEMSystem, sphere
-    from iceresist.grid.forest import BlockForest, Face
-    from iceresist.lbm.solver import LBMSolver
+def steps_for(d: float) -> int:
+    """Steps of a rung: ``RUN_DIAMETERS`` d / U."""
+    return int(RUN_DIAMETERS * d / U_LATTICE)
+
+
+def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
+    """The scene of a rung: the scene file (iceresist/validate/scenes/sphere_drag.toml, the middle quick rung)
+    with the rung's diameter ``d`` (cells), box (``box_diameters``, rounded up to whole blocks), tau (Re = 10),
+    sphere radius and position (3 d behind the inlet, centred sideways) and run length set over it."""
+    from iceresist.validate.rung import scene_of
+    from iceresist.validate.scenes import scene_data
 
     d = float(params["d"])
-    shape = tuple(int(math.ceil(n * d / 8) * 8) for n in params["box_diameters"])
-    faces = {"x-": Face("velocity_inlet", (U_LATTICE, 0, 0)), "x+": Face("pressure_outlet")}
-    fo = BlockForest.uniform(shape, faces=faces)
+    shape = [int(math.ceil(n * d / 8) * 8) for n in params["box_diameters"]]
     nu = U_LATTICE * d / REYNOLDS
-    target = resolve_backend(backend)
-    solver = LBMSolver(fo, tau=3 * nu + 0.5, operator="cumulant", precision=precision, target=target)
-    solver.initialize(u=(U_LATTICE, 0, 0))
-    dem = DEMSystem(gravity_m_s2=(0, 0, 0), backend=backend)
+    data = scene_data(NAME)
+    data["scene"].update(name=f"{NAME}-{d:g}", description=f"fixed sphere, Re {REYNOLDS:g}, {d:g} cells per "
+                         f"diameter, {' x '.join(f'{n:g}' for n in params['box_diameters'])} d box")
+    data["domain"]["cells"] = shape
+    data["numerics"].update(tau=3 * nu + 0.5, precision=precision, backend=backend)
+    data["run"] = {"steps": steps_for(d)}
+    data["bodies"][0].update(radius_m=d / 2, position_m=[3 * d, shape[1] / 2, shape[2] / 2])
+    return scene_of(data, f"{NAME} {params['label']}")
+
+
+def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
+    """One rung through the driver (:func:`iceresist.validate.rung.run_rung`): C_d from the mean of the fluid
+    force (``sphere_Fx_N``, eq. 20, lattice units) over the rows of the last ``MEAN_FRACTION`` of the run."""
+    from iceresist.models import build_model
+    from iceresist.validate.rung import run_rung
+
+    d = float(params["d"])
+    sc = scene(params, backend=backend, precision=precision)
+    steps = steps_for(d)
+    rung = run_rung(build_model(sc), sc, out_dir, NAME, params, steps=steps, sample_every=max(1, steps // 80))
+    it, fx = rung.timeseries["iteration"], rung.timeseries["sphere_Fx_N"]
+    force = float(fx[it >= (1 - MEAN_FRACTION) * steps].mean())
     radius = d / 2
-    dem.add_body(sphere(radius, 1000.0), position_m=(3 * d, shape[1] / 2, shape[2] / 2), kinematic=True)
-    cp = FluidStructureCoupling(solver, dem, [Sphere(radius)], Units.lattice(tau=solver.tau))
-    cp.step(1)                       # compile outside the timed loop
-    steps = int(RUN_DIAMETERS * d / U_LATTICE)
-    fx = np.empty(steps)
-    t0 = time.perf_counter()
-    for i in range(steps):
-        cp.step(1)
-        fx[i] = cp.force_lattice[0, 0]
-    solver.synchronize()
-    wall = time.perf_counter() - t0
-    force = float(fx[int((1 - MEAN_FRACTION) * steps):].mean())
     cd = force / (0.5 * U_LATTICE ** 2 * math.pi * radius ** 2)
     ref = schiller_naumann(REYNOLDS)
-    return CaseResult(case=NAME, label=params["label"], resolution=d, cells=fo.cells, steps=steps, wall_s=wall,
-                      quantity="drag coefficient C_d", value=cd, reference=ref, error=relative_error(cd, ref),
-                      backend=backend, precision=precision,
-                      extra={"tau": 3 * nu + 0.5, "blockage": math.pi / 4 / (params["box_diameters"][1]
-                                                                               * params["box_diameters"][2])})
+    cells = int(np.prod(sc.domain.padded_cells()))
+    return CaseResult(case=NAME, label=params["label"], resolution=d, cells=cells, steps=rung.steps,
+                      wall_s=rung.run_time_s, quantity="drag coefficient C_d", value=cd, reference=ref,
+                      error=relative_error(cd, ref), backend=backend, precision=precision,
+                      extra={"tau": 3 * (U_LATTICE * d / REYNOLDS) + 0.5,
+                             "blockage": math.pi / 4 / (params["box_diameters"][1] * params["box_diameters"][2]),
+                             "result_file": str(rung.path)})

@@ -33,7 +33,8 @@ import numpy as np
 
 from iceresist.errors import InputError
 from iceresist.models.base import Model, array_bytes
-from iceresist.models.fluid import BLOCK, FluidModel, check_block_shape, forest_faces, padding_solid, resolve_target
+from iceresist.models.fluid import (BLOCK, FluidModel, check_block_shape, check_free_surface_forces, forest_faces,
+                                    padding_solid, resolve_target)
 from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)
@@ -107,13 +108,7 @@ def check_bodies(scene: Scene, box_m) -> None:
 def _check_free_surface(scene: Scene) -> None:
     """What the closed tank of :class:`~iceresist.coupling.floating.FloatingBodies` takes."""
     fl, fs = scene.fluid, scene.free_surface
-    gx, gy, gz = fl.gravity_m_s2
-    if gx != 0.0 or gy != 0.0 or not gz < 0.0:
-        raise InputError(f"fluid.gravity_m_s2: the free surface needs gravity along -z, e.g. [0, 0, -9.81], "
-                         f"not {list(fl.gravity_m_s2)}")
-    if any(fl.body_force_N_m3):
-        raise InputError("fluid.body_force_N_m3: a free-surface scene is driven by gravity alone; "
-                         "leave the body force out")
+    check_free_surface_forces(scene)
     for name, face in scene.domain.faces.items():
         if face.kind != "wall":
             raise InputError(f"domain.faces.{name}: a free-surface scene with [[bodies]] is a closed tank: set "

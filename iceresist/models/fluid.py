@@ -70,6 +70,18 @@ def padding_solid(scene: Scene):
     return outside_box
 
 
+def check_free_surface_forces(scene: Scene) -> None:
+    """A free surface is driven by gravity alone, along -z: name the key otherwise."""
+    fl = scene.fluid
+    gx, gy, gz = fl.gravity_m_s2
+    if gx != 0.0 or gy != 0.0 or not gz < 0.0:
+        raise InputError(f"fluid.gravity_m_s2: the free surface needs gravity along -z, e.g. [0, 0, -9.81], "
+                         f"not {list(fl.gravity_m_s2)}")
+    if any(fl.body_force_N_m3):
+        raise InputError("fluid.body_force_N_m3: a free-surface scene is driven by gravity alone; "
+                         "leave the body force out")
+
+
 class FluidModel(Model):
     """The LBM fluid alone: a uniform block forest and an :class:`~iceresist.lbm.solver.LBMSolver`.
 
@@ -230,13 +242,8 @@ class FreeSurfaceModel(Model):
         self.shape_cells = scene.shape_cells()
         check_block_shape(self.shape_cells)
         fl = scene.fluid
-        gx, gy, gz = fl.gravity_m_s2
-        if gx != 0.0 or gy != 0.0 or not gz < 0.0:
-            raise InputError(f"fluid.gravity_m_s2: the free surface needs gravity along -z, e.g. [0, 0, -9.81], "
-                             f"not {list(fl.gravity_m_s2)}")
-        if any(fl.body_force_N_m3):
-            raise InputError("fluid.body_force_N_m3: a free-surface scene is driven by gravity alone; "
-                             "leave the body force out")
+        check_free_surface_forces(scene)
+        gz = fl.gravity_m_s2[2]
         nz = self.shape_cells[2]
         self.depth_cells = float(u.length_to_lattice(fs.water_depth_m))
         if not 0.0 < self.depth_cells < nz:

@@ -125,7 +125,10 @@ def check_lattice_speed_for_operator(scene, units) -> None:
 def check_step_count(scene, dt_s: float, *, dt_key: str = "numerics.dt_s") -> int:
     """Refuse a run needing more than :data:`MAX_STEPS` steps; returns the step count it needs."""
     r = scene.run
-    by_time = math.ceil(r.end_time_s / dt_s - 1e-9) if r.end_time_s is not None else None
+    by_time = None
+    if r.end_time_s is not None:
+        ratio = r.end_time_s / dt_s          # may overflow to inf for a huge end time: compare before ceil
+        by_time = math.ceil(ratio - 1e-9) if ratio <= MAX_STEPS else ratio
     steps = min(s for s in (r.steps, by_time) if s is not None)
     if steps <= MAX_STEPS:
         return int(steps)

@@ -60,6 +60,10 @@ def _one_line_error(rc, err, *needles):
     (("nu_m2_s = 1.0e-6", 'nu_m2_s = "water"'), "fluid.nu_m2_s: must be a number"),
     (("nu_m2_s = 1.0e-6", "nu_m2_s = 1.0e-16"), "below the floor"),
     (("size_m = [0.008, 0.008, 0.016]", "size_m = [0.008, 0.008, 0.012]"), "12 cells along z is not a multiple of 8"),
+    (("size_m = [0.008, 0.008, 0.016]", "size_m = [0.004, 0.008, 0.016]"), "along x is not a multiple of 8 (blocks of "
+                                                                          "8x8x8 cells): use 8 cells"),
+    (("nu_m2_s = 1.0e-6", "nu_m2_s = inf"), "fluid.nu_m2_s: input should be a finite number (got inf)"),
+    (("nu_m2_s = 1.0e-6", "nu_m2_s = nan"), "fluid.nu_m2_s: input should be a finite number (got nan)"),
     (("[run]", "[ship]\nspeed_m_s = 0.01\n\n[run]"), "[ship] need the free-surface, DEM and coupling engine"),
 ])
 def test_bad_scenes_exit_2_with_one_line(tmp_path, main, edit, needle):

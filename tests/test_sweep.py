@@ -377,3 +377,20 @@ def test_report_refuses_missing_folder(tmp_path):
         write_report(tmp_path / "missing")
     with pytest.raises(InputError, match="not a sweep folder"):
         write_report(tmp_path)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--cases", ""], "--cases: no case named"),
+    (["--cases", ","], "--cases: no case named"),
+    (["--cases", "A-c68-v1.0", "--output", "FILE"], "--output: FILE is a file, not a folder"),
+])
+def test_sweep_command_refusals_are_one_line_exit_2(tmp_path, capsys, monkeypatch, argv, needle):
+    from iceresist import cli
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "FILE").write_text("keep")
+    argv = argv if "--output" in argv else argv + ["--output", "out"]
+    rc = cli.main(["sweep", *argv, "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and needle in err[0], err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["FILE"] and (tmp_path / "FILE").read_text() == "keep"

@@ -10,6 +10,7 @@ file stays beside ``ladder.csv`` for a second look (``iceresist inspect``).
 
 from __future__ import annotations
 
+import contextlib
 import re
 import tempfile
 from dataclasses import dataclass
@@ -57,6 +58,20 @@ def slug(label: str) -> str:
 def result_path(out_dir, case: str, label: str) -> Path:
     """Where a rung's result file goes: ``OUT/runs/CASE/LABEL.h5``."""
     return Path(out_dir) / "runs" / case / f"{slug(label)}.h5"
+
+
+@contextlib.contextmanager
+def rung_folder(out_dir, case: str, label: str):
+    """A folder for a rung that runs a sweep case (the ship ladders): ``OUT/runs/CASE/LABEL/`` (kept, so a killed
+    rung continues from its checkpoint when the ladder is run again), or a scratch folder where ``out_dir`` is
+    None."""
+    if out_dir is None:
+        with tempfile.TemporaryDirectory(prefix="iceresist-rung-") as tmp:
+            yield Path(tmp)
+        return
+    folder = result_path(out_dir, case, label).with_suffix("")
+    folder.mkdir(parents=True, exist_ok=True)
+    yield folder
 
 
 def run_rung(model, scene, out_dir, case: str, params: dict, *, steps: int, sample_every: int,

@@ -14,10 +14,10 @@ ladder holds tier-1 rungs only.
 from __future__ import annotations
 
 import copy
-import tempfile
 import time
 
 from iceresist.validate.result import CaseResult
+from iceresist.validate.rung import rung_folder
 
 NAME = "ship_tier1"
 REFERENCE = ("no measurement at these sizes: the Richardson extrapolation of the three finest rungs (observed "
@@ -49,12 +49,12 @@ def overrides(params: dict) -> dict:
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    """One tier-1 run through :func:`iceresist.sweep.run_case` into a scratch folder (the DEM runs in float64,
-    as every tier-1 run: ``precision`` is recorded, not used)."""
+    """One tier-1 run through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder
+    without ``out_dir``); the DEM runs in float64, as every tier-1 run: ``precision`` is recorded, not used."""
     from iceresist.post.case import analyse_case
     from iceresist.sweep import run_case
 
-    with tempfile.TemporaryDirectory(prefix="iceresist-validate-") as tmp:
+    with rung_folder(out_dir, NAME, params["label"]) as tmp:
         t0 = time.perf_counter()
         path = run_case(CASE, "quick", 1, tmp, backend=backend, overrides=overrides(params))
         total = time.perf_counter() - t0

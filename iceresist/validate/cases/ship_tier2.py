@@ -28,12 +28,12 @@ protocol and the cost per rung, not a converged order. The full ladder's window 
 from __future__ import annotations
 
 import copy
-import tempfile
 import time
 
 import numpy as np
 
 from iceresist.validate.result import CaseResult
+from iceresist.validate.rung import rung_folder
 
 NAME = "ship_tier2"
 REFERENCE = ("no measurement at these sizes: the Richardson extrapolation of the three finest rungs (observed "
@@ -102,14 +102,15 @@ def warm_up(backend: str, precision: str) -> float:
     ov.setdefault("numerics", {})["precision"] = precision
     ov["run"] = {"end_time_s": ov["contact"]["sample_interval_s"]}
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="iceresist-validate-warm-") as tmp:
+    with rung_folder(None, NAME, "warm-up") as tmp:
         run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
     _WARM.add((backend, precision))
     return time.perf_counter() - t0
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
-    """One tier-2 run through :func:`iceresist.sweep.run_case` into a scratch folder (the LBM in ``precision``,
+    """One tier-2 run through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder
+    without ``out_dir``; a killed rung continues from its checkpoint) (the LBM in ``precision``,
     the DEM in float64), after :func:`warm_up` (its seconds in ``extra["compile_s"]``)."""
     from iceresist.io.hdf5 import RunFile
     from iceresist.post.case import analyse_case
@@ -118,7 +119,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     compile_s = warm_up(backend, precision)
     ov = overrides(params)
     ov.setdefault("numerics", {})["precision"] = precision
-    with tempfile.TemporaryDirectory(prefix="iceresist-validate-") as tmp:
+    with rung_folder(out_dir, NAME, params["label"]) as tmp:
         t0 = time.perf_counter()
         path = run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
         total = time.perf_counter() - t0

@@ -61,20 +61,21 @@ def test_dam_break_front_finer(one_thread):
     assert err[1] > 0.05
 
 
-def test_dam_break_on_a_free_slip_floor_converges(one_thread):
+def test_dam_break_on_a_free_slip_floor_converges_and_leads_martin_moyce_within_20_percent(one_thread):
     """Free-slip walls (specular reflection): the contact line is not held, so the floor edge and the nose
     coincide, and the front converges with resolution: Z(T = 2) = 2.564, 2.638, 2.665 at a = 8, 12, 16
-    (differences 0.074 then 0.027). It converges to about 16 % ahead of Martin and Moyce (+11.7, +16.1 %
-    at a = 8, 16), past the no-slip nose (+11 % at a = 16): the measurements lag the simulated
-    instantaneous release (docs/VALIDATION.md, "Dam break"). This guards those numbers."""
-    z2, err = [], []
+    (differences 0.074 then 0.027). The decision of issue 32: the instantaneous release leads Martin and Moyce's
+    gate-opened front, so the check against them is every measured point with T <= 3 within 20 % and the offset
+    at T = 2 converging (each refinement changes it less than the one before), not a fit. Measured: offsets at
+    T = 2 of +11.9, +15.1, +16.3 %."""
+    z2, offsets = [], []
     for a in (8, 12, 16):
-        r = db.run(dict(cells_per_column=a, walls="slip", t_end=2.05))
-        t = np.array(r.extra["T"])
-        z2.append(np.interp(2.0, t, r.extra["Z"]))
+        r = db.run(dict(cells_per_column=a, walls="slip", t_end=3.05))
+        z2.append(r.value)
+        offsets.append(r.extra["mm_offset_at_T"])
         assert np.max(np.abs(np.array(r.extra["Z"]) - np.array(r.extra["Z_nose"]))) < 0.01
-        err.append(np.array(r.extra["error_at_ref"])[np.array(r.extra["T_ref"]) <= 2.0])
+        assert r.extra["mm_worst_error"] < db.MM_TOLERANCE
         assert r.extra["volume"] == pytest.approx(2 * a * a * 8, rel=0.02)
-    assert abs(z2[2] - z2[1]) < 0.5 * abs(z2[1] - z2[0])
-    assert z2[0] < z2[1] < z2[2]
-    assert 0.10 < err[0].max() < 0.13 and 0.14 < err[2].max() < 0.19
+    assert z2 == pytest.approx([2.564, 2.638, 2.665], abs=0.01)
+    assert abs(offsets[2] - offsets[1]) < 0.5 * abs(offsets[1] - offsets[0])
+    assert 0.10 < offsets[0] < 0.13 and 0.14 < offsets[2] < 0.19

@@ -25,7 +25,7 @@ from iceresist.post.convergence import TABLE_NAME, load_table
 log = logging.getLogger(__name__)
 
 #: The reference cases of ``iceresist validate`` in report order (issue: error against run time).
-KNOWN_CASES = ("poiseuille", "taylor_green", "sphere_drag", "standing_wave", "dam_break", "floating_cube",
+KNOWN_CASES = ("poiseuille", "taylor_green", "sphere_drag", "sphere_array", "standing_wave", "dam_break", "floating_cube",
                "settling_sphere", "ship_tier1", "ship_tier2")
 KEY = ("case", "label", "ladder", "backend", "precision")
 

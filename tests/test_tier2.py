@@ -209,7 +209,10 @@ def test_tier2_cheap_watchdog_probe_reads_the_speed_the_populations_give(tiny_ru
     assert "density_min" in full and "density_min" not in light and "kinetic_energy" not in light
     assert light["finite"] == (True, None)
     assert light["max_lattice_speed"][0] == pytest.approx(full["max_lattice_speed"][0], rel=1e-6)
-    assert light["max_lattice_speed"][1] == full["max_lattice_speed"][1]
+    # the same cell, or its mirror across the tank's centre plane (the flow is symmetric in y, so the two speeds tie
+    # to the last bits and either probe may name either)
+    (i, j, k), ny = light["max_lattice_speed"][1], m.shape_cells[1]
+    assert full["max_lattice_speed"][1] in ([i, j, k], [i, ny - 1 - j, k])
     assert light["max_body_speed_m_s"] == full["max_body_speed_m_s"]
     m._probes = 0
     kinds = ["density_min" in m.watchdog_probe() for _ in range(2 * m.full_probe_every)]

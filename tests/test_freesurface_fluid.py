@@ -7,13 +7,11 @@ the fused kernel's free-surface branch (eq. 11, force rho g) is the same for eve
 import numpy as np
 import pytest
 
-from iceresist import lattice as L
 from iceresist.backends import jit
 from iceresist.errors import InputError
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import BlockForest, Face
-from iceresist.lbm.stream import stream_collide_source
 
 G = 1e-4
 DEPTH = 10.0
@@ -33,39 +31,44 @@ def _still_water(steps, operator="bgk", precision="float64"):
     return fs, v0, rho, u
 
 
-def test_eq11_is_anti_bounce_back_at_rho0():
-    """Eq. (11) with f^eq of eq. (12) at rho0 = 1, written for f - w, equals the generated branch."""
-    rng = np.random.default_rng(3)
-    u = rng.normal(scale=0.05, size=3)
-    fopp = rng.normal(scale=0.01)
-    for q in range(1, L.Q):
-        cu, uu = L.C[q] @ u, u @ u
-        feq = lambda c: L.W[q] * (1 + 3 * c + 4.5 * c * c - 1.5 * uu)   # noqa: E731, eq. (12), rho0 = 1
-        full = feq(cu) - ((fopp + L.W[q]) - feq(-cu))                      # eq. (11) on f = (f - w) + w
-        well = -fopp + 2 * L.W[q] * (4.5 * cu * cu - 1.5 * uu)            # the kernel's form
-        assert full - L.W[q] == pytest.approx(well, abs=1e-15)
-    src = stream_collide_source(free_surface=True)
-    assert "flags[nb, sc] & GAS" in src and "rho_c * Fz" in src
-    assert "GAS" not in stream_collide_source().replace("NEED_U", "")
-
-
 def test_still_water_tank_stays_still_and_flat():
-    """Closed 8x8x16 tank, 10 cells of water, g = 1e-4: after 1000 steps max |u| = 2.0e-7 (< 1e-4), the surface
-    flat to 1.1e-6 cell and 1.6e-4 cell below the initial level, sum phi conserved to 1e-13."""
+    """Closed 8x8x16 tank, 10 cells of water, g = 1e-4, 1000 steps. Measured (2-core x86 VM, float64): max |u| =
+    2.0e-7, surface flat to 6.9e-7 cell and 1.6e-4 cell below the initial level, sum phi conserved to 9e-14, the
+    hydrostatic step 3 g rho per cell within 1.7e-4 of itself. The tolerances are 3-10x those figures."""
     fs, v0, rho, u = _still_water(1000)
     h = fs.surface_height()
-    assert np.nanmax(np.abs(u)) < 1e-4
-    assert h.max() - h.min() < 0.1
-    assert abs(h.mean() - DEPTH) < 0.1
-    assert fs.volume() == pytest.approx(v0, rel=1e-3)
+    assert np.nanmax(np.abs(u)) < 1e-6
+    assert h.max() - h.min() < 5e-6
+    assert abs(h.mean() - DEPTH) < 5e-4
+    assert fs.volume() == pytest.approx(v0, rel=1e-12)
     # hydrostatic: rho falls by 3 g per cell upwards in the liquid
     col = rho[4, 4, :9]
-    assert np.allclose(np.diff(col), -3 * G * col[:-1], rtol=0.05, atol=0)
+    assert np.allclose(np.diff(col), -3 * G * col[:-1], rtol=1e-3, atol=0)
     # flags: liquid below the surface, GAS above, NEAR_SURFACE on the top liquid layer
     flags = fs.forest.to_dense(np.asarray(fs.fluid.flags).astype(float))
     assert np.all(flags[:, :, 11:] == FL.GAS)
     assert np.all((flags[:, :, 9].astype(int) & FL.NEAR_SURFACE) != 0)
     assert np.all((flags[2:6, 2:6, 1:9].astype(int) & ~FL.FLUID) == 0)
+
+
+def test_still_water_with_the_surface_inside_a_cell_keeps_the_hydrostatic_density():
+    """The level 10.3 cells sits 0.3 cell above the face of the top liquid cell, so the pull from the gas imposes the
+    sub-cell hydrostatic density 1 + 3 g s_mid of eq. (11) as written in stream_collide_source (s_mid = 0.3 there:
+    9e-5 above rho0). After 1000 steps every liquid cell holds rho = 1 + 3 g (h - z) with h the surface height:
+    measured to 2.8e-6 (the first-order profile against the kernel's), asserted to 1e-5; the sub-cell term doubled
+    puts the column 8.8e-5 off."""
+    depth = 10.3
+    fs = FreeSurfaceFluid(_tank(), tau=0.6, gravity_lattice=G, depth_cells=depth, operator="bgk",
+                          precision="float64")
+    fs.initialize()
+    fs.step(1000)
+    rho, u = fs.macroscopic()
+    h = fs.surface_height()
+    z = np.arange(10) + 0.5
+    assert abs(h.mean() - depth) < 0.02             # the surface reads 10.29 (measured -0.0103)
+    err = rho[:, :, :10] - (1 + 3 * G * (h.mean() - z))
+    assert np.abs(err).max() < 1e-5
+    assert np.nanmax(np.abs(u)) < 1e-6              # measured 2.0e-7
 
 
 @pytest.mark.slow

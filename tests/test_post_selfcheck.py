@@ -17,4 +17,9 @@ def test_check_ar1_small():
 def test_selfcheck_cli_json(capsys):
     assert main(["--a", "0.5", "--reps", "20", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["a"] == 0.5 and out["reps"] == 20 and 0.0 <= out["coverage_95"] <= 1.0
+    assert out["a"] == 0.5 and out["reps"] == 20
+    # the printed numbers are those of check_ar1 with the command's defaults (length 200 tau_int, seed 1)
+    direct = check_ar1(0.5, reps=20, length_tau=200.0, seed=1)
+    for key in ("coverage_95", "tau_int_mean", "tau_int_long_record", "refused", "n", "stderr_rms_over_true"):
+        assert out[key] == direct[key], key
+    assert out["coverage_95"] * (20 - out["refused"]) == pytest.approx(round(out["coverage_95"] * (20 - out["refused"])))

@@ -4,8 +4,8 @@ Measures million lattice-cell updates per second after a warm-up step (compile t
 apart), the CPU time the timed steps took (``mlups_per_cpu_s``: throughput per busy core-second,
 which a loaded shared machine does not depress the way it does the wall-clock figure) with the
 1-minute load average, and the memory bandwidth it implies, 2 * 27 * bytes * cells * steps / seconds
-(read and write of every population once per step). On CUDA it adds a 256^3 case, the largest cube that
-fits in device memory, and a device-to-device copy bandwidth to set the kernel's figure against.
+(read and write of every population once per step). On CUDA it adds a 256^3 case (``--largest``: also the
+largest cube that fits in device memory) and a device-to-device copy bandwidth to set the kernel's figure against.
 """
 
 from __future__ import annotations
@@ -24,6 +24,9 @@ def add_arguments(parser):
     parser.add_argument("--operator", choices=("auto", "cumulant", "bgk"), default="auto",
                         help="collision operator; auto = cumulant where available, else bgk")
     parser.add_argument("--tau", type=float, default=0.6)
+    parser.add_argument("--largest", action="store_true",
+                        help="on CUDA also the largest cube whose populations fit the device (its set-up on the host "
+                             "needs host memory of the same size: minutes and tens of GB on a large GPU)")
 
 
 def measure(n, precision, target, operator, steps, tau=0.6):
@@ -89,7 +92,8 @@ def run(args):
     for precision in args.precision:
         rows.append(measure(args.n, precision, target, operator, args.steps, args.tau))
         if target.is_cuda and not target.simulator:
-            for n in sorted({256, largest_cube(precision)} - {args.n}):
+            sizes = {256, largest_cube(precision)} if args.largest else {256}
+            for n in sorted(sizes - {args.n}):
                 rows.append(measure(n, precision, target, operator, args.steps, args.tau))
     if target.is_cuda and not target.simulator:
         rows.append(copy_bandwidth())

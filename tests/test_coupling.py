@@ -183,36 +183,46 @@ def test_cpu_and_cuda_simulator_agree_for_a_moving_rotating_box():
                        res["cuda"][0][np.broadcast_to(fluid[:, None, :], res["cuda"][0].shape)], atol=1e-14)
 
 
-def test_launch_rows_partition_each_box_into_z_slabs():
+def test_launch_rows_partition_each_box_into_runs():
     from iceresist.coupling.coupler import slab_counts, tile_rows
 
     bint = np.array([[1, 0, 6, 0, 0, 0, 3, 3, 3],            # 64 cells: stays one row
-                     [1, 6, 6, -2, 5, 1, 9, 12, 10]], np.int32)  # 12 x 8 x 10 = 960 cells: 10 slabs of 1 z-plane
-    assert slab_counts(bint, 100).tolist() == [1, 10] and slab_counts(bint, 1).tolist() == [4, 10]
+                     [1, 6, 6, -2, 5, 1, 9, 12, 10]], np.int32)  # 12 x 8 x 10 = 960 cells: 10 runs of 96
+    assert slab_counts(bint, 100).tolist() == [1, 10] and slab_counts(bint, 1).tolist() == [64, 960]
     assert slab_counts(bint, 300).tolist() == [1, 4] and slab_counts(bint, 10 ** 6).tolist() == [1, 1]
+    empty = np.array([[1, 0, 6, 5, 0, 0, 4, 3, 3]], np.int32)   # clipped away: no cells, still one row
+    assert slab_counts(empty, 100).tolist() == [1]
     rows = tile_rows(slab_counts(bint, 100))
-    assert rows[:, 0].tolist() == [1] * 5 + [0] + [1] * 5           # the slabs spread around the small body
+    assert rows[:, 0].tolist() == [1] * 5 + [0] + [1] * 5           # the runs spread around the small body
     assert sorted(rows[rows[:, 0] == 1, 1].tolist()) == list(range(10)) and (rows[rows[:, 0] == 1, 2] == 10).all()
     assert rows[rows[:, 0] == 0].tolist() == [[0, 0, 1]]
     assert tile_rows([1, 4])[:, 0].tolist() == [1, 1, 0, 1, 1]
 
 
-@pytest.mark.parametrize("slabs", [4, 12])
-def test_slabs_cut_the_cell_box_of_a_body_into_its_z_planes(slabs):
-    """The rows of a body split into ``slabs`` slabs cover the z-planes of its box once each, in x and y the whole
-    box: 4 slabs of 2 or 3 of its 10 planes, or 12 slabs of which two stay empty (fewer planes than slabs); the
-    boxes come from the body state on the target (iceresist.coupling.bodystate)."""
+@pytest.mark.parametrize("runs", [4, 12, 33, 1000])
+def test_runs_partition_the_cell_box_of_a_body(runs):
+    """The rows of a body split into ``runs`` runs visit every cell of its box once: 4, 12 or 33 runs of nearly
+    equal length (they differ by at most one cell), or 1000 runs, more than the box's cells, of which the surplus
+    stay empty. Each row's box keeps the whole box in x and y and only the planes its run touches; the boxes come
+    from the body state on the target (iceresist.coupling.bodystate)."""
     _, dem, cp = _setup((16, 16, 16), Box((4.0, 5.0, 6.0)), box((4.0, 5.0, 6.0), 900.0), (8.2, 7.7, 8.4))
-    cp._slabs = np.array([slabs])
+    cp._slabs = np.array([runs])
     cp.update_boundaries()
     whole = cp._host(cp._d["box"])[0]
-    assert (whole[5] - whole[2] + 1) == 10
-    bint = cp._host(cp._d["bint"])
-    assert len(bint) == slabs and (bint[:, 3:5] == whole[:2]).all() and (bint[:, 6:8] == whole[3:5]).all()
-    planes = np.concatenate([np.arange(lo, hi + 1) for lo, hi in bint[:, [5, 8]]])
-    assert sorted(planes.tolist()) == list(range(whole[2], whole[5] + 1))
-    sizes = np.sort(bint[:, 8] - bint[:, 5] + 1)
-    assert sizes.tolist() == ([2, 2, 3, 3] if slabs == 4 else [0, 0] + [1] * 10)
+    ext = whole[3:] - whole[:3] + 1
+    assert ext[2] == 10
+    bint = cp._host(cp._d["bint"]).astype(np.int64)
+    assert len(bint) == runs and (bint[:, 3:5] == whole[:2]).all() and (bint[:, 6:8] == whole[3:5]).all()
+    plane = ext[0] * ext[1]
+    cells = np.concatenate([(r[5] - whole[2]) * plane + np.arange(r[10], r[11]) for r in bint])
+    assert np.sort(cells).tolist() == list(range(ext.prod()))
+    lengths = bint[:, 11] - bint[:, 10]
+    assert lengths.max() - lengths.min() <= 1 and lengths.sum() == ext.prod()
+    full = lengths > 0
+    first_plane = whole[2] + ((bint[full, 5] - whole[2]) * plane + bint[full, 10]) // plane
+    last_plane = whole[2] + ((bint[full, 5] - whole[2]) * plane + bint[full, 11] - 1) // plane
+    assert (first_plane == bint[full, 5]).all() and (last_plane == bint[full, 8]).all()
+    assert (bint[full, 10] < plane).all()
 
 
 def _two_moving_boxes(target, tile_cells, steps, recount=False):
@@ -240,17 +250,17 @@ def _two_moving_boxes(target, tile_cells, steps, recount=False):
 
 
 @pytest.mark.parametrize("backend", ["cpu", "cuda"])
-def test_bodies_split_into_slabs_give_the_unsplit_result(backend):
-    """Two moving boxes launched as slabs of at most 64 cells (13 rows) cover the same cells and give the same
+def test_bodies_split_into_runs_give_the_unsplit_result(backend):
+    """Two moving boxes launched as runs of at most 64 cells (20 rows) cover the same cells and give the same
     populations, forces and torques (to the order of summation) as launched whole, over 8 steps in which their
     cell boxes change and they uncover cells: the refill reads the velocity of the body that uncovered a cell
-    through the row that covered it a step earlier, so the rows must keep their bodies (counting the slabs anew
+    through the row that covered it a step earlier, so the rows must keep their bodies (counting the runs anew
     every step moves them: the populations then differ by 0.035). On the CUDA simulator 3 steps (each uncovers
     6-9 cells): a simulated step takes 20-30 s, and 8 + 8 of them made this the longest test of the suite."""
     target = jit.cpu if backend == "cpu" else jit.cuda()
     steps = 3 if backend == "cuda" and SIMULATED else 8
     whole, split = _two_moving_boxes(target, 10 ** 6, steps), _two_moving_boxes(target, 64, steps)
-    assert whole[5] == {None} and len(split[5]) == 1 and len(next(iter(split[5]))) == 13
+    assert whole[5] == {None} and len(split[5]) == 1 and len(next(iter(split[5]))) == 20
     assert (whole[3] == split[3]).all() and (whole[3] == 1).sum() > 40 and (whole[3] == 0).sum() > 5
     assert (whole[4] == split[4]).all() and whole[4][1] > 100
     assert np.allclose(whole[1], split[1], rtol=1e-12, atol=1e-15) and np.abs(whole[1]).max() > 1e-4

@@ -8,8 +8,9 @@ A scalar device function is written once; a launcher runs it over an iteration s
 * :class:`ItemLauncher` ``item(i, *args)`` for i < n (forest blocks, bodies, spheres, array elements): CPU
   ``prange`` over items (on one thread below a size the kernel module chooses), CUDA one thread per item;
   :class:`BlockLauncher` is the same launcher over forest blocks;
-* :class:`BodyLauncher` ``visit(k, gx, gy, gz, bint, *args)`` over the cell box ``bint[k, 3:9]`` of every body:
-  CPU ``prange`` over bodies, CUDA one thread block per body, its threads striding over the box;
+* :class:`BodyLauncher` ``visit(k, gx, gy, gz, bint, *args)`` over the cells ``bint[k, 10:12]`` of the cell box
+  ``bint[k, 3:9]`` of every launch row k (a body, or a run of its box's cells): CPU ``prange`` over rows, CUDA one
+  thread block per row, its threads striding over the run;
 * :class:`ActiveLauncher` ``visit(b, c, *args)`` for the cells of the forest blocks flagged ``active[b] != 0``.
 
 Launchers are generated with named arguments (numba's CUDA kernels take no ``*args``) and live outside the
@@ -260,10 +261,11 @@ BODY_THREADS = 128
 
 
 class BodyLauncher(_GeneratedLauncher):
-    """``launcher(nbodies, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over every cell of the cell
-    box ``bint[k, 3:9]`` (inclusive) of every body k: on the CPU a prange over bodies, each calling the per-body
-    loop (compiled once, serial, the visit inlined into it); on CUDA one thread block per body, threads striding
-    over its cells."""
+    """``launcher(nrows, bint, *rest)`` runs ``visit(k, gx, gy, gz, bint, *rest)`` over the cells of each launch
+    row k: the cells ``bint[k, 10] <= i < bint[k, 11]`` of its cell box ``bint[k, 3:9]`` (inclusive), counted x
+    fastest (i = x + nx (y + ny z) from the box's low corner). On the CPU a prange over rows, each calling the
+    per-row loop (compiled once, serial, the visit inlined into it); on CUDA one thread block per row, threads
+    striding over its cells."""
 
     name, fn_name = "launch_bodies", "visit"
     threads = BODY_THREADS
@@ -276,15 +278,21 @@ class BodyLauncher(_GeneratedLauncher):
             return (f"def launch_bodies({sig}):\n"
                     "    k = cuda.blockIdx.x\n"
                     "    lx = bint[k, 3]\n    ly = bint[k, 4]\n    lz = bint[k, 5]\n"
-                    "    nx = bint[k, 6] - lx + 1\n    ny = bint[k, 7] - ly + 1\n    nz = bint[k, 8] - lz + 1\n"
-                    "    for i in range(cuda.threadIdx.x, nx * ny * nz, cuda.blockDim.x):\n"
+                    "    nx = bint[k, 6] - lx + 1\n    ny = bint[k, 7] - ly + 1\n"
+                    "    for i in range(bint[k, 10] + cuda.threadIdx.x, bint[k, 11], cuda.blockDim.x):\n"
                     "        gx = lx + i % nx\n        gy = ly + (i // nx) % ny\n        gz = lz + i // (nx * ny)\n"
                     f"        visit(k, gx, gy, gz, {sig})\n")
         loop = (f"def body_loop(k, {sig}):\n"
-                "    for gz in range(bint[k, 5], bint[k, 8] + 1):\n"
-                "        for gy in range(bint[k, 4], bint[k, 7] + 1):\n"
-                "            for gx in range(bint[k, 3], bint[k, 6] + 1):\n"
-                f"                visit(k, gx, gy, gz, {sig})\n")
+                "    lx = bint[k, 3]\n    ly = bint[k, 4]\n    hx = bint[k, 6]\n    hy = bint[k, 7]\n"
+                "    nx = hx - lx + 1\n    ny = hy - ly + 1\n    s = bint[k, 10]\n    e = bint[k, 11]\n"
+                "    if e <= s:\n        return\n"
+                "    gx = lx + s % nx\n    gy = ly + (s // nx) % ny\n    gz = bint[k, 5] + s // (nx * ny)\n"
+                "    for _ in range(e - s):\n"
+                f"        visit(k, gx, gy, gz, {sig})\n"
+                "        gx += 1\n"
+                "        if gx > hx:\n"
+                "            gx = lx\n            gy += 1\n"
+                "            if gy > hy:\n                gy = ly\n                gz += 1\n")
         return (f"{loop}\n\ndef launch_bodies(nbodies, {sig}):\n"
                 "    for k in prange(nbodies):\n"
                 f"        body_loop_jit(k, {sig})\n")

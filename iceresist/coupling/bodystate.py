@@ -6,8 +6,9 @@ Four per-item passes keep a coupled step on the device: nothing per body crosses
   ``body``/``bint`` rows of :mod:`iceresist.coupling.kernels` (centre (x - origin) / dx, rotation of the unit
   quaternion, velocity v dt / dx, angular velocity omega dt, shape parameters; the cell box
   floor(x - e - 1/2) - 1 .. ceil(x + e - 1/2) + 1 with e = |R| h the half extents of the rotated bounding box,
-  clipped to the domain on walled axes, at most one period long on periodic ones), and of a body split into
-  slabs its z-range ``slab_z`` of the box. The first slab of a body writes the whole box to ``box[body]``.
+  clipped to the domain on walled axes, at most one period long on periodic ones); a body launched as several
+  rows gives row j of m the run ``run_of`` of its box's cells (``bint[r, 10:12]``, cells counted x fastest) and
+  the planes that run touches as the row's box. The first row of a body writes the whole box to ``box[body]``.
 * ``active_row(r, ...)``: flags ``active[block] = 1`` for every block the row's cell box of this step and of the
   previous one touch, dilated by one cell (the blocks where cells may be covered or uncovered).
 * ``row_sums(k, ...)`` (one item per body): F_s(t), M_s(t) (eqs. 18-19, lattice units) and the link count of
@@ -17,7 +18,7 @@ Four per-item passes keep a coupled step on the device: nothing per body crosses
   and written as the DEM's external load (eqs. 13-14) less the buoyancy ``buoy[k]`` = rho_f V g (zero where the
   fluid carries the hydrostatic pressure); ``fprev[k]`` keeps F_s(t) for the next step.
 
-``rows[r] = (body, slab, slabs)`` lists the launch rows (:func:`iceresist.coupling.coupler.tile_rows`).
+``rows[r] = (body, run, runs)`` lists the launch rows (:func:`iceresist.coupling.coupler.tile_rows`).
 ``conv`` (float64): origin x, y, z (m), dx (m), dt / dx (s/m), dt (s). ``grid`` (int64): nx, ny, nz, and 1 for
 periodic axes. ``load_scale`` (float64): the lattice force and torque units, F dt^2 / (rho dx^4) -> N and N m.
 """
@@ -39,12 +40,13 @@ def build_body_state(target, real):
     """Compile the device functions ``(body_row, active_row, row_sums, fluid_loads)`` (module docstring)."""
     int64, int32, f64 = np.int64, np.int32, np.float64
 
-    def slab_z(lo, hi, j, m):
-        """z-range (z0, z1) of slab j of m of the planes lo..hi (empty, z1 < z0, where there are fewer planes)."""
-        nz = hi - lo + 1
-        return lo + (j * nz) // m, lo + ((j + 1) * nz) // m - 1
+    def run_of(plane, nz, j, m):
+        """Cells [s, e) of run j of m of a box of ``nz`` planes of ``plane`` cells, counted x fastest from its low
+        corner (the runs partition the box; run j holds cells j N // m to (j + 1) N // m, N = plane nz)."""
+        n = plane * nz
+        return (j * n) // m, ((j + 1) * n) // m
 
-    slab_z = target.device(slab_z)
+    run_of = target.device(run_of)
 
     def body_row(r, rows, pos, quat, vel, omega, shape_int, par_lat, half_lat, conv, grid, body, bint, box):
         r = int64(r)
@@ -84,10 +86,21 @@ def build_body_state(target, real):
             if j == 0:
                 box[k, a] = lo
                 box[k, 3 + a] = hi
-            if a == 2:
-                lo, hi = slab_z(lo, hi, j, m)
             bint[r, 3 + a] = int32(lo)
             bint[r, 6 + a] = int32(hi)
+        # the row's run of the box, and the row's box cut down to the planes the run touches
+        plane = max(int64(bint[r, 6]) - bint[r, 3] + 1, int64(0)) * max(int64(bint[r, 7]) - bint[r, 4] + 1, int64(0))
+        nz = max(int64(bint[r, 8]) - bint[r, 5] + 1, int64(0))
+        first, end = run_of(plane, nz, j, m)
+        if end > first:
+            z0 = first // plane
+            bint[r, 8] = int32(bint[r, 5] + (end - 1) // plane)
+            bint[r, 5] = int32(bint[r, 5] + z0)
+            bint[r, 10] = int32(first - z0 * plane)
+            bint[r, 11] = int32(end - z0 * plane)
+        else:
+            bint[r, 10] = 0
+            bint[r, 11] = 0
         bint[r, 0] = shape_int[k, 0]
         bint[r, 1] = shape_int[k, 1]
         bint[r, 2] = shape_int[k, 2]
@@ -116,14 +129,17 @@ def build_body_state(target, real):
 
     def active_row(r, rows, bint, box_prev, has_prev, grid, nblocks3, block_map, active):
         r = int64(r)
-        mark_blocks(int64(bint[r, 3]), int64(bint[r, 4]), int64(bint[r, 5]), int64(bint[r, 6]), int64(bint[r, 7]),
-                    int64(bint[r, 8]), grid, nblocks3, block_map, active)
+        if bint[r, 11] > bint[r, 10]:
+            mark_blocks(int64(bint[r, 3]), int64(bint[r, 4]), int64(bint[r, 5]), int64(bint[r, 6]),
+                        int64(bint[r, 7]), int64(bint[r, 8]), grid, nblocks3, block_map, active)
         if has_prev != 0:
             k = rows[r, 0]
-            z0, z1 = slab_z(box_prev[k, 2], box_prev[k, 5], rows[r, 1], rows[r, 2])
-            if z1 >= z0:
-                mark_blocks(box_prev[k, 0], box_prev[k, 1], z0, box_prev[k, 3], box_prev[k, 4], z1, grid, nblocks3,
-                            block_map, active)
+            plane = (max(box_prev[k, 3] - box_prev[k, 0] + 1, int64(0))
+                     * max(box_prev[k, 4] - box_prev[k, 1] + 1, int64(0)))
+            s, e = run_of(plane, max(box_prev[k, 5] - box_prev[k, 2] + 1, int64(0)), rows[r, 1], rows[r, 2])
+            if e > s:
+                mark_blocks(box_prev[k, 0], box_prev[k, 1], box_prev[k, 2] + s // plane, box_prev[k, 3],
+                            box_prev[k, 4], box_prev[k, 2] + (e - 1) // plane, grid, nblocks3, block_map, active)
 
     def row_sums(k, row_ptr, row_idx, bforce, btorque, nlinks, now, links):
         k = int64(k)

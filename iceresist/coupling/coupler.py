@@ -50,35 +50,41 @@ from iceresist.units import Units
 log = logging.getLogger(__name__)
 
 
-#: Cells of a body's cell box per launch row. A body whose box holds more (the hull: 0.7 M cells at the quick
-#: tier-2 resolution, 78 M at the paper's) is split into slabs along z, each launched as a body row of its own
-#: (:func:`tile_rows`), so that it spreads over every CPU thread and CUDA thread block instead of one.
+#: Cells of a body's cell box per launch row on the CPU. A body whose box holds more (the hull: 0.7 M cells at the
+#: quick tier-2 resolution, 78 M at the paper's) is split into runs of its cells, each launched as a row of its own
+#: (:func:`tile_rows`), so that it spreads over every CPU thread instead of one.
 TILE_CELLS = 32768
+
+#: The same on CUDA, where a row is one thread block of ``BODY_THREADS`` (128) threads: 16 cells per thread, so
+#: that the hull spreads over hundreds of blocks (with 32 768 the quick case's hull was 25 blocks sweeping 240-360
+#: cells per thread while the rest of the GPU idled: 75 % of the coupled step on an H200).
+TILE_CELLS_CUDA = 2048
 
 
 def slab_counts(bint, tile_cells: int = TILE_CELLS) -> np.ndarray:
-    """Slabs per body: its cell box (``bint[:, 3:9]``) over ``tile_cells``, rounded up, at most one per z-plane."""
-    ext = (bint[:, 6:9].astype(np.int64) - bint[:, 3:6] + 1)
-    return np.maximum(np.minimum(-(-ext.prod(axis=1) // int(tile_cells)), ext[:, 2]), 1)
+    """Runs (launch rows) per body: its cell box (``bint[:, 3:9]``) over ``tile_cells``, rounded up, at least one."""
+    ext = np.maximum(bint[:, 6:9].astype(np.int64) - bint[:, 3:6] + 1, 0)
+    return np.maximum(-(-ext.prod(axis=1) // int(tile_cells)), 1)
 
 
 def tile_rows(slabs) -> np.ndarray:
-    """The launch rows ``(rows, 3)`` int64 of bodies split into ``slabs[k]`` slabs along z: (body, slab, slabs).
+    """The launch rows ``(rows, 3)`` int64 of bodies split into ``slabs[k]`` runs: (body, run, runs).
 
-    Each row is a slab of its body's cell box (:func:`iceresist.coupling.bodystate.build_body_state` cuts the
-    box's z-range into ``slabs`` parts); the slabs of a body partition its box, so every cell is visited once and
-    the kernels, which index everything by the row (shape, state, owner, force row), run unchanged: the owner of a
-    covered cell is its slab's row and the force rows of a body's slabs add up to the body's force. The rows depend
-    on ``slabs`` alone, so a coupling that keeps ``slabs`` keeps the body of every row from step to step (the
-    refill reads the velocity of the body that uncovered a cell from the row that covered it a step earlier).
+    Each row is a run of its body's cell box, cells counted x fastest
+    (:func:`iceresist.coupling.bodystate.build_body_state` gives row j of m the cells j N // m to (j + 1) N // m of
+    the box's N); the runs of a body partition its box, so every cell is visited once and the kernels, which index
+    everything by the row (shape, state, owner, force row), run unchanged: the owner of a covered cell is its run's
+    row and the force rows of a body's runs add up to the body's force. The rows depend on ``slabs`` alone, so a
+    coupling that keeps ``slabs`` keeps the body of every row from step to step (the refill reads the velocity of
+    the body that uncovered a cell from the row that covered it a step earlier).
 
     The CPU launcher hands each thread a contiguous range of rows (numba's static prange schedule), so the rows
-    are ordered by (slab number + 1/2) / slabs of their body: a body's slabs spread evenly over the range and
+    are ordered by (run number + 1/2) / runs of their body: a body's runs spread evenly over the range and
     every thread gets its share of the large body.
     """
     m = np.asarray(slabs, dtype=np.int64)
     body = np.repeat(np.arange(len(m)), m)
-    j = np.arange(len(body)) - np.repeat(np.cumsum(m) - m, m)          # slab number within its body
+    j = np.arange(len(body)) - np.repeat(np.cumsum(m) - m, m)          # run number within its body
     order = np.argsort((j + 0.5) / m[body], kind="stable")
     return np.ascontiguousarray(np.stack([body[order], j[order], m[body[order]]], axis=1), dtype=np.int64)
 
@@ -161,7 +167,7 @@ class FluidStructureCoupling:
         self.contact_film = bool(contact_film)
         g_lat, level = (0.0, 0.0) if self.surface is None else (self.surface.g, self.surface.depth)
         self._d["film"] = dev(np.array([1.0 if self.contact_film else 0.0, g_lat, level], dtype=self.real))
-        self._tile_cells = TILE_CELLS
+        self._tile_cells = TILE_CELLS_CUDA if self.target.is_cuda else TILE_CELLS
         self._slabs = None
         self._rows = None           # host copy of the launch rows (tile_rows); None: to be laid out
         self._placed = self.surface is None
@@ -172,7 +178,7 @@ class FluidStructureCoupling:
 
     @property
     def tile_cells(self) -> int:
-        """Cells of a body's cell box per launch row (:func:`tile_rows`). The slabs of each body are counted
+        """Cells of a body's cell box per launch row (:func:`tile_rows`). The runs of each body are counted
         from its box at the first step after this is set and then kept."""
         return self._tile_cells
 
@@ -209,7 +215,7 @@ class FluidStructureCoupling:
         n, dev, real = self.n, self._dev, self.real
         if self._slabs is None:
             ident = dev(tile_rows(np.ones(n, np.int64)))
-            bint = dev(np.zeros((n, 10), np.int32))
+            bint = dev(np.zeros((n, 12), np.int32))
             self._body_rows(ident, n, dev(np.zeros((n, 21), real)), bint, dev(np.zeros((n, 6), np.int64)))
             self._slabs = slab_counts(self._host(bint), self._tile_cells)
         rows = tile_rows(self._slabs)
@@ -219,7 +225,7 @@ class FluidStructureCoupling:
         ptr[1:] = np.cumsum(np.bincount(rows[:, 0], minlength=n))
         d = self._d
         d["rows"], d["row_ptr"], d["row_idx"] = dev(rows), dev(ptr), dev(order.astype(np.int64))
-        d["body"], d["bint"] = dev(np.zeros((r, 21), real)), dev(np.zeros((r, 10), np.int32))
+        d["body"], d["bint"] = dev(np.zeros((r, 21), real)), dev(np.zeros((r, 12), np.int32))
         d["bforce"], d["btorque"] = dev(np.zeros((r, 3))), dev(np.zeros((r, 3)))
         d["nlinks"] = dev(np.zeros((r, 1), np.int64))
         self._rows = rows

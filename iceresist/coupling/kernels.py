@@ -7,9 +7,10 @@ Arrays the kernels share:
 
 * ``body[n, 21]`` (real): centre of mass (0-2), rotation body -> world, row-major (3-11), velocity (12-14),
   angular velocity (15-17), shape parameters (18-20: sphere radius or box half extents);
-* ``bint[n, 10]`` (int32): shape kind, first plane, plane count, then the cell box lo (3) and hi (3) the
-  body may touch (global cell indices, inclusive; beyond the domain on periodic axes), and the body the row
-  belongs to (a large body is launched as several rows, :func:`iceresist.coupling.coupler.tile_rows`);
+* ``bint[n, 12]`` (int32): shape kind, first plane, plane count, then the cell box lo (3) and hi (3) the
+  row may touch (global cell indices, inclusive; beyond the domain on periodic axes), the body the row
+  belongs to, and the run of the box's cells the row visits (a large body is launched as several rows, each a
+  run of its box's cells, :func:`iceresist.coupling.coupler.tile_rows`);
 * ``planes[m, 4]`` (real): face planes n . p + d of convex bodies in the body frame;
 * ``grid[6]`` (int64): nx, ny, nz and 1 for periodic axes; ``block_map[nbx, nby, nbz]``: block index or -1;
 * ``owner[nblocks, 512]`` (int32): the body covering a cell now (-1: none), ``owner_prev`` the same one step

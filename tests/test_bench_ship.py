@@ -67,3 +67,5 @@ def test_compare_pure_splits_the_coupled_step_into_its_kernels():
     assert fu["launches_per_step"] == 1.0 and 0 < fu["share"] < 1
     assert rows["ratio coupled / pure"]["ratio"] == pytest.approx(coupled["s_per_step"] / pure["s_per_step"])
     assert pure["cells"] == coupled["cells"] == 64 * 16 * 16
+    by_label = {r["name"] for r in compare_pure(scene, "cpu", 1, by_label=True)}
+    assert {"part: links", "part: mark", "part: dem_contact", "part: dem_sort", "part: f_update"} <= by_label

@@ -42,6 +42,8 @@ def add_arguments(parser):
                         help="timed records after one of warm-up (0: only the --fit-gib row, nothing timed)")
     parser.add_argument("--compare-pure", action="store_true",
                         help="time the coupled step part by part beside the pure fused LBM step on as many cells")
+    parser.add_argument("--by-label", action="store_true",
+                        help="with --compare-pure: one row per launcher label instead of the parts of docs/PERFORMANCE.md")
 
 
 def scaled_scene(case: str, preset: str, across: int, **overrides):
@@ -143,9 +145,9 @@ def pure_step_seconds(shape_cells, tau: float, operator: str, precision: str, ta
     return seconds / steps
 
 
-def compare_pure(scene, backend: str, records: int) -> list[dict]:
-    """Rows: each part of the coupled LBM step (seconds per step and share), the rest (host NumPy, Python), the
-    whole coupled step, the pure fused LBM step on as many cells, and their ratio."""
+def compare_pure(scene, backend: str, records: int, by_label: bool = False) -> list[dict]:
+    """Rows: each part of the coupled LBM step (seconds per step and share; ``by_label``: each launcher label), the
+    rest (host NumPy, Python), the whole coupled step, the pure fused LBM step on as many cells, and their ratio."""
     from iceresist.backends.launch import profiling
     from iceresist.models.tier2 import Tier2Model
 
@@ -169,7 +171,7 @@ def compare_pure(scene, backend: str, records: int) -> list[dict]:
     common = {"backend": model.target.name, "precision": model.precision, "cells": model.cells, "steps": steps}
     parts: dict = {}
     for label, (sec, n) in prof.items():
-        p = parts.setdefault(part_of(label), [0.0, 0, []])
+        p = parts.setdefault(label if by_label else part_of(label), [0.0, 0, []])
         p[0] += sec
         p[1] += n
         p[2].append(label)
@@ -224,7 +226,7 @@ def run(args):
     for n in acrosses if args.records else []:
         scene = scaled_scene(args.case, args.preset, n)
         if args.compare_pure:
-            rows.extend(compare_pure(scene, args.backend, args.records))
+            rows.extend(compare_pure(scene, args.backend, args.records, by_label=args.by_label))
         else:
             rows.append(measure(scene, args.backend, args.records))
     return rows

@@ -172,7 +172,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
         if sim.completed and on_completed is not None:
             on_completed(rf, model, sim)
+    rate = f"; {sim.mlups:.2f} MLUPS after it" if model.cells else ""   # tier 1 has no lattice
     log.info("%s: %d steps in %.2f s of stepping, %.2f s of it the first step (compiling or loading the "
-             "kernels); %.2f MLUPS after it -> %s", sim.stop_reason, sim.steps_done, sim.step_time_s,
-             sim.first_step_s, sim.mlups, path)
+             "kernels)%s -> %s", sim.stop_reason, sim.steps_done, sim.step_time_s, sim.first_step_s, rate, path)
     return RunResult(path, sim, dog)

@@ -393,7 +393,8 @@ class Simulation:
             msg += f", {100.0 * done / total:.0f} % of {total} steps"
             if done > 0:
                 msg += f", about {(total - done) * elapsed_s / done / 60.0:.0f} min to go"
-        log.info("%s (%.0f min so far, %.2f MLUPS)", msg, elapsed_s / 60.0, self.mlups)
+        rate = f", {self.mlups:.2f} MLUPS" if m.cells else ""      # tier 1 has no lattice
+        log.info("%s (%.0f min so far%s)", msg, elapsed_s / 60.0, rate)
 
     def _progress_bar(self, total: int | None):
         enabled = self.progress and sys.stderr.isatty()

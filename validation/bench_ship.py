@@ -43,7 +43,7 @@ def add_arguments(parser):
     parser.add_argument("--compare-pure", action="store_true",
                         help="time the coupled step part by part beside the pure fused LBM step on as many cells")
     parser.add_argument("--by-label", action="store_true",
-                        help="with --compare-pure: one row per launcher label instead of the parts of docs/PERFORMANCE.md")
+                        help="with --compare-pure: one row per launcher label, not the parts of docs/PERFORMANCE.md")
 
 
 def scaled_scene(case: str, preset: str, across: int, **overrides):

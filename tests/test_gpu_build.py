@@ -23,6 +23,13 @@ EXPECTED = {
 }
 
 
+def _real_device() -> bool:
+    """A CUDA device this process runs kernels on (the simulator off)."""
+    from numba import config, cuda
+
+    return not config.ENABLE_CUDASIM and cuda.is_available()
+
+
 @pytest.fixture(scope="module")
 def builds():
     """One run of ``python -m validation.bench gpu_build --json`` (about 1.5 min on a 2-core x86 VM)."""
@@ -30,6 +37,8 @@ def builds():
     res = subprocess.run([sys.executable, "-m", "validation.bench", "gpu_build", "--json"], capture_output=True,
                          text=True, env=env, timeout=1200)
     rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+    if not rows and "needs NVVM" in res.stderr and _real_device():
+        pytest.skip("no `gpu` extra here, but a real GPU: the CUDA tests compile every kernel for it instead")
     assert rows, res.stderr[-3000:]
     return rows, res.returncode
 

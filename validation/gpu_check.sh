@@ -25,5 +25,5 @@ echo "== fused LBM, 256^3"
 "$PYTHON" -m validation.bench lbm --backend cuda --precision float32 --precision float64 --n 256 --steps 50 --json \
     > "$OUT/lbm.json" 2> "$OUT/lbm.err"; echo "exit $?"; cat "$OUT/lbm.json"
 echo "== coupled quick tier-2 step"
-"$PYTHON" -m validation.bench ship --preset quick --backend cuda --compare-pure --by-label --records 3 --json \
+"$PYTHON" -m validation.bench ship --preset quick --backend cuda --precision float32 --compare-pure --by-label --records 3 --json \
     > "$OUT/ship.json" 2> "$OUT/ship.err"; echo "exit $?"; cat "$OUT/ship.json"

@@ -76,6 +76,7 @@ def counting():
 
     tally = TransferCount()
     saved = []
+    nested = [0]  # > 0 inside ``cuda.to_device``, whose own ``copy_to_device`` must not count a second time
 
     def patch(owner, name, wrapper):
         saved.append((owner, name, vars(owner).get(name, _INHERITED)))
@@ -89,7 +90,7 @@ def counting():
             return _f(self, *a, **k)
 
         def copy_to_device(self, ary, *a, _f=to_device, **k):
-            if jit.is_host_array(ary):
+            if jit.is_host_array(ary) and not nested[0]:
                 tally.add("upload")
             return _f(self, ary, *a, **k)
 
@@ -111,7 +112,11 @@ def counting():
         def to_device(a, *args, _f=upload, **k):
             if jit.is_host_array(a):
                 tally.add("upload")
-            return _f(a, *args, **k)
+            nested[0] += 1
+            try:
+                return _f(a, *args, **k)
+            finally:
+                nested[0] -= 1
 
         patch(cuda, "to_device", to_device)
 

@@ -11,7 +11,7 @@ import argparse
 import json
 import sys
 
-from . import report
+from . import hullmesh, report
 from .cliparser import OneLineParser
 from .compare import compare_table2
 from .errors import FsicrInputError
@@ -44,6 +44,16 @@ def _add_ship_options(p: argparse.ArgumentParser, with_power: bool) -> None:
         g.add_argument(FLAGS[field], dest=field, type=_number, metavar="X", help=DESCRIPTIONS[field])
     g.add_argument("--bulbous-bow", dest="bulbous_bow", action=argparse.BooleanOptionalAction,
                    help="bulbous bow: phi1 = 90 deg in C1, C2")
+    hm = p.add_argument_group("hull mesh (measure the upper-waterline inputs on it; stated values win)")
+    hm.add_argument("--mesh", metavar="HULL.stl", help="closed hull surface, STL or OBJ")
+    hm.add_argument("--draught", type=_number, metavar="X", help="draught of the mesh [m, at the mesh's scale]")
+    hm.add_argument("--scale", type=_number, default=1.0, metavar="S",
+                    help="full-scale lengths / the mesh's (e.g. 25 for a 1:25 model; default 1)")
+    hm.add_argument("--mesh-unit", default="m", metavar="U", help=f"unit of the mesh's coordinates: "
+                    f"{', '.join(hullmesh.UNITS)} (default m)")
+    hm.add_argument("--mesh-bow", default="+x", metavar="AXIS",
+                    help="the mesh's axis toward the bow: +x, -x, +y, -y (default +x; write --mesh-bow=-x)")
+    hm.add_argument("--mesh-up", default="+z", metavar="AXIS", help="the mesh's axis upward (default +z)")
     lw = p.add_argument_group("lower ice waterline (optional; --lower-T starts it, others default to the upper values)")
     for field in WATERLINE_FIELDS:
         lw.add_argument("--lower-" + FLAGS[field][2:], dest="lower_" + field, type=_number, metavar="X",
@@ -70,6 +80,12 @@ def _ship_from_args(args, with_power: bool):
         value = getattr(args, field, None)
         if value is not None:
             data[field] = value
+    if args.mesh is not None or args.draught is not None:
+        measured = _measure_mesh(args)
+        meta["mesh"] = {"file": args.mesh, "draught_m": args.draught, "scale": args.scale, "unit": args.mesh_unit,
+                        "measured": measured, "stated": {f: data[f] for f in measured if f in data}}
+        data = {**measured, **data}
+        where += " + mesh"
     lower = {f: getattr(args, "lower_" + f) for f in WATERLINE_FIELDS if getattr(args, "lower_" + f) is not None}
     if lower:
         base = data.get("lower_waterline")
@@ -84,6 +100,17 @@ def _ship_from_args(args, with_power: bool):
     return ship, parse_ice_class(text), meta
 
 
+def _measure_mesh(args) -> dict:
+    """The upper-waterline inputs measured on ``--mesh`` at ``--draught`` (:mod:`fsicr.hullmesh`)."""
+    if args.mesh is None:
+        raise FsicrInputError("--draught: given without --mesh; add --mesh HULL.stl or drop --draught")
+    if args.draught is None:
+        raise FsicrInputError("--draught: missing; give the mesh's draught in metres at its own scale, e.g. "
+                              "--draught 0.44 for the 1:25 B-063 model")
+    hull = hullmesh.read_hull_mesh(args.mesh, unit=args.mesh_unit, bow=args.mesh_bow, up=args.mesh_up)
+    return hullmesh.measure(hull, args.draught, scale=args.scale)
+
+
 def _cmd_resistance(args) -> int:
     ship, cls, meta = _ship_from_args(args, with_power=False)
     results = r_ch_at_waterlines(ship, cls)
@@ -96,6 +123,7 @@ def _cmd_resistance(args) -> int:
         "r_ch_kN": upper.r_ch_kN,
         "r_ch_N_by_waterline": {r.waterline: r.r_ch_N for r in results},
         "waterlines": [r.to_dict() for r in results],
+        **({"mesh": meta["mesh"]} if "mesh" in meta else {}),
         "warnings": [w for r in results for w in r.warnings],
     }, indent=2)                                   # refuses a result that is not finite, in text mode too
     print(out if args.json else report.format_resistance_report(results, meta))
@@ -105,7 +133,8 @@ def _cmd_resistance(args) -> int:
 def _cmd_power(args) -> int:
     ship, cls, meta = _ship_from_args(args, with_power=True)
     result = required_power(ship, cls)
-    out = _json({"command": "power", "name": meta.get("name", ""), **result.to_dict()}, indent=2)
+    out = _json({"command": "power", "name": meta.get("name", ""), **result.to_dict(),
+                 **({"mesh": meta["mesh"]} if "mesh" in meta else {})}, indent=2)
     print(out if args.json else report.format_power_report(result, meta))
     return 0
 
@@ -120,7 +149,7 @@ def _cmd_compare(args) -> int:
 
 
 def _cmd_ships(args) -> int:
-    ships = {name: str(path) for name, path in sorted(builtin_ships().items())}
+    ships = {name: str(path) for name, path in sorted({**builtin_ships(), **hullmesh.builtin_meshes()}.items())}
     if args.json:
         print(_json({"command": "ships", "ships": ships}, indent=2))
     else:

@@ -69,13 +69,33 @@ def _title(kind: str, meta: dict) -> list[str]:
     return lines
 
 
+def format_mesh(mesh: dict) -> str:
+    """The inputs measured on a hull mesh beside those the user stated (which the calculation uses)."""
+    from .hullmesh import HOW
+
+    out = [f"Measured on the hull mesh {mesh['file']} (draught {mesh['draught_m']:g} m, unit {mesh['unit']}, "
+           f"scale {mesh['scale']:g})",
+           f"  {'input':<48s} {'measured':>10s} {'stated':>10s}  how"]
+    for f, v in mesh["measured"].items():
+        stated = mesh["stated"].get(f)
+        out.append(f"  {DESCRIPTIONS[f]:<48s} {v:10.3f} {'' if stated is None else f'{stated:10.3f}':>10s}  "
+                   f"{HOW.get(f, 'the draught given x scale')}")
+    if mesh["stated"]:
+        out.append("  The calculation uses the stated values where given.")
+    return "\n".join(out)
+
+
+def _with_mesh(parts: list, meta: dict) -> list:
+    return parts[:1] + ([format_mesh(meta["mesh"])] if "mesh" in meta else []) + parts[1:]
+
+
 def format_resistance_report(results: tuple[ResistanceResult, ...], meta: dict) -> str:
     parts = ["\n".join(_title("brash-ice channel resistance R_CH", meta))]
     parts += [format_resistance(r) for r in results]
     if len(results) > 1:
         parts.append("\n".join(f"R_CH at the {r.waterline} ice waterline: {r.r_ch_kN:.2f} kN" for r in results))
     parts.append(format_warnings(tuple(w for r in results for w in r.warnings)))
-    return "\n\n".join(parts)
+    return "\n\n".join(_with_mesh(parts, meta))
 
 
 def format_power_report(p: PowerResult, meta: dict) -> str:
@@ -91,7 +111,7 @@ def format_power_report(p: PowerResult, meta: dict) -> str:
     lines.append(f"  REQUIRED ENGINE OUTPUT: {p.required_kW:10.0f} kW  (governed by the {p.governing})")
     parts.append("\n".join(lines))
     parts.append(format_warnings(p.warnings))
-    return "\n\n".join(parts)
+    return "\n\n".join(_with_mesh(parts, meta))
 
 
 def format_compare(c: dict) -> str:

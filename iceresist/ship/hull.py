@@ -127,6 +127,17 @@ class HullGeometry:
         """The 12 vertices of the convex hull (bottom hexagon, then deck hexagon), ship frame, metres."""
         return np.vstack([self._hexagon(0.0), self._hexagon(self.depth_m)])
 
+    def mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """The closed hull surface as triangles: (vertices (12, 3) m, faces (20, 3)), normals outward."""
+        from scipy.spatial import ConvexHull
+
+        v = self.vertices()
+        faces = ConvexHull(v).simplices.copy()
+        t = v[faces]
+        inward = np.einsum("ij,ij->i", np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), t[:, 0] - v.mean(axis=0)) < 0
+        faces[inward] = faces[inward][:, ::-1]
+        return v, faces
+
     def waterline_polygon(self) -> np.ndarray:
         """The waterline hexagon (x, y) at the draught, for pictures."""
         return self._hexagon(self.draught_m)[:, :2]

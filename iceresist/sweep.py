@@ -174,6 +174,8 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     def on_new(rf, model):
         g = rf.h5.require_group("bodies")
         g["initial_positions_m"] = model.ice_state()["positions_m"]
+        for key, value in model.floes_record().items():
+            g[key] = value
         g["hull_vertices_m"] = model.geometry.vertices()
 
     def on_completed(rf, model, sim):
@@ -301,6 +303,12 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="auto")
     p.add_argument("--threads", type=int, help="CPU threads of the DEM kernels (numba)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    m = p.add_argument_group("your own hull (Bow A cases; the hull replaces B-063)")
+    m.add_argument("--mesh", metavar="HULL.stl", help="closed hull surface, STL or OBJ, at the preset's model "
+                   "scale (draught 0.44 m), or a built-in mesh (b063)")
+    m.add_argument("--mesh-unit", default="m", help="unit of the mesh's coordinates: m, cm, mm, ft, in (default m)")
+    m.add_argument("--mesh-bow", default="+x", help="the mesh's axis toward the bow (default +x; write --mesh-bow=-x)")
+    m.add_argument("--mesh-up", default="+z", help="the mesh's upward axis (default +z)")
     p.set_defaults(func=cmd_sweep)
     return p
 
@@ -311,11 +319,44 @@ def set_threads(n: int | None):
     set_backend_threads(n, "--threads")
 
 
+def mesh_overrides(args) -> tuple[dict, str]:
+    """The ``[ship]`` keys of ``--mesh`` (checked here, before anything is written) and the cases to run: with a
+    mesh, ``all`` means every Bow A case."""
+    if not getattr(args, "mesh", None):
+        return {}, args.cases
+    from iceresist.scene.schema import Ship
+    from fsicr.hullmesh import MeshKeys
+    from iceresist.ship.meshhull import MeshHull, resolve_mesh_path
+
+    path = resolve_mesh_path(args.mesh)
+    path = str(Path(path).resolve()) if Path(path).is_file() else path
+    values = {"hull": "mesh", "mesh_file": path, "mesh_unit": args.mesh_unit, "mesh_bow": args.mesh_bow,
+              "mesh_up": args.mesh_up}
+    for key, value in values.items():
+        allowed = Ship.model_fields[key].annotation
+        if key != "mesh_file" and value not in getattr(allowed, "__args__", (value,)):
+            raise InputError(f"--{key.replace('_', '-')}: {value!r} is not one of "
+                             f"{', '.join(allowed.__args__)}")
+    cases = args.cases
+    if str(cases).strip() == "all":
+        cases = ",".join(c for c in CASES if get_case(c).bow == "A")
+    bow_b = [c for c in resolve_cases(cases) if get_case(c).bow != "A"]
+    if bow_b:
+        raise InputError(f"--cases: {', '.join(bow_b)} name Bow B of B-063; with --mesh the mesh is the hull, so run "
+                         f"the A cases (e.g. --cases A-c68-v1.0)")
+    draught = float(case_scene(resolve_cases(cases)[0], args.preset, args.tier).ship.draught_m)
+    MeshHull.from_file(path, draught, unit=args.mesh_unit, bow=args.mesh_bow, up=args.mesh_up,
+                       keys=MeshKeys(draught=f"--mesh (the preset's draught {draught:g} m)"))
+    return {"ship": values}, cases
+
+
 def cmd_sweep(args) -> int:
-    out = args.output or f"runs/sweep-{args.preset}-t{args.tier}"
+    overrides, cases = mesh_overrides(args)
+    suffix = f"-{Path(args.mesh).stem}" if overrides else ""
+    out = args.output or f"runs/sweep-{args.preset}-t{args.tier}{suffix}"
     set_threads(args.threads)
-    table = run_sweep(args.preset, args.tier, out, args.cases, backend=args.backend,
-                      progress=not args.no_progress)
+    table = run_sweep(args.preset, args.tier, out, cases, backend=args.backend,
+                      progress=not args.no_progress, overrides=overrides or None)
     cols = ["case", "mean_force_N", "ci95_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR", "wall_time_s"]
     log.info("sweep table %s/sweep.csv:\n%s", out, table[cols].to_string(index=False, float_format="%.4g"))
     return 0

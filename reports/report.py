@@ -127,6 +127,53 @@ def fig_tank(plt, cases: dict):
     return fig
 
 
+def floe_polygons(model: dict, bodies: dict, positions: np.ndarray, quaternions=None):
+    """Plan outlines (n, 4, 2) of the floes at ``positions``, turned by the quaternions' yaw (or the recorded start
+    yaw), and their thicknesses (n,): each floe's own size where the file records it, else the cube edge."""
+    from iceresist.ship.icefield import floe_corners
+
+    n = len(positions)
+    size = np.asarray(bodies.get("floe_sizes_m", np.full(n, model["cube_m"])), dtype=float)
+    thick = np.asarray(bodies.get("floe_thickness_m", np.full(n, model["cube_m"])), dtype=float)
+    if quaternions is not None:
+        w, x, y, z = np.asarray(quaternions, dtype=float).T
+        yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    else:
+        yaw = np.asarray(bodies.get("floe_yaw_rad", np.zeros(n)), dtype=float)
+    return floe_corners(np.asarray(positions, dtype=float)[:, :2], size, yaw), thick
+
+
+def fig_ice_field(plt, cases: dict):
+    """The initial ice field of the first case that packs floes of a size distribution (top view and the edges'
+    histogram), or None where every case has the regular cubes."""
+    from matplotlib.collections import PolyCollection
+
+    name, c = next(((k, v) for k, v in cases.items() if "ice_field" in v["model"]), (None, None))
+    if c is None:
+        return None
+    m, b = c["model"], c["bodies"]
+    info = m["ice_field"]
+    polys, _ = floe_polygons(m, b, b["initial_positions_m"])
+    size = np.asarray(b["floe_sizes_m"]) * 1e3
+    fig, (ax, hx) = plt.subplots(1, 2, figsize=(10.0, 4.5), layout="constrained",
+                                 gridspec_kw={"width_ratios": [2.2, 1.0]})
+    pc = PolyCollection(polys, array=size, cmap="viridis", edgecolor="none")
+    ax.add_collection(pc)
+    ax.set_xlim(m["channel_start_x_m"], m["channel_start_x_m"] + m["channel_length_m"])
+    ax.set_ylim(m["centre_y_m"] - m["channel_width_m"] / 2, m["centre_y_m"] + m["channel_width_m"] / 2)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(f"{name}: {info['floes']} floes, {100 * info['concentration']:.1f} % covered, "
+                 f"{1e3 * info['thickness_m']:.0f} mm thick, seed {info['seed']}", fontsize=9, loc="left")
+    fig.colorbar(pc, ax=ax, label="edge [mm]", orientation="horizontal", shrink=0.6)
+    hx.hist(size, bins=30, color="0.5")
+    hx.set_xlabel("floe edge [mm]")
+    hx.set_ylabel("floes")
+    hx.set_title(f"{info['distribution']} edges", fontsize=9, loc="left")
+    return fig
+
+
 def fig_topviews(plt, cases: dict):
     from matplotlib.collections import PolyCollection
 
@@ -136,11 +183,10 @@ def fig_topviews(plt, cases: dict):
     fig, axes = plt.subplots(n, 1, figsize=(8.0, n * 8.0 * m0["channel_width_m"] / span + 1.0), squeeze=False,
                              layout="constrained")
     for ax, (name, c) in zip(axes[:, 0], cases.items()):
-        m, p = c["model"], c["bodies"]["final_positions_m"]
-        a = m["cube_m"]
-        sq = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * a / 2
-        polys = p[:, None, :2] + sq[None]
-        depth = np.clip(m["water_level_m"] - (p[:, 2] + a / 2), 0, None)
+        m, b = c["model"], c["bodies"]
+        p = b["final_positions_m"]
+        polys, thick = floe_polygons(m, b, p, b.get("final_quaternions"))
+        depth = np.clip(m["water_level_m"] - (p[:, 2] + thick / 2), 0, None)
         pc = PolyCollection(polys, array=depth, cmap="viridis_r", clim=(0, 0.1), edgecolor="none")
         ax.add_collection(pc)
         wl = hull_of_model(m).waterline_polygon() + np.array([float(c["meta"]["final_x_bow_m"]), m["centre_y_m"]])
@@ -172,6 +218,22 @@ RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "c
                "start_wave_fraction": "window in start wave", "ci_method": "CI method", "note": "note"}
 
 
+def hull_summary(hull: dict) -> tuple[str, "pd.DataFrame | None"]:
+    """The hull's name for the title, and for a mesh hull the FSICR inputs measured on it at full scale."""
+    import pandas as pd
+
+    from fsicr.hullmesh import HOW
+    from fsicr.ship import DESCRIPTIONS
+    from iceresist.ship.meshhull import HullRecord
+
+    if hull.get("kind") != "mesh":
+        return "B-063", None
+    full = HullRecord(hull).fsicr_inputs(SCALE)
+    rows = [{"input": DESCRIPTIONS[k], "full scale": f"{v:.4g}", "measured as": HOW.get(k, "the draught x scale")}
+            for k, v in full.items()]
+    return f"{Path(hull.get('mesh_file', 'mesh')).stem} (mesh hull)", pd.DataFrame(rows)
+
+
 def write_report(sweep_dir) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.pdf`` into ``sweep_dir``; returns their paths."""
     from matplotlib.backends.backend_pdf import PdfPages
@@ -192,10 +254,14 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     tank = fig_tank(plt, cases)
     if tank is not None:
         figs["tank"] = tank
+    field = fig_ice_field(plt, cases)
+    if field is not None:
+        figs["ice_field"] = field
     images = {k: _png64(f) for k, f in figs.items()}
     r_sim, r_fs = bow_ratios(table)
     trends = trends_table(table)
     note = preset_note(info.get("preset"), int(info.get("tier", 1)))
+    hull_name, hull_inputs = hull_summary(next(iter(cases.values()))["model"]["hull"])
     env = template_env()
     html = env.get_template("report.html.j2").render(
         title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),
@@ -203,7 +269,8 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
         scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS),
         runs=_html_table(table, RUN_COLUMNS, na_rep="–"),
         bow_ratio_sim=f"{r_sim:.3g}", bow_ratio_fsicr=f"{r_fs:.3g}", images=images, preset_note=note,
-        trends=_html_table(trends, TREND_COLUMNS))
+        trends=_html_table(trends, TREND_COLUMNS), hull_name=hull_name,
+        hull_inputs=None if hull_inputs is None else _html_table(hull_inputs, {c: c for c in hull_inputs.columns}))
     html_path, pdf_path = d / "report.html", d / "report.pdf"
     html_path.write_text(html, encoding="utf-8")
     with PdfPages(pdf_path) as pdf:

@@ -183,6 +183,17 @@ def _sample_triangle(p0, p1, p2, spacing):
     return pts
 
 
+def _volume_samples(verts: np.ndarray, com: np.ndarray, spacing: float, inside) -> np.ndarray:
+    """Volume samples: the centres of a cubic lattice of ``spacing`` over the vertices' box that ``inside`` keeps
+    (the centre of mass alone where none is)."""
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    grids = [np.arange(lo[k] + spacing / 2, hi[k], spacing) for k in range(3)]
+    gx, gy, gz = np.meshgrid(*grids, indexing="ij")
+    cand = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)
+    samples = cand[inside(cand)]
+    return samples if len(samples) else com[None, :]
+
+
 def _dedupe(points: np.ndarray, tol: float) -> np.ndarray:
     from scipy.spatial import cKDTree
 
@@ -234,16 +245,194 @@ def convex_polyhedron(vertices_m, density_kg_m3: float, spacing_m: float, sample
     offsets = (centres - com) @ axes
 
     ss = sample_spacing_m or max(spacing, volume ** (1 / 3) / 8)
-    lo, hi = verts.min(axis=0), verts.max(axis=0)
-    grids = [np.arange(lo[k] + ss / 2, hi[k], ss) for k in range(3)]
-    gx, gy, gz = np.meshgrid(*grids, indexing="ij")
-    cand = np.stack([gx.ravel(), gy.ravel(), gz.ravel()], axis=1)
-    inside = (cand @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 0
-    samples = cand[inside]
-    if len(samples) == 0:
-        samples = com[None, :]
+    samples = _volume_samples(verts, com, ss, lambda p: (p @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 0)
     sample_vol = np.full(len(samples), volume / len(samples))
     log.debug("convex polyhedron %s: %d spheres, %d volume samples", name, len(offsets), len(samples))
+    return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=moments,
+                      sphere_offsets_m=offsets, sphere_radius_m=radius, sample_offsets_m=(samples - com) @ axes,
+                      sample_volumes_m3=sample_vol, sample_half_extent_m=np.full(3, ss / 2),
+                      model_com_m=com, model_to_body=axes)
+
+
+def _mesh_mass_properties(vertices: np.ndarray, faces: np.ndarray):
+    """Volume, centroid and second moment ``int x x^T dV`` of a closed, outward triangle mesh: signed tetrahedra
+    from the origin (so a solid of any shape sums right; Tonon 2004 for each tetrahedron)."""
+    b, c, d = (vertices[faces[:, k]] for k in range(3))
+    vols = np.einsum("ij,ij->i", b, np.cross(c, d)) / 6.0
+    volume = vols.sum()
+    s = b + c + d  # the apex (origin) adds nothing
+    centroid = (vols[:, None] * s / 4.0).sum(axis=0) / volume
+    second = np.einsum("t,tki,tkj->ij", vols / 20.0, np.stack([b, c, d], axis=1), np.stack([b, c, d], axis=1))
+    second += np.einsum("t,ti,tj->ij", vols / 20.0, s, s)
+    return volume, centroid, second
+
+
+#: Shears (dx/dz, dy/dz) of the three rays of :func:`inside_mesh`: none lies along a lattice or a mesh edge.
+_RAY_TILTS = ((0.0, 0.0), (0.1234567, 0.0654321), (-0.0712345, 0.1123456))
+
+
+def inside_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """Which points lie inside a closed triangle mesh: the parity of the faces a ray crosses, the majority of
+    three rays (one along +z, two tilted), so a ray that grazes an edge or a vertex is outvoted."""
+    votes = np.zeros(len(points), dtype=np.int64)
+    for a, b in _RAY_TILTS:
+        shear = np.array([[1.0, 0.0, -a], [0.0, 1.0, -b], [0.0, 0.0, 1.0]])  # the tilted ray becomes vertical
+        votes += _inside_along_z(np.asarray(points, float) @ shear.T, vertices @ shear.T, faces, chunk)
+    return votes >= 2
+
+
+def _inside_along_z(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, chunk: int) -> np.ndarray:
+    """The parity of the faces a ray from each point along +z crosses."""
+    t = vertices[faces]
+    (x0, y0), (x1, y1), (x2, y2) = (t[:, k, :2].T for k in range(3))
+    det = (y1 - y2) * (x0 - x2) + (x2 - x1) * (y0 - y2)
+    ok = np.abs(det) > 1e-300  # faces seen edge-on from below are never crossed
+    t, det = t[ok], det[ok]
+    (x0, y0), (x1, y1), (x2, y2) = (t[:, k, :2].T for k in range(3))
+    out = np.zeros(len(points), dtype=bool)
+    for lo in range(0, len(points), chunk):
+        p = points[lo:lo + chunk]
+        px, py = p[:, :1], p[:, 1:2]
+        l0 = ((y1 - y2) * (px - x2) + (x2 - x1) * (py - y2)) / det
+        l1 = ((y2 - y0) * (px - x2) + (x0 - x2) * (py - y2)) / det
+        l2 = 1.0 - l0 - l1
+        # half-open barycentric test, so a ray through a shared edge counts one of its two faces
+        hit = (l0 >= 0) & (l1 >= 0) & (l2 > 0)
+        z = l0 * t[:, 0, 2] + l1 * t[:, 1, 2] + l2 * t[:, 2, 2]
+        out[lo:lo + chunk] = ((hit & (z > p[:, 2:3])).sum(axis=1) % 2) == 1
+    return out
+
+
+def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Distance from each point p[k] to the triangle (a[k], b[k], c[k]) (Ericson 2005, section 5.1.5, by
+    Voronoi regions, vectorised)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = np.einsum("ij,ij->i", ab, ap), np.einsum("ij,ij->i", ac, ap)
+    bp = p - b
+    d3, d4 = np.einsum("ij,ij->i", ab, bp), np.einsum("ij,ij->i", ac, bp)
+    cp = p - c
+    d5, d6 = np.einsum("ij,ij->i", ab, cp), np.einsum("ij,ij->i", ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    denom = va + vb + vc
+    safe = np.where(denom != 0, denom, 1.0)
+    v, w = vb / safe, vc / safe
+    q = a + v[:, None] * ab + w[:, None] * ac  # inside the face
+    with np.errstate(divide="ignore", invalid="ignore"):
+        regions = [
+            ((d1 <= 0) & (d2 <= 0), a),
+            ((d3 >= 0) & (d4 <= d3), b),
+            ((d6 >= 0) & (d5 <= d6), c),
+            ((vc <= 0) & (d1 >= 0) & (d3 <= 0), a + np.nan_to_num(d1 / (d1 - d3))[:, None] * ab),
+            ((vb <= 0) & (d2 >= 0) & (d6 <= 0), a + np.nan_to_num(d2 / (d2 - d6))[:, None] * ac),
+            ((va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0),
+             b + np.nan_to_num((d4 - d3) / ((d4 - d3) + (d5 - d6)))[:, None] * (c - b)),
+        ]
+    for cond, point in reversed(regions):  # the first region that applies wins
+        q = np.where(cond[:, None], point, q)
+    return np.linalg.norm(p - q, axis=1)
+
+
+def distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, within: float) -> np.ndarray:
+    """Unsigned distance from each point to a triangle mesh, exact up to ``within`` (farther points: at least
+    ``within``); triangles found near each point with a k-d tree of their centroids."""
+    from scipy.spatial import cKDTree
+
+    t = vertices[faces]
+    centroid = t.mean(axis=1)
+    reach = np.linalg.norm(t - centroid[:, None, :], axis=2).max()
+    pairs = cKDTree(points).query_ball_tree(cKDTree(centroid), within + reach)
+    i = np.repeat(np.arange(len(points)), [len(js) for js in pairs])
+    j = np.fromiter((jj for js in pairs for jj in js), dtype=np.int64, count=len(i))
+    out = np.full(len(points), np.inf)
+    if len(i):
+        d = _closest_on_triangles(points[i], t[j, 0], t[j, 1], t[j, 2])
+        np.minimum.at(out, i, d)
+    return np.minimum(out, max(within, 0.0) if np.isinf(out).any() else np.inf)
+
+
+def _convex_edge_points(verts: np.ndarray, faces: np.ndarray, spacing: float, radius: float) -> list:
+    """Sphere centres at each corner and along each convex edge of a mesh, one radius from every face that meets
+    there (the corners and edges of the solid shrunk by one radius, as :func:`convex_polyhedron` samples them):
+    the stem keeps its sharpness."""
+    normals = np.cross(verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]])
+    lengths = np.linalg.norm(normals, axis=1)
+    normals = normals / np.where(lengths > 0, lengths, 1.0)[:, None]
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    owner = np.tile(np.arange(len(faces)), 3)
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, owner = edges[order], owner[order]
+    same = (edges[1:] == edges[:-1]).all(axis=1)
+    out = []
+    # each corner: the point one radius from every face that meets there (least squares where more than three do)
+    for vtx in range(len(verts)):
+        ns = np.unique(np.round(normals[(faces == vtx).any(axis=1)], 9), axis=0)
+        if len(ns) >= 2:
+            d = np.linalg.lstsq(ns, np.full(len(ns), -radius), rcond=None)[0]
+            if np.linalg.norm(d) < 4.0 * radius:
+                out.append(verts[vtx] + d)
+    for k in np.flatnonzero(same):
+        (a, b), f1, f2 = edges[k], owner[k], owner[k + 1]
+        n1, n2 = normals[f1], normals[f2]
+        cos = float(n1 @ n2)
+        if cos > 1.0 - 1e-9 or cos < -0.9:  # flat, or a knife edge whose inward offset runs off
+            continue
+        other = verts[faces[f2]].mean(axis=0)
+        if (other - verts[a]) @ n1 > 1e-12 * spacing:  # concave: the faces' own spheres meet there
+            continue
+        d = -radius * (n1 + n2) / (1.0 + cos)
+        m = max(1, int(np.ceil(np.linalg.norm(verts[b] - verts[a]) / spacing)))
+        for t in np.arange(m + 1) / m:
+            out.append(verts[a] + t * (verts[b] - verts[a]) + d)
+    return out
+
+
+def mesh_solid(vertices_m, faces, density_kg_m3: float, spacing_m: float, sample_spacing_m: float | None = None,
+               name: str = "hull") -> RigidShape:
+    """A solid of any shape given as a closed, outward triangle mesh (e.g. a ship hull in ship coordinates).
+
+    Mass properties from signed tetrahedra. Spheres of radius ``spacing/2`` are placed on every face, about
+    ``spacing`` apart, and set back along the face's inward normal by one radius, so their envelope is the
+    surface with rounded edges (as :func:`convex_polyhedron` does for a convex solid). Volume samples: a cubic
+    lattice of ``sample_spacing_m`` inside the mesh.
+    """
+    verts = np.asarray(vertices_m, dtype=float)
+    faces = np.asarray(faces, dtype=np.int64)
+    if verts.ndim != 2 or verts.shape[1] != 3 or faces.ndim != 2 or faces.shape[1] != 3 or len(faces) < 4:
+        raise InputError("hull mesh: vertices must be (n, 3) in metres and faces (m >= 4, 3) vertex indices")
+    rho = _check_positive("density_kg_m3", density_kg_m3)
+    spacing = _check_positive("spacing_m", spacing_m)
+    radius = spacing / 2
+    volume, com, second = _mesh_mass_properties(verts, faces)
+    if not volume > 0:
+        raise InputError(f"hull mesh {name}: volume {volume:.4g} m^3; the faces must point outward")
+    mass = rho * volume
+    c_com = rho * (second - volume * np.outer(com, com))
+    inertia_model = np.trace(c_com) * np.eye(3) - c_com
+    moments, axes = _principal_frame(inertia_model)
+
+    pts = []
+    for tri in verts[faces]:
+        n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+        norm = np.linalg.norm(n)
+        if norm == 0:
+            continue
+        pts.extend(np.asarray(_sample_triangle(*tri, spacing)) - radius * n / norm)
+    edge_pts = _convex_edge_points(verts, faces, spacing, radius)
+    cand = np.array(edge_pts + pts)  # the edges' first: the de-duplication keeps them
+    # set back from every face, not only their own: near an edge a point moved in from one face lies outside or
+    # too near the other, and goes (before the de-duplication, so it cannot push out a good neighbour)
+    keep = inside_mesh(cand, verts, faces) & (distance_to_mesh(cand, verts, faces, radius) >= 0.98 * radius)
+    if keep.mean() < 0.25:
+        raise InputError(f"sphere spacing {spacing} m is too coarse for hull mesh {name}: {np.sum(~keep)} of "
+                         f"{len(cand)} sphere places fall outside it or too near another face; use a spacing below "
+                         f"its thinnest part")
+    centres = _dedupe(cand[keep], 0.5 * spacing)
+    offsets = (centres - com) @ axes
+
+    ss = sample_spacing_m or max(spacing, volume ** (1 / 3) / 8)
+    samples = _volume_samples(verts, com, ss, lambda p: inside_mesh(p, verts, faces))
+    sample_vol = np.full(len(samples), volume / len(samples))
+    log.debug("mesh solid %s: %d faces, %d spheres, %d volume samples", name, len(faces), len(offsets), len(samples))
     return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=moments,
                       sphere_offsets_m=offsets, sphere_radius_m=radius, sample_offsets_m=(samples - com) @ axes,
                       sample_volumes_m3=sample_vol, sample_half_extent_m=np.full(3, ss / 2),

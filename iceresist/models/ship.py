@@ -20,11 +20,16 @@ from iceresist.errors import InputError
 from iceresist.models.base import Model
 from iceresist.ship.channel import ChannelLayout, channel_layout
 from iceresist.ship.hull import HullGeometry
+from iceresist.ship.icefield import IceField, ice_field
+from iceresist.ship.meshhull import MeshHull
 
 
-def hull_geometry(scene) -> HullGeometry:
-    """The :class:`HullGeometry` of a scene's ``[ship]`` section."""
+def hull_geometry(scene) -> HullGeometry | MeshHull:
+    """The hull of a scene's ``[ship]`` section: the parametric :class:`HullGeometry` or a :class:`MeshHull`."""
     sh = scene.ship
+    if sh.hull == "mesh":
+        return MeshHull.from_file(sh.mesh_file, sh.draught_m, unit=sh.mesh_unit, bow=sh.mesh_bow, up=sh.mesh_up,
+                                  scene_source=scene.source_name)
     stern = sh.stern_angle_deg
     if stern is None:
         stern = 45.0 if sh.bow_angle_deg == 30.0 else 30.0 if sh.bow_angle_deg == 45.0 else sh.bow_angle_deg
@@ -33,24 +38,39 @@ def hull_geometry(scene) -> HullGeometry:
                         bow_rake_deg=sh.bow_angle_deg, stern_rake_deg=stern)
 
 
-def hull_shape(geometry: HullGeometry, spacing_m: float, band_m: float, density_kg_m3: float = 500.0):
-    """The hull as a DEM clump: spheres on the faces, kept up to ``band_m`` above the waterline.
+def hull_shape(geometry: HullGeometry | MeshHull, spacing_m: float, band_m: float, density_kg_m3: float = 500.0):
+    """The hull as a DEM clump: spheres on the faces, kept up to ``band_m`` above the waterline. A convex hull
+    (B-063, or a mesh that fills its convex hull) by :func:`~iceresist.dem.convex_polyhedron`, any other mesh by
+    :func:`~iceresist.dem.mesh_solid`.
 
     Mass properties are those of the whole solid (they do not matter for a kinematic body)."""
-    from iceresist.dem import convex_polyhedron
+    from iceresist.dem import convex_polyhedron, mesh_solid
 
-    shape = convex_polyhedron(geometry.vertices(), density_kg_m3, spacing_m, name="hull")
+    if isinstance(geometry, MeshHull) and not geometry.is_convex:
+        shape = mesh_solid(geometry.vertices(), geometry.faces, density_kg_m3, spacing_m, name="hull")
+    else:
+        shape = convex_polyhedron(geometry.vertices(), density_kg_m3, spacing_m, name="hull")
     model_z = (shape.model_com_m + shape.sphere_offsets_m @ shape.model_to_body.T)[:, 2]
     keep = model_z <= geometry.draught_m + band_m
     return dataclasses.replace(shape, sphere_offsets_m=shape.sphere_offsets_m[keep])
 
 
-def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float, rho_w_kg_m3: float) -> ChannelLayout:
-    """The scene's ice channel (``[ice]``) across ``width_m``, centred on ``centre_y_m``, floating at ``level_m``,
-    after the pre-run ice limits (:func:`iceresist.limits.check_scene_ice`)."""
-    from iceresist.limits import check_scene_ice
+def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float,
+               rho_w_kg_m3: float) -> ChannelLayout | IceField:
+    """The scene's ice channel (``[ice]``) across ``width_m``, centred on ``centre_y_m``, floating at ``level_m``:
+    the cube pattern after the pre-run ice limits (:func:`iceresist.limits.check_scene_ice`), or with
+    ``ice.size_distribution`` an :class:`~iceresist.ship.icefield.IceField`."""
+    from iceresist.limits import check_ice_floats, check_scene_ice
 
     ice = scene.ice
+    if ice.size_distribution != "none":
+        check_ice_floats(ice.density_kg_m3, rho_w_kg_m3)
+        return ice_field(width_m=width_m, length_m=ice.channel_length_m, concentration=ice.concentration,
+                         distribution=ice.size_distribution, size_m=ice.size_m, size_min_m=ice.size_min_m,
+                         size_max_m=ice.size_max_m, size_sigma=ice.size_sigma, thickness_m=ice.thickness_m,
+                         yaw=ice.yaw, start_x_m=ice.channel_start_x_m, centre_y_m=centre_y_m,
+                         water_level_m=level_m, ice_density_kg_m3=ice.density_kg_m3,
+                         water_density_kg_m3=rho_w_kg_m3, seed=ice.seed)
     check_scene_ice(scene, width_m)
     jitter = ice.jitter_m if ice.jitter_m is not None else (math.inf if ice.arrangement == "random" else 0.0)
     return channel_layout(width_m=width_m, length_m=ice.channel_length_m, cube_m=ice.size_m,
@@ -113,7 +133,19 @@ class ShipModel(Model):
         self.start_x_m = ship_start_x_m(scene)
         self.window_m = steady_window_m(scene, self.geometry, self.layout)
         self.hull = hull_shape(self.geometry, sh.sphere_spacing_m, sh.sphere_band_m)
-        self.cube = box((ice.size_m,) * 3, ice.density_kg_m3, spheres_per_edge=ice.spheres_per_edge, name="ice")
+        if isinstance(self.layout, IceField):
+            # one shape per floe, spheres of one radius (thickness / spheres_per_edge apart); the heaviest floe
+            # stands for all where one is asked for (the pre-run limits of the impact overlap)
+            lay = self.layout
+            spacing = lay.thickness_m / ice.spheres_per_edge
+            self.floe_shapes = [box((a, a, lay.thickness_m), ice.density_kg_m3, spacing_m=spacing, name="ice")
+                                for a in lay.sizes_m]
+            self.floe_orientations = [(math.cos(t / 2), 0.0, 0.0, math.sin(t / 2)) for t in lay.yaw_rad]
+            self.cube = self.floe_shapes[int(np.argmax(lay.sizes_m))]
+        else:
+            self.cube = box((ice.size_m,) * 3, ice.density_kg_m3, spheres_per_edge=ice.spheres_per_edge, name="ice")
+            self.floe_shapes = [self.cube] * self.layout.count
+            self.floe_orientations = [None] * self.layout.count
 
     def _make_dem(self, *, backend: str, precision: str, gravity_m_s2):
         """The DEM system with the scene's contact law (ice-ice and ice-ship) and no bodies yet."""
@@ -168,6 +200,33 @@ class ShipModel(Model):
         return {"finite": (True, None), "max_body_speed_m_s": (float(speed[b]), {"body": int(np.flatnonzero(ice)[b])}),
                 "max_body_speed_limit_m_s": 10.0 * self.ice_speed_reference_m_s()}
 
+    def ice_summary(self) -> str:
+        """The ice in a few words, for the log."""
+        lay = self.layout
+        if isinstance(lay, IceField):
+            return (f"{lay.count} floes ({lay.distribution} edges {1e3 * lay.sizes_m.min():.0f}-"
+                    f"{1e3 * lay.sizes_m.max():.0f} mm, median {1e3 * lay.cube_m:.0f} mm, {1e3 * lay.thickness_m:.0f} mm "
+                    f"thick, {100 * lay.concentration:.1f} %)")
+        return f"{lay.count} ice cubes ({lay.n_across} x {lay.n_along})"
+
+    def layout_description(self) -> dict:
+        """An ice field's distribution and what the packing gave (the floes themselves go to the result file)."""
+        lay = self.layout
+        return {"distribution": lay.distribution, "seed": lay.seed, "floes": lay.count,
+                "concentration": lay.concentration, "thickness_m": lay.thickness_m, "gap_m": lay.gap_m,
+                "columns": lay.columns, "size_median_m": lay.cube_m, "size_mean_m": float(lay.sizes_m.mean()),
+                "size_smallest_m": float(lay.sizes_m.min()), "size_largest_m": float(lay.sizes_m.max()),
+                **lay.info}
+
+    def floes_record(self) -> dict:
+        """Per floe at the start: edge (m), thickness (m) and yaw (rad), for the result file's ``bodies`` group."""
+        lay = self.layout
+        if isinstance(lay, IceField):
+            return {"floe_sizes_m": lay.sizes_m, "floe_thickness_m": np.full(lay.count, lay.thickness_m),
+                    "floe_yaw_rad": lay.yaw_rad}
+        return {"floe_sizes_m": np.full(lay.count, lay.cube_m), "floe_thickness_m": np.full(lay.count, lay.cube_m),
+                "floe_yaw_rad": np.zeros(lay.count)}
+
     def describe_ship(self) -> dict:
         """The run metadata both tiers write: bodies, channel, ship and hull."""
         g = self.geometry
@@ -180,7 +239,9 @@ class ShipModel(Model):
                 "channel_width_m": self.layout.width_m, "centre_y_m": self.centre_y_m,
                 "water_level_m": self.level_m, "speed_m_s": self.speed_m_s, "start_x_m": self.start_x_m,
                 "steady_window_m": list(self.window_m), "critical_step_s": self.dem.critical_step_s(),
-                "hull": {"length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
-                         "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,
-                         "bow_rake_deg": g.bow_rake_deg, "stern_rake_deg": g.stern_rake_deg,
-                         "waterline_length_m": g.waterline_length_m, "freeboard_m": g.freeboard_m}}
+                **({"ice_field": self.layout_description()} if isinstance(self.layout, IceField) else {}),
+                "hull": g.describe() if isinstance(g, MeshHull) else
+                {"kind": "b063", "length_overall_m": g.length_overall_m, "beam_m": g.beam_m, "draught_m": g.draught_m,
+                 "parallel_length_m": g.parallel_length_m, "waterline_angle_deg": g.waterline_angle_deg,
+                 "bow_rake_deg": g.bow_rake_deg, "stern_rake_deg": g.stern_rake_deg,
+                 "waterline_length_m": g.waterline_length_m, "freeboard_m": g.freeboard_m}}

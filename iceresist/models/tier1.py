@@ -44,8 +44,8 @@ class Tier1Model(ShipModel):
                                                                   self.level_m - g.draught_m),
                                            velocity_m_s=(self.speed_m_s, 0.0, 0.0), kinematic=True,
                                            material="ship", name="hull")
-        for c in self.layout.centres_m:
-            self.dem.add_body(self.cube, position_m=c, material="ice")
+        for shape, c, q in zip(self.floe_shapes, self.layout.centres_m, self.floe_orientations):
+            self.dem.add_body(shape, position_m=c, orientation=q, material="ice")
         self._add_tank_walls(self.dem)
         self.dem.set_water(Water(level_m=self.level_m, density_kg_m3=self.rho_w,
                                  drag_coefficient=ice.drag_coefficient,
@@ -58,9 +58,8 @@ class Tier1Model(ShipModel):
         self._iteration = 0
         self._force_mean = np.zeros(3)
         self._force_last = np.zeros(3)
-        log.info("tier 1: %d ice cubes (%d x %d), %d hull spheres, %d spheres, sub-step %.3g s, %d per record",
-                 self.layout.count, self.layout.n_across, self.layout.n_along, self.hull.n_spheres,
-                 self.dem.n_spheres, self.substep_s, self.substeps_per_step)
+        log.info("tier 1: %s, %d hull spheres, %d spheres, sub-step %.3g s, %d per record", self.ice_summary(),
+                 self.hull.n_spheres, self.dem.n_spheres, self.substep_s, self.substeps_per_step)
 
     # -- protocol ---------------------------------------------------------------------------------------
     @property

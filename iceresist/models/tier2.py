@@ -83,6 +83,9 @@ class Tier2Model(ShipModel):
         dx = lu.dx_m
         self._set_up_ship(scene, tuple(n * dx for n in self.shape_cells))
         sh, ice, con, g = scene.ship, scene.ice, self.contact, self.geometry
+        if not getattr(g, "is_convex", True):
+            raise InputError(f"ship.tier: tier 2 sees a hull as a convex polyhedron for now, and {sh.mesh_file!r} "
+                             f"fills {100 * g.convex_fraction:.1f} % of its convex hull; run it at tier = 1")
         self.tank = tank_flow(g.midship_area_m2, self.domain_m[1], self.level_m, float(sh.speed_m_s))
         if not self.tank.subcritical:
             log.warning("tier 2: %.3g m/s is above the limiting speed of this tank (depth Froude number %.3g, "
@@ -116,9 +119,10 @@ class Tier2Model(ShipModel):
             ConvexPolyhedron.of_shape(g.vertices(), self.hull), self.hull,
             position_m=(self.start_x_m, self.centre_y_m, self.level_m - g.draught_m),
             velocity_m_s=(self.speed_m_s, 0.0, 0.0), kinematic=True, material="ship")
-        cube_sdf = Box((ice.size_m,) * 3)
-        for c in self.layout.centres_m:
-            self.fb.add_body(cube_sdf, self.cube, position_m=c, material="ice")
+        floes = self.floes_record()
+        for shape, c, q, size, thick in zip(self.floe_shapes, self.layout.centres_m, self.floe_orientations,
+                                            floes["floe_sizes_m"], floes["floe_thickness_m"]):
+            self.fb.add_body(Box((size, size, thick)), shape, position_m=c, orientation=q, material="ice")
         self.fb.start()
         self.lbm_dt_s = self.fb.dt_s
         self.lbm_steps_per_record = max(1, int(math.ceil(con.sample_interval_s / self.lbm_dt_s - 1e-9)))
@@ -135,9 +139,9 @@ class Tier2Model(ShipModel):
         self._fluid_mean = np.zeros(3)
         self.water_volume0_m3 = self.fb.water_volume_m3()
         log.info("tier 2: %d cells %s, dx %.4g m, dt %.4g s (%d per record), tau %.6g, g_lattice %.3g, "
-                 "ship %.3g cells/step; %d ice cubes, %d hull spheres", self.cells, self.shape_cells, dx,
+                 "ship %.3g cells/step; %s, %d hull spheres", self.cells, self.shape_cells, dx,
                  self.lbm_dt_s, self.lbm_steps_per_record, tau, g_lat, self.speed_m_s * self.lbm_dt_s / dx,
-                 self.layout.count, self.hull.n_spheres)
+                 self.ice_summary(), self.hull.n_spheres)
 
     # -- protocol ---------------------------------------------------------------------------------------
     @property

@@ -35,6 +35,13 @@ def load_case(path) -> dict:
     return {"meta": meta, "ts": ts, "bodies": bodies, "model": model}
 
 
+def mesh_r_ch_kN(hull) -> float:
+    """FSICR R_CH (kN) of a mesh hull at full scale (1:``SCALE``), class IA, from the inputs measured on it."""
+    import fsicr
+
+    return fsicr.r_ch(fsicr.Ship(name="mesh hull", **hull.fsicr_inputs(SCALE)), "IA").r_ch_N / 1e3
+
+
 def fsicr_r_ch_kN() -> dict:
     """FSICR R_CH (kN) of the paper's table-1 ships (fsicr/ships), class IA."""
     from importlib import resources
@@ -121,7 +128,7 @@ def analyse_case(path) -> dict:
     x_lo = model["channel_start_x_m"]
     x_hi = x_bow - geom.end_length_m
     final = bodies["final_positions_m"]
-    r_ch = fsicr_r_ch_kN()[meta["bow"]]
+    r_ch = fsicr_r_ch_kN()[meta["bow"]] if model["hull"].get("kind") != "mesh" else mesh_r_ch_kN(geom)
     R_kN = float(force_to_full_scale(sm.mean_N, SCALE)) / 1e3
     return {
         "case": meta["case"], "bow": meta["bow"], "concentration": float(model["concentration"]),
@@ -150,10 +157,14 @@ def analyse_case(path) -> dict:
 
 
 def hull_of_model(model: dict):
-    """The :class:`~iceresist.ship.hull.HullGeometry` of a case file's model description."""
+    """The :class:`~iceresist.ship.hull.HullGeometry` of a case file's model description, or for a mesh hull its
+    :class:`~iceresist.ship.meshhull.HullRecord`."""
     from iceresist.ship.hull import HullGeometry
+    from iceresist.ship.meshhull import HullRecord
 
     h = model["hull"]
+    if h.get("kind") == "mesh":
+        return HullRecord(h)
     return HullGeometry(length_overall_m=h["length_overall_m"], beam_m=h["beam_m"], draught_m=h["draught_m"],
                         parallel_length_m=h["parallel_length_m"], waterline_angle_deg=h["waterline_angle_deg"],
                         bow_rake_deg=h["bow_rake_deg"], stern_rake_deg=h["stern_rake_deg"])

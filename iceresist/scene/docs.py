@@ -382,6 +382,26 @@ motion = "free"
 """)]
 
 
+#: A ship scene on the user's own hull, for docs/SCENES.md; tests/test_mesh_hull.py runs it.
+MESH_EXAMPLE = """# Your own hull in the quick tier-1 case: the case's tank, ice and contact law, the hull from a mesh. The mesh is
+# a closed surface (STL or OBJ) at model scale; its path is relative to this file ("b063" is the shipped B-063
+# model with Bow A at +x). The reader puts the keel at z = 0, the centreline at y = 0 and the stem at the
+# waterline at x = 0; FSICR inputs are measured on it at draught_m (docs/FSICR.md).
+[case]
+name = "A-c68-v1.0"
+fidelity = "quick"
+tier = 1
+
+[ship]
+hull = "mesh"
+mesh_file = "b063"            # e.g. "my_hull.stl"
+mesh_unit = "m"               # m, cm, mm, ft, in
+mesh_bow = "+x"               # the mesh's axis toward the bow
+mesh_up = "+z"                # the mesh's upward axis
+draught_m = 0.44
+"""
+
+
 def scenes_markdown() -> str:
     """The whole of docs/SCENES.md."""
     out = [INTRO, reference_markdown(), "## Complete examples\n\n"]
@@ -392,7 +412,8 @@ def scenes_markdown() -> str:
         out.append(f"### `{name}` — {what}\n\n```toml\n{preset_text(name).rstrip()}\n```\n\n")
     for title, text in BODY_EXAMPLES:
         out.append(f"### {title}\n\n```toml\n{text.rstrip()}\n```\n\n")
-    out.append(f"### A ship in a brash-ice channel (all sections)\n\n```toml\n{FULL_EXAMPLE.rstrip()}\n```\n")
+    out.append(f"### A ship in a brash-ice channel (all sections)\n\n```toml\n{FULL_EXAMPLE.rstrip()}\n```\n\n")
+    out.append(f"### Your own hull (a mesh)\n\n```toml\n{MESH_EXAMPLE.rstrip()}\n```\n")
     return "".join(out)
 
 

@@ -285,7 +285,14 @@ class Ship(_Section):
     half angle `waterline_angle_deg` and plane bow faces raked at `bow_angle_deg` (stern: `stern_angle_deg`).
     """
 
-    hull: Literal["b063"] = Field("b063", description="Built-in hull: `b063`, the NMRI model ship of the paper.")
+    hull: Literal["b063", "mesh"] = Field("b063", description="`b063`: the NMRI model ship of the paper, from the "
+                                          "parameters below; `mesh`: the closed surface in `mesh_file`.")
+    mesh_file: str | None = Field(None, description="Hull mesh (STL or OBJ) for `hull = \"mesh\"`: a path (relative to "
+                                  "the scene file) or a built-in mesh (`b063`: the B-063 model with Bow A at +x).")
+    mesh_unit: Literal["m", "cm", "mm", "ft", "in"] = Field("m", description="Unit of the mesh's coordinates.")
+    mesh_bow: Literal["+x", "-x", "+y", "-y"] = Field("+x", description="The mesh's axis toward the bow.")
+    mesh_up: Literal["+x", "-x", "+y", "-y", "+z", "-z"] = Field("+z", description="The mesh's upward axis. The keel "
+                                                                 "is put at z = 0 and the centreline at y = 0.")
     bow_angle_deg: float = Field(30.0, gt=0, lt=90, description="Stem rake of the bow going ahead (deg): "
                                                                "30 = Bow A, 45 = Bow B.")
     stern_angle_deg: float | None = Field(None, gt=0, lt=90, description="Stem rake of the other end (deg). "
@@ -313,6 +320,10 @@ class Ship(_Section):
 
     @model_validator(mode="after")
     def _window(self):
+        if self.hull == "mesh" and not self.mesh_file:
+            raise ValueError("mesh_file: a mesh hull needs its file, e.g. mesh_file = \"hull.stl\" (or \"b063\")")
+        if self.hull != "mesh" and self.mesh_file:
+            raise ValueError("hull: mesh_file is given; set hull = \"mesh\" to use it")
         w = self.steady_window_m
         if w is not None and not w[1] > w[0]:
             raise ValueError("steady_window_m: give [x0, x1] with x1 > x0")
@@ -324,7 +335,9 @@ class Ice(_Section):
 
     Cubes sit on a regular pattern (docs/SHIP.md): 68 % gives 28 x 112 = 3136 cubes and 88 % gives
     32 x 128 = 4096 in the paper's 1.39 m x 5.56 m channel; 50 % gives 24 x 96 = 2304 (the paper's 2034 is
-    read as a misprint; `count = 2034` reproduces it literally).
+    read as a misprint; `count = 2034` reproduces it literally). With `size_distribution`, an ice field instead:
+    square floes of edges drawn from the distribution, `thickness_m` thick, packed without overlap to
+    `concentration` with random yaw (docs/SHIP.md, "Ice fields").
     """
 
     size_m: float = Field(0.041, gt=0, description="Cube edge (m).")
@@ -344,11 +357,26 @@ class Ice(_Section):
     spheres_per_edge: int = Field(3, ge=2, description="DEM spheres along a cube edge (clumped-sphere body).")
     drag_coefficient: float = Field(1.05, ge=0, description="Tier 1: quadratic drag coefficient of a floe.")
     added_mass_coefficient: float = Field(0.5, ge=0, description="Tier 1: added-mass coefficient of a floe.")
+    size_distribution: Literal["none", "uniform", "lognormal"] = Field(
+        "none", description="`none`: cubes of `size_m`; `uniform`: floe edges uniform in [`size_min_m`, "
+                            "`size_max_m`]; `lognormal`: median `size_m`, log-standard deviation `size_sigma`, cut "
+                            "to [`size_min_m`, `size_max_m`].")
+    size_min_m: float | None = Field(None, gt=0, description="Smallest floe edge (m). Default: `size_m` (uniform), "
+                                                             "`size_m` / 2 (lognormal).")
+    size_max_m: float | None = Field(None, gt=0, description="Largest floe edge (m). Default: `size_m` (uniform), "
+                                                             "2 `size_m` (lognormal).")
+    size_sigma: float = Field(0.3, gt=0, description="Lognormal: standard deviation of ln(edge).")
+    thickness_m: float | None = Field(None, gt=0, description="Floe thickness (m) of a size distribution. "
+                                                              "Default: `size_m`.")
+    yaw: Literal["random", "none"] = Field("random", description="Floes of a size distribution: `random` yaw "
+                                           "within what the packing leaves room for, or `none`.")
 
     @model_validator(mode="after")
     def _amount(self):
         if (self.concentration is None) == (self.count is None):
             raise ValueError("concentration: give exactly one of concentration and count")
+        if self.size_distribution != "none" and self.count is not None:
+            raise ValueError("count: a size distribution is packed to a concentration; give concentration instead")
         return self
 
 

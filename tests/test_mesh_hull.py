@@ -1,0 +1,202 @@
+"""Your own hull: a mesh hull (``ship.hull = "mesh"``) in the engine. The shipped B-063 mesh as a
+:class:`MeshHull` against the parametric hull; spheres on a mesh solid of any shape (an L-shaped prism against
+its closed-form mass properties); tier 2 on a mesh of the CI-sized hull sees the flow force of the parametric one;
+tier 1 through the sweep with the mesh's own FSICR; and one-line refusals with exit status 2."""
+
+import copy
+
+import h5py
+import numpy as np
+import pytest
+import trimesh
+
+from fsicr.hullmesh import write_stl
+from iceresist.dem.bodies import convex_polyhedron, distance_to_mesh, inside_mesh, mesh_solid
+from iceresist.errors import InputError
+from iceresist.models import build_model
+from iceresist.ship.hull import HullGeometry, b063_hull
+from iceresist.ship.meshhull import MeshHull
+from iceresist.scene.load import load_scene
+from iceresist.ship.presets import case_scene
+from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, run_case
+
+CASE = "A-c68-v1.0"
+
+
+def _polygon_area(p):
+    x, y = p[:, 0], p[:, 1]
+    return 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+def l_prism():
+    """Three unit cubes in an L (a solid that is not convex): (vertices, faces), outward."""
+    xy = np.array([[1, 1], [1, 2], [0, 2], [0, 0], [2, 0], [2, 1]], float)
+    tri = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]])
+    m = trimesh.creation.extrude_triangulation(xy, tri, 1.0)
+    assert m.is_watertight and m.volume > 0
+    return np.asarray(m.vertices, float), np.asarray(m.faces)
+
+
+def test_the_b063_mesh_hull_answers_as_the_parametric_hull():
+    for bow, axis in (("A", "+x"), ("B", "-x")):
+        ref, got = b063_hull(bow), MeshHull.from_file("b063", 0.44, bow=axis)
+        assert got.is_convex
+        for key in ("beam_m", "waterline_length_m", "end_length_m", "parallel_length_m", "length_overall_m",
+                    "freeboard_m", "midship_area_m2", "prismatic_length_m"):
+            assert getattr(got, key) == pytest.approx(getattr(ref, key), rel=1e-6), key
+        assert got.volume_m3() == pytest.approx(ref.volume_m3(), rel=1e-6)
+        assert _polygon_area(got.waterline_polygon()) == pytest.approx(_polygon_area(ref.waterline_polygon()), rel=1e-6)
+        assert got.fsicr_inputs(25)["phi1_deg"] == pytest.approx(ref.bow_rake_deg, abs=1e-5)
+
+
+def test_spheres_on_a_solid_that_is_not_convex():
+    v, f = l_prism()
+    rho, spacing = 500.0, 0.1
+    s = mesh_solid(v, f, rho, spacing, name="L")
+    assert s.volume_m3 == pytest.approx(3.0, rel=1e-12)
+    assert s.model_com_m == pytest.approx([2.5 / 3, 2.5 / 3, 0.5], rel=1e-12)
+    # inertia about the centre of mass: three unit cubes (1/6 each about their centres) moved by the parallel axis
+    centres = np.array([[0.5, 0.5, 0.5], [1.5, 0.5, 0.5], [0.5, 1.5, 0.5]]) - s.model_com_m
+    ref = sum(np.eye(3) / 6.0 + (c @ c) * np.eye(3) - np.outer(c, c) for c in centres) * rho
+    assert s.inertia_tensor_model() == pytest.approx(ref, abs=1e-9 * rho)
+    # every sphere inside, one radius from the nearest face; the reflex edge gets no sphere outside the L
+    c = s.model_com_m + s.sphere_offsets_m @ s.model_to_body.T
+    r = s.sphere_radius_m
+    assert inside_mesh(c, v, f).all()
+    d = distance_to_mesh(c, v, f, 2 * r)
+    assert d.min() >= 0.98 * r and d.max() == pytest.approx(r, rel=1e-9)
+    assert not ((c[:, 0] > 1 + 1e-9) & (c[:, 1] > 1 + 1e-9)).any()
+    # the surface is covered: every point of it within 1.05 spacings of a sphere's centre (a square lattice of
+    # spacing s one radius under a face leaves 0.87 s; the faces' own lattices meet their edges less evenly)
+    surface = trimesh.sample.sample_surface(trimesh.Trimesh(v, f), 2000, seed=1)[0]
+    from scipy.spatial import cKDTree
+
+    assert cKDTree(c).query(surface)[0].max() < 1.05 * spacing
+    # the same body as a convex polyhedron would fill the notch: the mesh solid does not
+    assert convex_polyhedron(v, rho, spacing).volume_m3 == pytest.approx(3.5, rel=1e-12)
+
+
+def test_inside_mesh_against_the_l_prism():
+    v, f = l_prism()
+    p = np.random.default_rng(3).uniform(-0.2, 2.2, (5000, 3))
+    truth = (p >= 0).all(axis=1) & (p[:, 2] <= 1) & (p[:, :2] <= 2).all(axis=1) & ~((p[:, 0] > 1) & (p[:, 1] > 1))
+    assert (inside_mesh(p, v, f) == truth).all()
+
+
+@pytest.fixture(scope="module")
+def tiny_hull_mesh(tmp_path_factory):
+    """The CI-sized tier-2 hull (TINY_TIER2_OVERRIDES) written as an STL, moved off the ship frame."""
+    sh = TINY_TIER2_OVERRIDES["ship"]
+    g = HullGeometry(length_overall_m=sh["length_m"], beam_m=sh["beam_m"], draught_m=sh["draught_m"],
+                     parallel_length_m=sh["parallel_length_m"], bow_rake_deg=30.0, stern_rake_deg=45.0)
+    path = tmp_path_factory.mktemp("mesh") / "tiny.stl"
+    v, f = g.mesh()
+    write_stl(path, v + np.array([0.7, -0.2, 0.5]), f)  # anywhere: the reader puts keel, centreline and stem
+    return path
+
+
+def test_tier2_on_a_mesh_hull_sees_the_flow_force_of_the_parametric_hull(tiny_hull_mesh, tmp_path):
+    """Until the first ice contact (record 10) the hull's flow force of the mesh equals the parametric hull's
+    (the same convex polyhedron to float32 rounding); then their sphere layouts, not the flow, differ."""
+    mesh = copy.deepcopy(TINY_TIER2_OVERRIDES)
+    mesh["ship"].update(hull="mesh", mesh_file=str(tiny_hull_mesh))
+    fluid = {}
+    for name, overrides in (("parametric", TINY_TIER2_OVERRIDES), ("mesh", mesh)):
+        path = run_case(CASE, "quick", 2, tmp_path / name, backend="cpu", overrides=overrides)
+        with h5py.File(path) as h:
+            fluid[name] = np.stack([h["timeseries"][k][:10] for k in ("Fx_fluid_N", "Fz_fluid_N")])
+            if name == "mesh":
+                assert h["bodies/hull_vertices_m"].shape == (12, 3)
+    assert np.abs(fluid["parametric"]).max() > 1.0
+    assert fluid["mesh"] == pytest.approx(fluid["parametric"], rel=1e-4, abs=1e-4)
+
+
+def test_tier1_sweep_case_on_the_b063_mesh_uses_the_meshs_fsicr_and_the_report_says_so(tmp_path):
+    from iceresist.sweep import run_sweep
+    from reports.report import write_report
+
+    overrides = copy.deepcopy(TINY_OVERRIDES)
+    overrides["ship"].update(hull="mesh", mesh_file="b063")
+    table = run_sweep("quick", 1, tmp_path, CASE, backend="cpu", overrides=overrides)
+    row = table.iloc[0]
+    assert row["R_CH_FSICR_kN"] == pytest.approx(300.1, abs=0.05)  # measured L 76.01 m, Awf 132.6 m^2
+    assert np.isfinite(row["mean_force_N"]) and row["mean_force_N"] > 0
+    html = write_report(tmp_path)[0].read_text()
+    assert "<h1>b063 (mesh hull) in a brash-ice channel" in html
+    assert "area of the waterline of the bow Awf [m^2]</td>" in html and "<td>132.6</td>" in html
+
+
+def test_tier2_refuses_a_hull_that_is_not_convex(tmp_path):
+    v, f = l_prism()
+    path = tmp_path / "L.stl"
+    write_stl(path, v * np.array([0.2, 0.04, 0.1]), f)
+    mesh = copy.deepcopy(TINY_TIER2_OVERRIDES)
+    mesh["ship"].update(hull="mesh", mesh_file=str(path), draught_m=0.06)
+    with pytest.raises(InputError, match=r"ship.tier: tier 2 sees a hull as a convex polyhedron .* run it at tier = 1"):
+        build_model(case_scene(CASE, "quick", 2, **mesh), backend="cpu")
+
+
+def test_a_scene_names_the_mesh_key_of_a_bad_hull(tmp_path):
+    """Scene files with a mesh hull (the mesh path relative to the scene file): one line naming the key."""
+    v, f = b063_hull("A").mesh()
+    write_stl(tmp_path / "open.stl", v, f[1:])
+    head = '[case]\nname = "A-c68-v1.0"\nfidelity = "quick"\ntier = 1\n[ship]\n'
+    for ship, needle in (('hull = "mesh"', 'ship.mesh_file: a mesh hull needs its file'),
+                         ('mesh_file = "b063"', 'set hull = "mesh"'),
+                         ('hull = "mesh"\nmesh_file = "open.stl"', "ship.mesh_file: 'open.stl' is not watertight"),
+                         ('hull = "mesh"\nmesh_file = "b063"\nmesh_unit = "mm"', "ship.mesh_unit: the hull is "
+                                                                               "0.0035 m long in 'mm'")):
+        path = tmp_path / "scene.toml"
+        path.write_text(head + ship + "\n")
+        with pytest.raises(InputError) as err:
+            build_model(load_scene(path), backend="cpu")
+        assert needle in str(err.value) and "\n" not in str(err.value), str(err.value)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--mesh", "nope.stl"], "--mesh: no file 'nope.stl'"),
+    (["--mesh", "b063", "--mesh-unit", "mm"], "--mesh-unit: the hull is 0.0035 m long in 'mm'"),
+    (["--mesh", "b063", "--cases", "B-c68-v1.0"], "--cases: B-c68-v1.0 name Bow B"),
+    (["--mesh", "b063", "--mesh-bow", "+z"], "--mesh-bow: '+z' is not one of"),
+])
+def test_sweep_mesh_refusals_are_one_line_and_write_nothing(tmp_path, capsys, monkeypatch, argv, needle):
+    from iceresist import cli
+
+    monkeypatch.chdir(tmp_path)
+    rc = cli.main(["sweep", *argv, "--output", "out", "--no-progress"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and needle in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_the_quick_tier1_sweep_on_the_b063_mesh_equals_the_parametric_hulls(tmp_path):
+    """Every Bow A case of the quick tier-1 sweep, B-063 from its shipped mesh and from its parameters: the mean
+    ice forces agree within their combined 95 % intervals (about 3 min on a 2-core x86 VM)."""
+    from iceresist.ship.presets import CASES
+    from iceresist.sweep import run_sweep
+
+    names = ",".join(c for c in CASES if c.startswith("A-"))
+    mesh = run_sweep("quick", 1, tmp_path / "mesh", names, backend="cpu",
+                     overrides={"ship": {"hull": "mesh", "mesh_file": "b063"}})
+    param = run_sweep("quick", 1, tmp_path / "param", names, backend="cpu")
+    both = mesh.merge(param, on="case", suffixes=("_mesh", "_param"))
+    print(both[["case", "mean_force_N_mesh", "ci95_N_mesh", "mean_force_N_param", "ci95_N_param"]].to_string())
+    assert len(both) == 5
+    scatter = np.hypot(both["ci95_N_mesh"], both["ci95_N_param"])
+    gap = (both["mean_force_N_mesh"] - both["mean_force_N_param"]).abs()
+    assert (gap <= scatter).all(), both[["mean_force_N_mesh", "mean_force_N_param", "ci95_N_mesh", "ci95_N_param"]]
+    assert (both["R_CH_FSICR_kN_mesh"] - 300.1).abs().max() < 0.05
+
+
+def test_the_documented_mesh_scene_builds_and_steps():
+    from iceresist.scene.docs import MESH_EXAMPLE
+    from iceresist.scene.load import parse_scene
+
+    model = build_model(parse_scene(MESH_EXAMPLE, "mesh_example.toml"), backend="cpu")
+    assert model.describe_ship()["hull"]["kind"] == "mesh"
+    # the same surface sampled from float32 vertices: the faces' triangles differ, so the count does a little
+    assert model.hull.n_spheres == pytest.approx(build_model(case_scene(CASE, "quick", 1), backend="cpu").hull.n_spheres,
+                                                 rel=0.03)
+    model.step(2)
+    assert np.isfinite(model.diagnostics()["Fx_N"])

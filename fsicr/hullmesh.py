@@ -124,8 +124,9 @@ def _rotation(bow: str, up: str, keys: MeshKeys) -> np.ndarray:
     return np.stack([fwd, port, upv])  # rows: ship axes in mesh coordinates
 
 
-def read_hull_mesh(path, *, unit: str = "m", bow: str = "+x", up: str = "+z", keys: MeshKeys = MeshKeys()) -> HullMesh:
-    """Read, check and orient a hull mesh; the stem is put at x = 0 later by :func:`to_stem_frame`."""
+def read_mesh(path, *, unit: str = "m", keys: MeshKeys = MeshKeys(), what: str = "hull") -> HullMesh:
+    """Read and check a closed surface mesh (STL or OBJ; a built-in name), in metres, as the file places it:
+    not empty, watertight, faces outward."""
     try:
         import trimesh
     except ImportError:  # pragma: no cover - a dependency
@@ -135,29 +136,36 @@ def read_hull_mesh(path, *, unit: str = "m", bow: str = "+x", up: str = "+z", ke
     if not p.exists() and p.parent == Path(".") and p.stem in builtin:
         p = builtin[p.stem]
     if not p.is_file():
-        raise FsicrInputError(f"{keys.file}: no file {str(path)!r}; give the path of an STL or OBJ hull or a "
+        raise FsicrInputError(f"{keys.file}: no file {str(path)!r}; give the path of an STL or OBJ {what} or a "
                               f"built-in one ({', '.join(sorted(builtin))})")
     if p.suffix.lower() not in (".stl", ".obj"):
-        raise FsicrInputError(f"{keys.file}: {p.name!r} is not .stl or .obj; export the hull as STL or OBJ")
+        raise FsicrInputError(f"{keys.file}: {p.name!r} is not .stl or .obj; export the {what} as STL or OBJ")
     if unit not in UNITS:
         raise FsicrInputError(f"{keys.unit}: {unit!r} is not a length unit; use one of {', '.join(UNITS)}")
-    R = _rotation(bow, up, keys)
     try:
         mesh = trimesh.load(p, force="mesh", process=True)
     except Exception as exc:  # noqa: BLE001 - any parse failure is the user's file
         raise FsicrInputError(f"{keys.file}: {p.name!r} could not be read as a mesh ({type(exc).__name__}: "
-                              f"{str(exc)[:80]}); export the hull again as STL or OBJ") from None
+                              f"{str(exc)[:80]}); export the {what} again as STL or OBJ") from None
     if len(getattr(mesh, "faces", ())) == 0:
-        raise FsicrInputError(f"{keys.file}: {p.name!r} holds no triangles; export the hull surface as STL or OBJ")
+        raise FsicrInputError(f"{keys.file}: {p.name!r} holds no triangles; export the {what} surface as STL or OBJ")
     if not mesh.is_watertight:
         raise FsicrInputError(f"{keys.file}: {p.name!r} is not watertight ({len(mesh.faces)} triangles, open edges "
-                              f"or holes); close the hull (deck included) before exporting")
-    verts = (np.asarray(mesh.vertices, float) * UNITS[unit]) @ R.T
-    hull = HullMesh(verts, np.asarray(mesh.faces, np.int64), source=str(p),
-                    meta={"file": str(p), "unit": unit, "bow": bow, "up": up, "triangles": int(len(mesh.faces))})
-    if hull.volume_m3 <= 0:
+                              f"or holes); close the {what} (deck included) before exporting")
+    out = HullMesh(np.asarray(mesh.vertices, float) * UNITS[unit], np.asarray(mesh.faces, np.int64), source=str(p),
+                   meta={"file": str(p), "unit": unit, "triangles": int(len(mesh.faces))})
+    if out.volume_m3 <= 0:
         raise FsicrInputError(f"{keys.file}: {p.name!r} is inside out (its faces point inward, volume "
-                              f"{hull.volume_m3:.4g} m^3); flip the normals before exporting")
+                              f"{out.volume_m3:.4g} m^3); flip the normals before exporting")
+    return out
+
+
+def read_hull_mesh(path, *, unit: str = "m", bow: str = "+x", up: str = "+z", keys: MeshKeys = MeshKeys()) -> HullMesh:
+    """Read, check and orient a hull mesh; the stem is put at x = 0 later by :func:`to_stem_frame`."""
+    R = _rotation(bow, up, keys)
+    hull = read_mesh(path, unit=unit, keys=keys)
+    hull.vertices = hull.vertices @ R.T
+    hull.meta.update(bow=bow, up=up)
     length = hull.length_m
     lo, hi = LENGTH_RANGE_M
     if not lo <= length <= hi:

@@ -50,20 +50,40 @@ def _g(v) -> str:
     return f"{float(v):.6g}"
 
 
-def half_extent(body) -> np.ndarray:
-    """Half the body's extent along x, y, z (m): its radius, or half its edges (boxes are axis-aligned)."""
+def body_mesh(body, index: int, scene_source: str | None = None):
+    """A mesh body's checked surface, vertices (n, 3) m about the centre of its bounding box, and faces; one
+    line naming ``bodies[i].mesh_file`` (or ``mesh_unit``) on a bad file."""
+    from fsicr.errors import FsicrInputError
+    from fsicr.hullmesh import MeshKeys, read_mesh
+    from iceresist.ship.meshhull import resolve_mesh_path
+
+    keys = MeshKeys(file=f"bodies[{index}].mesh_file", unit=f"bodies[{index}].mesh_unit")
+    try:
+        mesh = read_mesh(resolve_mesh_path(body.mesh_file, scene_source), unit=body.mesh_unit, keys=keys, what="body")
+    except FsicrInputError as exc:
+        raise InputError(str(exc)) from None
+    v = mesh.vertices
+    return v - 0.5 * (v.min(axis=0) + v.max(axis=0)), mesh.faces
+
+
+def half_extent(body, mesh=None) -> np.ndarray:
+    """Half the body's extent along x, y, z (m): its radius, half its edges (boxes are axis-aligned), or half a
+    mesh's bounding box (``mesh``: its vertices about that box's centre)."""
     if body.shape == "sphere":
         return np.full(3, float(body.radius_m))
+    if body.shape == "mesh":
+        return np.abs(np.asarray(mesh[0] if isinstance(mesh, tuple) else mesh, dtype=float)).max(axis=0)
     return 0.5 * np.asarray(body.size_m, dtype=float)
 
 
-def _overlap(a, b) -> bool:
-    """Whether bodies ``a`` and ``b`` of the scene share volume at t = 0."""
+def _overlap(a, b, ma=None, mb=None) -> bool:
+    """Whether bodies ``a`` and ``b`` of the scene share volume at t = 0 (a mesh body counts as its bounding box:
+    the check errs on the side of refusing)."""
     ca, cb = np.asarray(a.position_m, dtype=float), np.asarray(b.position_m, dtype=float)
-    ha, hb = half_extent(a), half_extent(b)
+    ha, hb = half_extent(a, ma), half_extent(b, mb)
     if a.shape == "sphere" and b.shape == "sphere":
         return float(np.linalg.norm(ca - cb)) < a.radius_m + b.radius_m
-    if a.shape == "box" and b.shape == "box":
+    if a.shape != "sphere" and b.shape != "sphere":
         return bool((np.abs(ca - cb) < ha + hb).all())
     s, c, h = (a, cb, hb) if a.shape == "sphere" else (b, ca, ha)
     centre = np.asarray(s.position_m, dtype=float)
@@ -71,13 +91,15 @@ def _overlap(a, b) -> bool:
     return float(np.linalg.norm(centre - nearest)) < s.radius_m
 
 
-def check_bodies(scene: Scene, box_m) -> None:
+def check_bodies(scene: Scene, box_m, meshes: dict | None = None) -> None:
     """Refuse bodies that reach outside the box ``box_m`` (m), overlap at t = 0, or give a velocity to a fixed
-    body: an :class:`InputError` naming the key and a value that works."""
+    body: an :class:`InputError` naming the key and a value that works. ``meshes``: body index -> its
+    :func:`body_mesh`."""
     box_m = np.asarray(box_m, dtype=float)
+    meshes = meshes or {}
     for i, b in enumerate(scene.bodies):
-        c, h = np.asarray(b.position_m, dtype=float), half_extent(b)
-        key = "radius_m" if b.shape == "sphere" else "size_m"
+        c, h = np.asarray(b.position_m, dtype=float), half_extent(b, meshes.get(i))
+        key = {"sphere": "radius_m", "box": "size_m", "mesh": "mesh_unit"}[b.shape]
         if b.motion == "fixed" and any(b.velocity_m_s):
             raise InputError(f"bodies[{i}].velocity_m_s: body {b.name!r} is fixed (at rest): leave velocity_m_s "
                              f"out, or set motion = \"prescribed\" to move it at {list(b.velocity_m_s)} m/s")
@@ -94,9 +116,10 @@ def check_bodies(scene: Scene, box_m) -> None:
     for j, b in enumerate(scene.bodies):
         for i in range(j):
             a = scene.bodies[i]
-            if not _overlap(a, b):
+            if not _overlap(a, b, meshes.get(i), meshes.get(j)):
                 continue
-            ca, ha, hb = np.asarray(a.position_m, dtype=float), half_extent(a), half_extent(b)
+            ca, ha, hb = (np.asarray(a.position_m, dtype=float), half_extent(a, meshes.get(i)),
+                          half_extent(b, meshes.get(j)))
             fix = np.asarray(b.position_m, dtype=float).copy()
             gap = 0.05 * float(min(ha.min(), hb.min()))
             ahead, behind = ca[0] + ha[0] + hb[0] + gap, ca[0] - ha[0] - hb[0] - gap
@@ -144,7 +167,8 @@ class BodiesModel(Model):
         box_cells = scene.domain.shape_cells()
         u0 = scene.units()
         self.box_m = tuple(n * u0.dx_m for n in box_cells)
-        check_bodies(scene, self.box_m)
+        self.meshes = {i: body_mesh(b, i, scene.source_name) for i, b in enumerate(scene.bodies) if b.shape == "mesh"}
+        check_bodies(scene, self.box_m, self.meshes)
         if self.free_surface:
             self._build_free_surface(u0)
         else:
@@ -185,14 +209,26 @@ class BodiesModel(Model):
 
     def _shapes(self):
         """(coupling geometry, DEM shape, kinematic, velocity, material) of each body."""
-        from iceresist.coupling import Box, Sphere
-        from iceresist.dem import box, sphere
+        from scipy.spatial import ConvexHull
+
+        from iceresist.coupling import Box, ConvexPolyhedron, Sphere
+        from iceresist.dem import box, convex_polyhedron, sphere
 
         out = []
-        for b in self.scene.bodies:
+        for i, b in enumerate(self.scene.bodies):
             rho = b.density_kg_m3 if b.density_kg_m3 is not None else self.scene.rho_kg_m3
             if b.shape == "sphere":
                 geom, shape = Sphere(float(b.radius_m)), sphere(float(b.radius_m), rho)
+            elif b.shape == "mesh":
+                v, f = self.meshes[i]
+                fill = abs(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0) \
+                    / ConvexHull(v).volume
+                if fill < 1.0 - 1e-6:
+                    raise InputError(f"bodies[{i}].mesh_file: body {b.name!r} fills {100 * fill:.1f} % of its convex "
+                                     f"hull; the fluid sees a body as a convex polyhedron for now: give a convex mesh")
+                spacing = b.sphere_spacing_m or 0.25 * float(np.ptp(v, axis=0).min())
+                shape = convex_polyhedron(v, rho, spacing, name=b.name)
+                geom = ConvexPolyhedron.of_shape(v, shape)
             else:
                 size = tuple(float(v) for v in b.size_m)
                 geom, shape = Box(size), box(size, rho)

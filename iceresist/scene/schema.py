@@ -400,13 +400,21 @@ class Contact(_Section):
 
 
 class Body(_Section):
-    """``[[bodies]]``: an extra rigid body (box or sphere), free, fixed or moving at a prescribed velocity."""
+    """``[[bodies]]``: an extra rigid body (box, sphere or convex mesh), free, fixed or moving at a prescribed
+    velocity."""
 
     name: str = Field(..., pattern=r"^[A-Za-z0-9_.-]+$", description="Body name (time-series column prefix).")
-    shape: Literal["box", "sphere"] = Field(..., description="`box` (edges size_m) or `sphere` (radius_m).")
+    shape: Literal["box", "sphere", "mesh"] = Field(..., description="`box` (edges size_m), `sphere` (radius_m) or "
+                                                    "`mesh` (a closed convex surface in mesh_file).")
     size_m: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = Field(None, description="Box edges (m).")
     radius_m: float | None = Field(None, gt=0, description="Sphere radius (m).")
-    position_m: Vec3 = Field(..., description="Centre at t = 0 (m).")
+    mesh_file: str | None = Field(None, description="Mesh body: STL or OBJ file (relative to the scene file), "
+                                  "placed as it is drawn with the centre of its bounding box at position_m.")
+    mesh_unit: Literal["m", "cm", "mm", "ft", "in"] = Field("m", description="Mesh body: unit of the mesh's "
+                                                            "coordinates (lattice units in a lattice-unit scene: m).")
+    sphere_spacing_m: float | None = Field(None, gt=0, description="Mesh body: DEM sphere spacing on its surface "
+                                           "(m). Default: a quarter of its smallest extent.")
+    position_m: Vec3 = Field(..., description="Centre at t = 0 (m); a mesh's bounding-box centre.")
     velocity_m_s: Vec3 = Field((0.0, 0.0, 0.0), description="Velocity at t = 0, or the prescribed velocity (m/s).")
     density_kg_m3: float | None = Field(None, gt=0, description="Density (kg/m^3); needed for `free` bodies.")
     motion: Literal["free", "prescribed", "fixed"] = Field("free", description="How the body moves.")
@@ -417,6 +425,8 @@ class Body(_Section):
             raise ValueError("size_m: a box needs size_m")
         if self.shape == "sphere" and self.radius_m is None:
             raise ValueError("radius_m: a sphere needs radius_m")
+        if self.shape == "mesh" and not self.mesh_file:
+            raise ValueError("mesh_file: a mesh body needs its file, e.g. mesh_file = \"body.stl\"")
         if self.motion == "free" and self.density_kg_m3 is None:
             raise ValueError("density_kg_m3: a free body needs its density")
         return self

@@ -126,14 +126,47 @@ def test_tier1_sweep_case_on_the_b063_mesh_uses_the_meshs_fsicr_and_the_report_s
     assert "area of the waterline of the bow Awf [m^2]</td>" in html and "<td>132.6</td>" in html
 
 
-def test_tier2_refuses_a_hull_that_is_not_convex(tmp_path):
-    v, f = l_prism()
-    path = tmp_path / "L.stl"
-    write_stl(path, v * np.array([0.2, 0.04, 0.1]), f)
+def test_tier2_on_convex_slabs_of_the_hull_sees_the_same_flow_force(tiny_hull_mesh, tmp_path, monkeypatch):
+    """The union-of-pieces path of the kernels' SDF (a hull that is not convex): the CI-sized hull taken as 8
+    convex slabs along x (exact for a convex hull: no excess) feels the flow force of the one polyhedron to 1e-4
+    until the first ice contact; the seams between slabs read inside."""
     mesh = copy.deepcopy(TINY_TIER2_OVERRIDES)
-    mesh["ship"].update(hull="mesh", mesh_file=str(path), draught_m=0.06)
-    with pytest.raises(InputError, match=r"ship.tier: tier 2 sees a hull as a convex polyhedron .* run it at tier = 1"):
-        build_model(case_scene(CASE, "quick", 2, **mesh), backend="cpu")
+    mesh["ship"].update(hull="mesh", mesh_file=str(tiny_hull_mesh))
+    fluid = {}
+    for name in ("polyhedron", "slabs"):
+        if name == "slabs":
+            monkeypatch.setattr(MeshHull, "is_convex", property(lambda self: False))
+        model = build_model(case_scene(CASE, "quick", 2, **mesh), backend="cpu")
+        rows = []
+        for _ in range(8):
+            model.step(1)
+            d = model.diagnostics()
+            rows.append((d["Fx_fluid_N"], d["Fz_fluid_N"]))
+        fluid[name] = np.array(rows)
+        if name == "slabs":
+            assert len(model.fb.geometries[0].pieces_m) == 8
+    assert np.abs(fluid["polyhedron"]).max() > 1.0
+    assert fluid["slabs"] == pytest.approx(fluid["polyhedron"], rel=1e-4, abs=1e-4)
+
+
+def test_tier2_takes_a_hull_convex_in_section_and_refuses_one_that_is_not(tmp_path):
+    """An L-shaped plan (convex sections) is cut into slabs within 1 % of its volume; an L-shaped section along
+    the whole length (a hull whose cross-sections are not convex) is refused naming ship.tier."""
+    v, f = l_prism()
+    plan, section = tmp_path / "plan.stl", tmp_path / "section.stl"
+    write_stl(plan, v * np.array([0.2, 0.04, 0.1]), f)  # 0.4 m long, the notch in the plan
+    write_stl(section, np.column_stack([v[:, 2] * 0.4, v[:, 0] * 0.04, v[:, 1] * 0.05]), f)  # the L across
+    for path, ok in ((plan, True), (section, False)):
+        mesh = copy.deepcopy(TINY_TIER2_OVERRIDES)
+        mesh["ship"].update(hull="mesh", mesh_file=str(path), draught_m=0.06)
+        scene = case_scene(CASE, "quick", 2, **mesh)
+        if ok:
+            model = build_model(scene, backend="cpu")
+            g = model.fb.geometries[0]
+            assert len(g.pieces_m) >= 8 and model.geometry.union_excess(list(g.pieces_m)) <= 0.01
+        else:
+            with pytest.raises(InputError, match=r"ship.tier: .* cross-sections are not convex\); run it at tier = 1"):
+                build_model(scene, backend="cpu")
 
 
 def test_a_scene_names_the_mesh_key_of_a_bad_hull(tmp_path):

@@ -6,6 +6,6 @@ Public API::
 """
 
 from iceresist.coupling.coupler import FluidStructureCoupling
-from iceresist.coupling.geometry import Box, ConvexPolyhedron, Sphere
+from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion, Sphere
 
-__all__ = ["FluidStructureCoupling", "Sphere", "Box", "ConvexPolyhedron"]
+__all__ = ["FluidStructureCoupling", "Sphere", "Box", "ConvexPolyhedron", "ConvexUnion"]

@@ -23,7 +23,7 @@ MIRROR_DEPTH = 2.0
 
 def build_geometry_functions(target, real):
     """Small device functions: ``lookup`` of a global cell, ``sdf_at`` a world point, ``wall_velocity``."""
-    half, zero, big = real(0.5), real(0.0), real(1e30)
+    half, zero, two, big = real(0.5), real(0.0), real(2.0), real(1e30)
     sphere_kind, box_kind = SPHERE, BOX
     dev = target.device
 
@@ -81,13 +81,34 @@ def build_geometry_functions(target, real):
             my = max(qy, zero)
             mz = max(qz, zero)
             return math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
-        d = -big
+        # convex pieces (geometry.ConvexUnion): dp = max over a piece's planes, ds = the same without its caps
+        # (rows of normal length 2, shared with the next piece); outside: min over the pieces of dp; inside a
+        # piece: min of ds over the pieces that hold p (the distance to the surface, not to a seam). One piece
+        # without caps is the plain convex polyhedron.
+        d_out = big
+        d_in = big
+        dp = -big
+        ds = -big
         first = bint[k, 1]
-        for i in range(first, first + bint[k, 2]):
-            v = planes[i, 0] * x + planes[i, 1] * y + planes[i, 2] * z + planes[i, 3]
-            if v > d:
-                d = v
-        return d
+        last = first + bint[k, 2]
+        for i in range(first, last + 1):
+            if i == last or (planes[i, 0] == zero and planes[i, 1] == zero and planes[i, 2] == zero):
+                d_out = min(d_out, dp)
+                if dp < zero:
+                    d_in = min(d_in, ds)
+                dp = -big
+                ds = -big
+            else:
+                nx, ny, nz = planes[i, 0], planes[i, 1], planes[i, 2]
+                v = nx * x + ny * y + nz * z + planes[i, 3]
+                if nx * nx + ny * ny + nz * nz > two:
+                    dp = max(dp, half * v)
+                else:
+                    dp = max(dp, v)
+                    ds = max(ds, v)
+        if d_in < big:
+            return d_in
+        return d_out
 
     @dev
     def wall_velocity(k, px, py, pz, body, grid):

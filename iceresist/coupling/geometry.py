@@ -10,6 +10,10 @@ negative inside, positive outside:
   outside wherever the nearest surface point lies inside a face; near edges and vertices, outside, it
   underestimates the distance (by at most a factor 1/sqrt(3) next to a corner). Its zero level set is the
   exact surface, so the link distances q found by root finding along the links are exact.
+* union of convex pieces (a solid that is not convex, e.g. a hull mesh cut into slabs): the min over the pieces
+  of each piece's max over its planes. The pieces' planes follow one another in the plane table, each piece
+  closed by a separator row (normal 0, :data:`SEPARATOR`). Its zero level set is the union's surface; inside, a
+  seam between two pieces reads close to 0 (each piece's cap is near), never above.
 
 Each shape packs into a row of parameters and, for polyhedra, a table of planes, which the kernels of
 :mod:`iceresist.coupling.kernels` read; the NumPy ``sdf`` methods here are their reference.
@@ -24,6 +28,8 @@ import numpy as np
 from iceresist.errors import InputError
 
 SPHERE, BOX, CONVEX = 0, 1, 2
+#: The offset of a separator row in the plane table (its normal is 0): the end of one convex piece.
+SEPARATOR = 1.0e30
 
 
 @dataclass(frozen=True)
@@ -120,13 +126,77 @@ class ConvexPolyhedron:
         return (p @ eq[:, :3].T + eq[:, 3]).max(axis=-1)
 
 
+@dataclass(frozen=True)
+class ConvexUnion:
+    """A union of convex pieces, each given by its vertices in the model frame, moved into the body frame of
+    ``shape`` as :class:`ConvexPolyhedron`; ``volume`` (m^3) is the solid's own (the pieces may overlap)."""
+
+    pieces_m: tuple
+    volume: float
+    model_com_m: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    model_to_body: np.ndarray = field(default_factory=lambda: np.eye(3))
+    kind: int = field(default=CONVEX, init=False)
+
+    @classmethod
+    def of_shape(cls, pieces_m, volume_m3, shape):
+        return cls(tuple(np.asarray(p, dtype=float) for p in pieces_m), float(volume_m3),
+                   np.asarray(shape.model_com_m, dtype=float), np.asarray(shape.model_to_body, dtype=float))
+
+    def _polys(self):
+        return [ConvexPolyhedron(p, self.model_com_m, self.model_to_body) for p in self.pieces_m]
+
+    def parameters(self):
+        """Each piece's planes, a separator row after each but the last; a cap shared with another piece (all
+        its vertices on a plane x = const of the model frame that another piece also has) stored at twice its
+        length, so the kernels leave it out of the distance inside."""
+        sep = np.array([[0.0, 0.0, 0.0, SEPARATOR]])
+        ends = [(p[:, 0].min(), p[:, 0].max()) for p in self.pieces_m]
+        cuts = [x for lo, hi in ends for x in (lo, hi)]
+        shared = {x for x in cuts if sum(abs(c - x) <= 1e-12 * (1.0 + abs(x)) for c in cuts) > 1}
+        rows = []
+        for piece, poly in zip(self.pieces_m, self._polys()):
+            eq = poly.parameters()[1].copy()
+            body = poly.body_vertices()
+            for r in range(len(eq)):
+                on = np.abs(body @ eq[r, :3] + eq[r, 3]) <= 1e-9 * (1.0 + np.abs(body).max())
+                xs = piece[on, 0]
+                if len(xs) and any(np.all(np.abs(xs - c) <= 1e-12 * (1.0 + abs(c))) for c in shared):
+                    eq[r] *= 2.0
+            rows += [eq, sep]
+        return np.zeros(3), np.concatenate(rows[:-1])  # no separator after the last piece
+
+    def half_extent_m(self):
+        return np.abs(np.concatenate([poly.body_vertices() for poly in self._polys()])).max(axis=0)
+
+    def volume_m3(self):
+        return self.volume
+
+    def sdf(self, p):
+        """The kernels' rule (:func:`iceresist.coupling.cellfunctions`): outside the min over the pieces,
+        inside the min over the pieces that hold p of their distance without the shared caps."""
+        _, eq = self.parameters()
+        p = np.asarray(p, dtype=float)
+        ends = np.flatnonzero((eq[:, :3] == 0).all(axis=1))
+        out, inside = np.inf, np.full(p.shape[:-1], np.inf)
+        for rows in np.split(eq, ends):
+            rows = rows[(rows[:, :3] != 0).any(axis=1)]
+            cap = (rows[:, :3] ** 2).sum(axis=1) > 2.0
+            v = p @ rows[:, :3].T + rows[:, 3]
+            v = np.where(cap, 0.5 * v, v)
+            dp, ds = v.max(axis=-1), np.where(cap, -np.inf, v).max(axis=-1)
+            out = np.minimum(out, dp)
+            inside = np.where(dp < 0, np.minimum(inside, ds), inside)
+        return np.where(np.isfinite(inside), inside, out)
+
+
 def pack(geometries):
     """Kinds (n,), parameters (n, 3), first plane and plane count (n,), planes (m, 4), body-frame half extents (n, 3)."""
     kinds, pars, first, count, planes, half = [], [], [], [], [], []
     m = 0
     for g in geometries:
-        if not isinstance(g, (Sphere, Box, ConvexPolyhedron)):
-            raise InputError(f"coupled geometry must be Sphere, Box or ConvexPolyhedron, got {type(g).__name__}")
+        if not isinstance(g, (Sphere, Box, ConvexPolyhedron, ConvexUnion)):
+            raise InputError(f"coupled geometry must be Sphere, Box, ConvexPolyhedron or ConvexUnion, got "
+                             f"{type(g).__name__}")
         par, pl = g.parameters()
         kinds.append(g.kind)
         pars.append(par)

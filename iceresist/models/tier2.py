@@ -37,6 +37,7 @@ from iceresist.errors import InputError
 from iceresist.models.base import array_bytes
 from iceresist.models.fluid import check_block_shape, resolve_target
 from iceresist.models.ship import ShipModel, ship_start_x_m, steady_window_m
+from iceresist.ship.meshhull import MeshHull
 from iceresist.ship.tank import start_wave, tank_flow
 from iceresist.units import GRAVITY_M_S2, Units
 
@@ -68,7 +69,7 @@ class Tier2Model(ShipModel):
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
                  tau_floor: float | None = None):
         from iceresist.coupling.floating import FloatingBodies
-        from iceresist.coupling.geometry import Box, ConvexPolyhedron
+        from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
 
         self._check_sections(scene)
         if scene.is_lattice:
@@ -83,9 +84,7 @@ class Tier2Model(ShipModel):
         dx = lu.dx_m
         self._set_up_ship(scene, tuple(n * dx for n in self.shape_cells))
         sh, ice, con, g = scene.ship, scene.ice, self.contact, self.geometry
-        if not getattr(g, "is_convex", True):
-            raise InputError(f"ship.tier: tier 2 sees a hull as a convex polyhedron for now, and {sh.mesh_file!r} "
-                             f"fills {100 * g.convex_fraction:.1f} % of its convex hull; run it at tier = 1")
+        pieces = g.fluid_pieces() if isinstance(g, MeshHull) else None
         self.tank = tank_flow(g.midship_area_m2, self.domain_m[1], self.level_m, float(sh.speed_m_s))
         if not self.tank.subcritical:
             log.warning("tier 2: %.3g m/s is above the limiting speed of this tank (depth Froude number %.3g, "
@@ -115,8 +114,14 @@ class Tier2Model(ShipModel):
                                  width=scene.free_surface.interface_width_cells, dem=dem,
                                  contact_film=con.fluid_film)
         self.dem = dem
+        if pieces is not None and len(pieces[0]) > 1:
+            log.info("tier 2: the hull %r is not convex: %d convex slabs for the fluid, %.2f %% more volume than "
+                     "the mesh", g.name, len(pieces[0]), 100 * pieces[1])
+            hull_geometry = ConvexUnion.of_shape(pieces[0], g.mesh.volume_m3, self.hull)
+        else:
+            hull_geometry = ConvexPolyhedron.of_shape(g.vertices(), self.hull)
         self.hull_body = self.fb.add_body(
-            ConvexPolyhedron.of_shape(g.vertices(), self.hull), self.hull,
+            hull_geometry, self.hull,
             position_m=(self.start_x_m, self.centre_y_m, self.level_m - g.draught_m),
             velocity_m_s=(self.speed_m_s, 0.0, 0.0), kinematic=True, material="ship")
         floes = self.floes_record()

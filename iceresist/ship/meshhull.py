@@ -6,8 +6,9 @@ unit, turned by ``ship.mesh_bow`` and ``ship.mesh_up``) and moved into the ship 
 the waterline. :class:`MeshHull` answers what the models ask of a hull (draught, beam, waterline length, bow
 length, midship area, displacement, the waterline polygon, the FSICR inputs), so a mesh hull runs wherever the
 parametric B-063 runs: the DEM sees spheres on its faces (:func:`iceresist.dem.mesh_solid`; a convex mesh takes
-:func:`iceresist.dem.convex_polyhedron`, the B-063 path), and tier 2's fluid sees its exact signed distance as a
-convex polyhedron, which tier 2 needs for now (a mesh that is not convex runs at tier 1).
+:func:`iceresist.dem.convex_polyhedron`, the B-063 path), and tier 2's fluid sees a convex mesh as one convex
+polyhedron and any other as a union of convex slabs along its length (:meth:`MeshHull.fluid_pieces`,
+:class:`iceresist.coupling.ConvexUnion`).
 """
 
 from __future__ import annotations
@@ -145,6 +146,64 @@ class MeshHull:
             return cls(mesh, float(draught_m), name=Path(path).stem)
         except FsicrInputError as exc:
             raise InputError(str(exc)) from None
+
+    # -- convex pieces for the fluid (tier 2) -----------------------------------------------------------
+    def convex_pieces(self, slabs: int) -> list[np.ndarray]:
+        """The hull cut into ``slabs`` equal slabs along x, each slab's part as the vertices of its convex hull
+        (the mesh's vertices in the slab and its edges' crossings of the two cut planes)."""
+        v, f = self.mesh.vertices, self.mesh.faces
+        edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+        a, b = v[edges[:, 0]], v[edges[:, 1]]
+        cuts = np.linspace(v[:, 0].min(), v[:, 0].max(), slabs + 1)
+        crossings = []
+        for xc in cuts:
+            t = (xc - a[:, 0]) / np.where(b[:, 0] != a[:, 0], b[:, 0] - a[:, 0], np.inf)
+            on = (t >= 0) & (t <= 1) & (b[:, 0] != a[:, 0])
+            pts = a[on] + t[on, None] * (b[on] - a[on])
+            pts[:, 0] = xc
+            crossings.append(pts)
+        pieces = []
+        for k in range(slabs):
+            inside = v[(v[:, 0] >= cuts[k]) & (v[:, 0] <= cuts[k + 1])]
+            pieces.append(np.vstack([inside, crossings[k], crossings[k + 1]]))
+        return pieces
+
+    def union_excess(self, pieces: list[np.ndarray], samples: int = 40) -> float:
+        """How much more the union of the pieces' convex hulls holds than the mesh, as a fraction of the mesh's
+        volume (points of a lattice of ``samples`` along the longest side)."""
+        from scipy.spatial import ConvexHull
+
+        from iceresist.dem.bodies import inside_mesh
+
+        v = self.mesh.vertices
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        h = float(np.max(hi - lo)) / samples
+        g = np.stack(np.meshgrid(*[np.arange(lo[k] + h / 2, hi[k], h) for k in range(3)], indexing="ij"), -1)
+        p = g.reshape(-1, 3)
+        in_mesh = inside_mesh(p, v, self.mesh.faces)
+        in_union = np.zeros(len(p), dtype=bool)
+        for piece in pieces:
+            eq = ConvexHull(piece).equations
+            in_union |= (p @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 1e-12
+        return float((in_union & ~in_mesh).sum() / max(in_mesh.sum(), 1))
+
+    def fluid_pieces(self, tolerance: float = 0.01, most: int = 256) -> tuple[list[np.ndarray], float]:
+        """Convex pieces for the fluid: one (the mesh) if it is convex, else slabs doubled from 8 until their union
+        holds at most ``tolerance`` more than the mesh; (pieces, excess). A mesh whose sections are not convex
+        keeps an excess however thin the slabs: refused naming ``ship.tier``."""
+        if self.is_convex:
+            return [self.mesh.vertices], 0.0
+        slabs = 8
+        while True:
+            pieces = self.convex_pieces(slabs)
+            excess = self.union_excess(pieces)
+            if excess <= tolerance:
+                return pieces, excess
+            if slabs >= most:
+                raise InputError(f"ship.tier: tier 2 sees a hull as convex slabs along its length, and the "
+                                 f"{most} slabs of {self.name!r} still hold {100 * excess:.1f} % more than it (its "
+                                 f"cross-sections are not convex); run it at tier = 1")
+            slabs *= 2
 
     # -- what the models ask of a hull ---------------------------------------------------------------
     @property

@@ -19,7 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from iceresist.errors import InputError
-from iceresist.post.case import SCALE, case_start_wave, hull_of_model, load_case
+from iceresist.post.case import (SCALE, case_start_wave, floe_outlines, hull_of_model, load_case,
+                                  mesh_hull_inputs)
 from iceresist.post.sweeptable import case_path, preset_note, sweep_table
 from iceresist.post.trends import trends_table
 from reports.common import html_table as _html_table
@@ -127,22 +128,6 @@ def fig_tank(plt, cases: dict):
     return fig
 
 
-def floe_polygons(model: dict, bodies: dict, positions: np.ndarray, quaternions=None):
-    """Plan outlines (n, 4, 2) of the floes at ``positions``, turned by the quaternions' yaw (or the recorded start
-    yaw), and their thicknesses (n,): each floe's own size where the file records it, else the cube edge."""
-    from iceresist.ship.icefield import floe_corners
-
-    n = len(positions)
-    size = np.asarray(bodies.get("floe_sizes_m", np.full(n, model["cube_m"])), dtype=float)
-    thick = np.asarray(bodies.get("floe_thickness_m", np.full(n, model["cube_m"])), dtype=float)
-    if quaternions is not None:
-        w, x, y, z = np.asarray(quaternions, dtype=float).T
-        yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    else:
-        yaw = np.asarray(bodies.get("floe_yaw_rad", np.zeros(n)), dtype=float)
-    return floe_corners(np.asarray(positions, dtype=float)[:, :2], size, yaw), thick
-
-
 def fig_ice_field(plt, cases: dict):
     """The initial ice field of the first case that packs floes of a size distribution (top view and the edges'
     histogram), or None where every case has the regular cubes."""
@@ -153,7 +138,7 @@ def fig_ice_field(plt, cases: dict):
         return None
     m, b = c["model"], c["bodies"]
     info = m["ice_field"]
-    polys, _ = floe_polygons(m, b, b["initial_positions_m"])
+    polys, _ = floe_outlines(m, b, b["initial_positions_m"])
     size = np.asarray(b["floe_sizes_m"]) * 1e3
     fig, (ax, hx) = plt.subplots(1, 2, figsize=(10.0, 4.5), layout="constrained",
                                  gridspec_kw={"width_ratios": [2.2, 1.0]})
@@ -185,7 +170,7 @@ def fig_topviews(plt, cases: dict):
     for ax, (name, c) in zip(axes[:, 0], cases.items()):
         m, b = c["model"], c["bodies"]
         p = b["final_positions_m"]
-        polys, thick = floe_polygons(m, b, p, b.get("final_quaternions"))
+        polys, thick = floe_outlines(m, b, p, b.get("final_quaternions"))
         depth = np.clip(m["water_level_m"] - (p[:, 2] + thick / 2), 0, None)
         pc = PolyCollection(polys, array=depth, cmap="viridis_r", clim=(0, 0.1), edgecolor="none")
         ax.add_collection(pc)
@@ -222,15 +207,9 @@ def hull_summary(hull: dict) -> tuple[str, "pd.DataFrame | None"]:
     """The hull's name for the title, and for a mesh hull the FSICR inputs measured on it at full scale."""
     import pandas as pd
 
-    from fsicr.hullmesh import HOW
-    from fsicr.ship import DESCRIPTIONS
-    from iceresist.ship.meshhull import HullRecord
-
-    if hull.get("kind") != "mesh":
+    rows = mesh_hull_inputs(hull, SCALE)
+    if rows is None:
         return "B-063", None
-    full = HullRecord(hull).fsicr_inputs(SCALE)
-    rows = [{"input": DESCRIPTIONS[k], "full scale": f"{v:.4g}", "measured as": HOW.get(k, "the draught x scale")}
-            for k, v in full.items()]
     return f"{Path(hull.get('mesh_file', 'mesh')).stem} (mesh hull)", pd.DataFrame(rows)
 
 

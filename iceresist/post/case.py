@@ -192,3 +192,32 @@ def start_wave_fraction(model: dict, geom) -> float:
     (:func:`iceresist.ship.tank.start_wave`, :func:`case_start_wave`); NaN for tier 1."""
     sw = case_start_wave(model, geom)
     return float("nan") if sw is None else sw[0].window_fraction(*sw[1])
+
+
+def floe_outlines(model: dict, bodies: dict, positions: np.ndarray, quaternions=None):
+    """Plan outlines (n, 4, 2) of the floes at ``positions``, turned by the quaternions' yaw (or the recorded start
+    yaw), and their thicknesses (n,): each floe's own size where the file records it, else the cube edge."""
+    from iceresist.ship.icefield import floe_corners
+
+    n = len(positions)
+    size = np.asarray(bodies.get("floe_sizes_m", np.full(n, model["cube_m"])), dtype=float)
+    thick = np.asarray(bodies.get("floe_thickness_m", np.full(n, model["cube_m"])), dtype=float)
+    if quaternions is not None:
+        w, x, y, z = np.asarray(quaternions, dtype=float).T
+        yaw = np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+    else:
+        yaw = np.asarray(bodies.get("floe_yaw_rad", np.zeros(n)), dtype=float)
+    return floe_corners(np.asarray(positions, dtype=float)[:, :2], size, yaw), thick
+
+
+def mesh_hull_inputs(hull: dict, scale: float) -> list[dict] | None:
+    """Rows (input, full scale, how it is measured) of the FSICR inputs measured on a mesh hull, from a case
+    file's hull description; None for the parametric hull."""
+    from fsicr.hullmesh import HOW
+    from fsicr.ship import DESCRIPTIONS
+    from iceresist.ship.meshhull import HullRecord
+
+    if hull.get("kind") != "mesh":
+        return None
+    return [{"input": DESCRIPTIONS[k], "full scale": f"{v:.4g}", "measured as": HOW.get(k, "the draught x scale")}
+            for k, v in HullRecord(hull).fsicr_inputs(scale).items()]

@@ -92,6 +92,13 @@ class HullMesh:
         t = self.triangles
         return float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
 
+    @property
+    def convex_fill(self) -> float:
+        """The mesh's volume over its convex hull's: 1 for a convex solid."""
+        from scipy.spatial import ConvexHull
+
+        return self.volume_m3 / float(ConvexHull(self.vertices).volume)
+
     def trimesh(self):
         import trimesh
 

@@ -51,8 +51,9 @@ def _g(v) -> str:
 
 
 def body_mesh(body, index: int, scene_source: str | None = None):
-    """A mesh body's checked surface, vertices (n, 3) m about the centre of its bounding box, and faces; one
-    line naming ``bodies[i].mesh_file`` (or ``mesh_unit``) on a bad file."""
+    """A mesh body's checked surface: vertices (n, 3) m about the centre of its bounding box, faces, and the
+    fraction of its convex hull it fills; one line naming ``bodies[i].mesh_file`` (or ``mesh_unit``) on a bad
+    file."""
     from fsicr.errors import FsicrInputError
     from fsicr.hullmesh import MeshKeys, read_mesh
     from iceresist.ship.meshhull import resolve_mesh_path
@@ -63,7 +64,7 @@ def body_mesh(body, index: int, scene_source: str | None = None):
     except FsicrInputError as exc:
         raise InputError(str(exc)) from None
     v = mesh.vertices
-    return v - 0.5 * (v.min(axis=0) + v.max(axis=0)), mesh.faces
+    return v - 0.5 * (v.min(axis=0) + v.max(axis=0)), mesh.faces, mesh.convex_fill
 
 
 def half_extent(body, mesh=None) -> np.ndarray:
@@ -209,8 +210,6 @@ class BodiesModel(Model):
 
     def _shapes(self):
         """(coupling geometry, DEM shape, kinematic, velocity, material) of each body."""
-        from scipy.spatial import ConvexHull
-
         from iceresist.coupling import Box, ConvexPolyhedron, Sphere
         from iceresist.dem import box, convex_polyhedron, sphere
 
@@ -220,9 +219,7 @@ class BodiesModel(Model):
             if b.shape == "sphere":
                 geom, shape = Sphere(float(b.radius_m)), sphere(float(b.radius_m), rho)
             elif b.shape == "mesh":
-                v, f = self.meshes[i]
-                fill = abs(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0) \
-                    / ConvexHull(v).volume
+                v, _, fill = self.meshes[i]
                 if fill < 1.0 - 1e-6:
                     raise InputError(f"bodies[{i}].mesh_file: body {b.name!r} fills {100 * fill:.1f} % of its convex "
                                      f"hull; the fluid sees a body as a convex polyhedron for now: give a convex mesh")

@@ -130,9 +130,7 @@ class MeshHull:
         areas = sum(hullmesh.breadth_at(s, xs) for s in segs) * self.draught_m / SECTION_LEVELS
         self._midship_area = float(areas.max())
         self._waterline = _chain(hullmesh.waterline_segments(self.mesh, self.draught_m))
-        from scipy.spatial import ConvexHull
-
-        self.convex_fraction = float(self.mesh.volume_m3 / ConvexHull(self.mesh.vertices).volume)
+        self.convex_fraction = float(self.mesh.convex_fill)
 
     @classmethod
     def from_file(cls, path: str, draught_m: float, *, unit: str = "m", bow: str = "+x", up: str = "+z",

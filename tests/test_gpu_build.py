@@ -14,7 +14,7 @@ from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
 
 #: Kernels that must be in the check: each part of a tier-2 step and of tier 1 (LBM, free surface, coupling, DEM).
 EXPECTED = {
-    "f_update", "h_stream_collide", "phi", "h_init", "velocity", "reflag", "extension", "water_volume", "probe",
+    "f_update", "h_stream", "h_collide", "h_init", "velocity", "reflag", "extension", "water_volume", "probe",
     "pool_wet", "pool_fill", "lbm_stream_collide", "block_phases", "block_phases_near",
     "mark", "links", "mirror", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
     "near_events", "fill",

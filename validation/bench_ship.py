@@ -107,10 +107,10 @@ def measure(scene, backend: str, records: int) -> dict:
 PARTS = {
     "links": "link pass (q, eq. 16, eq. 17)",
     "f_update": "free-surface fused f update",
-    "h_stream_collide": "phase field h stream-collide",
+    "h_stream": "phase field h stream and phi (eq. 5)",
+    "h_collide": "phase field h collision (eqs. 6-9)",
     "reflag": "reflag",
     "extension": "velocity extension",
-    "phi": "phase field phi pass",
     "velocity": "velocity",
     "mark": "redistribute / mirror / refill / mark", "mirror": "redistribute / mirror / refill / mark",
     "refill_fs": "redistribute / mirror / refill / mark", "redistribute_fs": "redistribute / mirror / refill / mark",

@@ -15,9 +15,11 @@ phi = 1/2 + 1/2 tanh(2 z / W).
 One time step is two passes over the cells, so that the normal is taken from
 phi at the new time level:
 
-1. ``phi_cell``: phi(x, t+1) = sum_k h_k^post(x - c_k, t)  (pull streaming);
-2. ``stream_collide_cell``: pull h again, take n from the phi of pass 1,
-   collide (eq. 6) and write the post-collision h into the other buffer.
+1. ``stream_cell``: h_k(x, t+1) = h_k^post(x - c_k, t) (pull streaming) into the
+   other buffer, and phi(x, t+1) = sum_k of them (eq. 5);
+2. ``collide_cell``: take n from the phi of pass 1 and collide the streamed h of
+   the cell in place (eq. 6). Pass 2 reads only its own cell's h: the h of a cell
+   is pulled from its neighbours once per step.
 
 Walls (``nbr == -1``): h bounces back half-way (no flux of phi through a wall, so
 sum phi is conserved to round-off), and the gradient stencil clamps to the
@@ -104,10 +106,10 @@ def build_normal(target, real):
 
 
 def build_phase_cells(target, real, lat: HLattice):
-    """Compile the cell functions ``(phi_cell, stream_collide_cell, init_cell)`` for ``target``.
+    """Compile the cell functions ``(stream_cell, collide_cell, init_cell)`` for ``target``.
 
-    * ``phi_cell(b, c, h_in, phi, nbr, solid)``: phi = sum of pulled h (pass 1);
-    * ``stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa, solid)``: pass 2, with
+    * ``stream_cell(b, c, h_in, h_out, phi, nbr, solid)``: h_out = pulled h, phi = their sum (pass 1);
+    * ``collide_cell(b, c, h_out, phi, u, nbr, omega, kappa, solid)``: pass 2 in place, with
       omega = 1/tau_phi and kappa = M / (c_s^2 W);
     * ``init_cell(b, c, h_out, phi, u, nbr, kappa)``: h = h^eq(phi, u, n).
 
@@ -142,7 +144,7 @@ def build_phase_cells(target, real, lat: HLattice):
         return hw[k] * (p * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu)) + th * cn)
 
     @dev
-    def phi_cell(b, c, h_in, phi, nbr, solid):
+    def stream_cell(b, c, h_in, h_out, phi, nbr, solid):
         b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
         if solid[b, c] >= 0:
             return
@@ -151,7 +153,9 @@ def build_phase_cells(target, real, lat: HLattice):
         x = c % 8
         s = zero
         for k in range(nq):
-            s += pulled(h_in, nbr, solid, b, c, x, y, z, k)
+            hk = pulled(h_in, nbr, solid, b, c, x, y, z, k)
+            h_out[b, k, c] = hk
+            s += hk
         phi[b, c] = s
 
     @dev
@@ -171,13 +175,13 @@ def build_phase_cells(target, real, lat: HLattice):
         return x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu
 
     @dev
-    def stream_collide_cell(b, c, h_in, h_out, phi, u, nbr, omega, kappa, solid):
+    def collide_cell(b, c, h_out, phi, u, nbr, omega, kappa, solid):
         b = int64(b)  # the CPU prange index may be unsigned; keep block ids signed
         if solid[b, c] >= 0:
             return
         x, y, z, p, nx, ny, nz, th, ux, uy, uz, uu = equilibrium_inputs(b, c, phi, u, nbr, kappa)
         for k in range(nq):
-            hk = pulled(h_in, nbr, solid, b, c, x, y, z, k)
+            hk = h_out[b, k, c]
             h_out[b, k, c] = hk + omega * (h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu) - hk)
 
     @dev
@@ -187,11 +191,11 @@ def build_phase_cells(target, real, lat: HLattice):
         for k in range(nq):
             h_out[b, k, c] = h_equilibrium(k, p, nx, ny, nz, th, ux, uy, uz, uu)
 
-    return phi_cell, stream_collide_cell, init_cell
+    return stream_cell, collide_cell, init_cell
 
 
 def build_phase_blocks(real, lat: HLattice):
-    """Compile the CPU block forms ``(phi_block, stream_collide_block)`` of passes 1 and 2 (the launchers call
+    """Compile the CPU block forms ``(stream_block, collide_block)`` of passes 1 and 2 (the launchers call
     them once per block, ``CellLauncher(per_block=True)``): the same updates as :func:`build_phase_cells`,
     arranged so that LLVM vectorises them across the cells of a block.
 
@@ -264,8 +268,8 @@ def build_phase_blocks(real, lat: HLattice):
                     tmp[c0 + x] = ln[x + o] if sl[x + o] < 0 else own
 
     @dev
-    def phi_block(b, h_in, phi, nbr, solid):
-        """Pass 1 for block b: phi = sum_k pulled h_k; a solid cell keeps its phi."""
+    def stream_block(b, h_in, h_out, phi, nbr, solid):
+        """Pass 1 for block b: h_out = pulled h, phi = sum_k of them; a solid cell keeps its h and phi."""
         b = np.int64(b)
         tmp = np.empty(512, rdtype)
         acc = np.zeros(512, rdtype)
@@ -275,6 +279,7 @@ def build_phase_blocks(real, lat: HLattice):
             gather(b, k, h_in, nbr, solid, tmp, ln, sl)
             for c in range(512):
                 acc[c] += tmp[c]
+                h_out[b, k, c] = tmp[c] if solid[b, c] < 0 else h_out[b, k, c]
         for c in range(512):
             phi[b, c] = acc[c] if solid[b, c] < 0 else phi[b, c]
 
@@ -331,18 +336,16 @@ def build_phase_blocks(real, lat: HLattice):
                 nx_[c], ny_[c], nz_[c] = normal(phi, nbr, b, c % 8, (c // 8) % 8, c // 64)
 
     @dev
-    def stream_collide_block(b, h_in, h_out, phi, u, nbr, omega, kappa, solid):
-        """Pass 2 for block b: pull h, collide towards h^eq(phi, u, n) (eqs. 6-9); a solid cell keeps its h."""
+    def collide_block(b, h_out, phi, u, nbr, omega, kappa, solid):
+        """Pass 2 for block b: collide the streamed h in place towards h^eq(phi, u, n) (eqs. 6-9); a solid cell
+        keeps its h."""
         b = np.int64(b)
         nx_ = np.empty(512, np.float64)  # the stencil sums in float64 (integer c_q times phi), as the cell form
         ny_ = np.empty(512, np.float64)
         nz_ = np.empty(512, np.float64)
         th_ = np.empty(512, rdtype)
         uu_ = np.empty(512, rdtype)
-        tmp = np.empty(512, rdtype)
         pad = np.empty(1000, rdtype)
-        ln = np.empty(10, rdtype)
-        sl = np.empty(10, np.int32)
         normals(b, phi, nbr, nx_, ny_, nz_, pad)
         for c in range(512):
             dp = phi[b, c] - half
@@ -352,9 +355,8 @@ def build_phase_blocks(real, lat: HLattice):
             uz = u[b, 2, c]
             uu_[c] = ux * ux + uy * uy + uz * uz
         for k in range(nq):
-            gather(b, k, h_in, nbr, solid, tmp, ln, sl)
             for c in range(512):
-                hk = tmp[c]
+                hk = h_out[b, k, c]
                 ux = u[b, 0, c]
                 uy = u[b, 1, c]
                 uz = u[b, 2, c]
@@ -364,23 +366,23 @@ def build_phase_blocks(real, lat: HLattice):
                 new = hk + omega * (heq - hk)
                 h_out[b, k, c] = new if solid[b, c] < 0 else h_out[b, k, c]
 
-    return phi_block, stream_collide_block
+    return stream_block, collide_block
 
 
 @lru_cache(maxsize=None)
 def phase_launchers(target, precision: str, lattice_name: str, vector: bool = True):
-    """Compile (once per target, precision and h lattice) the launchers ``(phi, stream_collide, init)``; on the
+    """Compile (once per target, precision and h lattice) the launchers ``(stream, collide, init)``; on the
     CPU passes 1 and 2 run in their block form (:func:`build_phase_blocks`) unless ``vector=False``."""
     real, lat = jit.real_type(precision), lookup_h_lattice(lattice_name)
-    phi_cell, sc_cell, init_cell = build_phase_cells(target, real, lat)
-    phi_args, sc_args = ("h_in", "phi", "nbr", "solid"), ("h_in", "h_out", "phi", "u", "nbr", "omega", "kappa", "solid")
+    stream_cell, collide_cell, init_cell = build_phase_cells(target, real, lat)
+    st_args, co_args = ("h_in", "h_out", "phi", "nbr", "solid"), ("h_out", "phi", "u", "nbr", "omega", "kappa", "solid")
     init = CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa"), label="h_init")
     if target.is_cuda or not vector:
-        return (CellLauncher(target, phi_cell, phi_args, label="phi"),
-                CellLauncher(target, sc_cell, sc_args, label="h_stream_collide"), init)
-    phi_block, sc_block = build_phase_blocks(real, lat)
-    return (CellLauncher(target, phi_block, phi_args, per_block=True, label="phi"),
-            CellLauncher(target, sc_block, sc_args, per_block=True, label="h_stream_collide"), init)
+        return (CellLauncher(target, stream_cell, st_args, label="h_stream"),
+                CellLauncher(target, collide_cell, co_args, label="h_collide"), init)
+    stream_block, collide_block = build_phase_blocks(real, lat)
+    return (CellLauncher(target, stream_block, st_args, per_block=True, label="h_stream"),
+            CellLauncher(target, collide_block, co_args, per_block=True, label="h_collide"), init)
 
 
 @lru_cache(maxsize=None)
@@ -429,7 +431,7 @@ class PhaseField:
         self.forest = forest
         nbr = forest.nbr
         self.nblocks = int(nbr.shape[0])
-        self._phi, self._sc, self._init = phase_launchers(target, precision, self.lat.name, vector)
+        self._stream, self._collide, self._init = phase_launchers(target, precision, self.lat.name, vector)
         self.nbr = self._to_target(np.ascontiguousarray(nbr, dtype=np.int64))
         shape = (self.nblocks, self.lat.q, CELLS)
         self.h = self._to_target(np.zeros(shape, self.real))
@@ -464,9 +466,9 @@ class PhaseField:
         self._init(self.nblocks, self.h, self.phi, self._u(u), self.nbr, self.kappa)
 
     def step(self, u) -> None:
-        """One time step: phi(t+1) by pull streaming, then stream + collide h with u (``[block, 3, cell]``)."""
-        self._phi(self.nblocks, self.h, self.phi, self.nbr, self.solid)
-        self._sc(self.nblocks, self.h, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa, self.solid)
+        """One time step: h and phi(t+1) by pull streaming, then collide h with u (``[block, 3, cell]``)."""
+        self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid)
+        self._collide(self.nblocks, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa, self.solid)
         self.h, self.h_next = self.h_next, self.h
 
     def phi_host(self) -> np.ndarray:

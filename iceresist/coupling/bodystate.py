@@ -185,25 +185,69 @@ def build_body_state(target, real):
             target.device(fluid_loads))
 
 
+def build_event_mask(target):
+    """Compile ``near_mask(b, evt, nbr, near)``: bit o of ``near[b]`` (int32) is set where the block at offset o
+    of b, o = (bx + 1) + 3 (by + 1) + 9 (bz + 1) (bit 13: b itself), had a covered or uncovered cell this step
+    (``evt`` of the refill pass). A cell of b whose 26 neighbours lie in blocks without the bit has nothing to
+    redistribute (:func:`reach_mask`)."""
+    from iceresist.freesurface.layout import DIR_OF_OFFSET
+
+    dir_of = DIR_OF_OFFSET
+    int64, int32 = np.int64, np.int32
+
+    def near_mask(b, evt, nbr, near):
+        b = int64(b)
+        m = int32(0)
+        for o in range(27):
+            bn = nbr[b, dir_of[o]]
+            if bn >= 0:
+                if evt[bn] != 0:
+                    m |= int32(1) << int32(o)
+        near[b] = m
+
+    return target.device(near_mask)
+
+
+def build_reach_mask(target):
+    """Compile ``reach_mask(c) -> int32``: the bits (as :func:`build_event_mask`) of the blocks the 26 neighbours
+    of cell c of a block lie in: its own block, and across each face, edge or corner the cell touches."""
+    int32 = np.int32
+
+    def reach_mask(c):
+        x = c & 7
+        y = (c >> 3) & 7
+        z = c >> 6
+        mx = 2 | (1 if x == 0 else 0) | (4 if x == 7 else 0)
+        my = 2 | (1 if y == 0 else 0) | (4 if y == 7 else 0)
+        mz = 2 | (1 if z == 0 else 0) | (4 if z == 7 else 0)
+        # bit (i + 3 j + 9 k) for i in mx, j in my, k in mz: each axis's bits spread over the 27, then ANDed
+        sx = mx * 0x1249249
+        sy = (((my & 1) * 7) | ((my & 2) * 28) | ((my & 4) * 112)) * 0x40201
+        sz = ((mz & 1) * 0x1FF) | ((mz & 2) * 0x1FF * 256) | ((mz & 4) * 0x1FF * 65536)
+        return int32(sx & sy & sz)
+
+    return target.device(reach_mask)
+
+
 _LAUNCHERS: dict = {}
 
 
 def body_state_launchers(target, real) -> dict:
     """``{"body_rows", "active_rows", "row_sums", "fluid_loads", "near_events"}``: launchers over launch rows,
-    launch rows, bodies, bodies and forest blocks, cached per target and precision. ``near_events`` ORs each
-    block's event flag with its 26 neighbours' (the blocks a redistribution reaches)."""
+    launch rows, bodies, bodies and forest blocks, cached per target and precision. ``near_events`` gathers
+    the event flags of each block and its 26 neighbours into a bit mask (:func:`build_event_mask`; the blocks a
+    redistribution reaches)."""
     key = (target.name, target.simulator, np.dtype(real).name)
     if key not in _LAUNCHERS:
         from iceresist.backends.launch import BlockLauncher
-        from iceresist.freesurface.fluid import build_block_phases
 
         body_row, active_row, row_sums, fluid_loads = build_body_state(target, real)
-        near = build_block_phases(target, real)[1]
+        near = build_event_mask(target)
         _LAUNCHERS[key] = {
             "body_rows": BlockLauncher(target, body_row, BODY_ROW_ARGS, label="body_rows"),
             "active_rows": BlockLauncher(target, active_row, ACTIVE_ROW_ARGS, label="active_rows"),
             "row_sums": BlockLauncher(target, row_sums, ROW_SUMS_ARGS, label="row_sums"),
             "fluid_loads": BlockLauncher(target, fluid_loads, FLUID_LOADS_ARGS, label="fluid_loads"),
-            "near_events": BlockLauncher(target, near, ("phases", "nbr", "near"), label="near_events"),
+            "near_events": BlockLauncher(target, near, ("evt", "nbr", "near"), label="near_events"),
         }
     return _LAUNCHERS[key]

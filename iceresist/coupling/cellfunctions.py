@@ -121,6 +121,86 @@ def build_geometry_functions(target, real):
     return lookup, sdf_at, wall_velocity
 
 
+def build_link_root(target, real):
+    """``link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid) -> t``: where the segment p - t c,
+    t in [0, 1], from a cell centre p outside body k to the centre p - c of a covered cell enters the body, in
+    closed form (the link distance q_d of eq. 16): a sphere by the smaller root of |o - t d|^2 = r^2, a box by the
+    latest entry into its three slabs, a convex polyhedron by the latest entry through the planes facing p,
+    max over n . d > 0 of (n . o + e) / (n . d) (o = p - x_s and d = c in the body frame), a union of convex
+    pieces by the first entry into a piece the segment crosses. Returns -1 where round-off leaves no entry in
+    [0, 1]: the caller then finds the root on the signed distance."""
+    half, zero, one, big = real(0.5), real(0.0), real(1.0), real(1e30)
+    sphere_kind, box_kind = SPHERE, BOX
+    dev = target.device
+
+    @dev
+    def slab_entry(o, d, h):
+        """Earliest t with |o - t d| <= h along one axis of a box (-big where d is 0: no bound)."""
+        if d == zero:
+            return -big
+        return min((o - h) / d, (o + h) / d)
+
+    @dev
+    def link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid):
+        dx = px - body[k, 0]
+        dy = py - body[k, 1]
+        dz = pz - body[k, 2]
+        if grid[3] != 0:
+            L = real(grid[0])
+            dx -= L * real(math.floor(dx / L + half))
+        if grid[4] != 0:
+            L = real(grid[1])
+            dy -= L * real(math.floor(dy / L + half))
+        if grid[5] != 0:
+            L = real(grid[2])
+            dz -= L * real(math.floor(dz / L + half))
+        ox = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
+        oy = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
+        oz = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
+        ex = body[k, 3] * cx + body[k, 6] * cy + body[k, 9] * cz     # R^T c
+        ey = body[k, 4] * cx + body[k, 7] * cy + body[k, 10] * cz
+        ez = body[k, 5] * cx + body[k, 8] * cy + body[k, 11] * cz
+        kind = bint[k, 0]
+        if kind == sphere_kind:
+            r = body[k, 18]
+            dd = ex * ex + ey * ey + ez * ez
+            od = ox * ex + oy * ey + oz * ez
+            disc = od * od - dd * (ox * ox + oy * oy + oz * oz - r * r)
+            return (od - math.sqrt(max(disc, zero))) / dd
+        if kind == box_kind:
+            return max(slab_entry(ox, ex, body[k, 18]), max(slab_entry(oy, ey, body[k, 19]),
+                                                          slab_entry(oz, ez, body[k, 20])))
+        # convex pieces (one, or a union separated by rows of normal 0): the segment lies in a piece for
+        # t_in <= t <= t_out; it enters the union where it first enters a piece it crosses. A cap stored at twice
+        # its length (geometry.ConvexUnion) gives the same ratio v / (n . d).
+        t = big
+        t_in = -big
+        t_out = big
+        first = bint[k, 1]
+        last = first + bint[k, 2]
+        for i in range(first, last + 1):
+            if i == last or (planes[i, 0] == zero and planes[i, 1] == zero and planes[i, 2] == zero):
+                if t_in <= t_out and t_out >= zero and t_in <= one:
+                    t = min(t, t_in)
+                t_in = -big
+                t_out = big
+            else:
+                nx, ny, nz = planes[i, 0], planes[i, 1], planes[i, 2]
+                nd = nx * ex + ny * ey + nz * ez
+                v = nx * ox + ny * oy + nz * oz + planes[i, 3]
+                if nd > zero:
+                    t_in = max(t_in, v / nd)
+                elif nd < zero:
+                    t_out = min(t_out, v / nd)
+                elif v > zero:
+                    t_out = -big        # parallel to a face it lies outside of: never in this piece
+        if t == big:
+            return -one                 # no entry found (round-off): the caller finds the root on the SDF
+        return t
+
+    return link_root
+
+
 def build_refill_functions(target, real):
     """Device functions the single-phase and the free-surface refill share.
 

@@ -27,8 +27,8 @@ Passes of one coupling step, each a launch:
    refilled cell gives back its share of that cell's excess, so that the sum of rho - 1 over the fluid is
    unchanged; the share goes into the rest population. Gathering (each cell writes only itself) makes it race-free;
 4. ``links`` (per body over its cell box): for every covered cell y and direction q with a fluid cell
-   x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q by regula falsi on the
-   signed distance, the interpolated bounce-back population of eq. (16) with the wall velocity
+   x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q (in closed form for spheres,
+   boxes, convex polyhedra and their unions, :func:`iceresist.coupling.cellfunctions.build_link_root`), the interpolated bounce-back population of eq. (16) with the wall velocity
    v + omega x r at the wall point, written into slot q of y (the fused kernel pulls it from there), and the
    momentum exchange of eq. (17), summed into force and torque (eqs. 18-19) about the centre of mass.
 
@@ -56,13 +56,15 @@ import numpy as np
 
 from iceresist.backends import cache
 from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumulate
-from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions
+from iceresist.coupling.bodystate import build_reach_mask
+from iceresist.coupling.cellfunctions import build_geometry_functions, build_link_root, build_refill_functions
 from iceresist.coupling.surface_kernels import build_surface_visits
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
 
-#: Regula-falsi (Illinois) iterations for the link distance; exact after one for planar faces.
+#: Regula-falsi (Illinois) iterations for the link distance where its closed form finds no entry (round-off at a
+#: cell centre on the surface); exact after one for planar faces.
 ROOT_ITERATIONS = 5
 #: Smallest link distance used (avoids 1/(2q) blowing up where a cell centre lies on the surface).
 Q_MIN = 1e-3
@@ -72,10 +74,10 @@ LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "
              "flags", "film")
 REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                "block_evt", "Fx", "Fy", "Fz")
-REDIST_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
+REDIST_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
 POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
 REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
-REDIST_FS_ARGS = ("active", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f", "phi", "h")
+REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f", "phi", "h")
 MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "phi")
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
@@ -86,6 +88,8 @@ def build_visits(target, real, free_surface: bool = False):
     """The per-cell functions of the passes (see the module docstring); ``free_surface``: links only to liquid
     cells (``flags`` has the FLUID bit, :mod:`iceresist.freesurface`)."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
+    link_root = build_link_root(target, real)
+    reach_mask = build_reach_mask(target)
     accumulate = build_accumulate(target)
     stable, add_nonequilibrium = build_refill_functions(target, real)
     zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
@@ -190,12 +194,15 @@ def build_visits(target, real, free_surface: bool = False):
                 continue
             cx, cy, cz = CXR[q], CYR[q], CZR[q]
             px, py, pz = yx + cx, yy + cy, yz + cz
-            # link distance: root of the SDF on x - t c_q, t in [0, 1] (Illinois regula falsi)
+            # link distance: where x - t c_q, t in [0, 1], enters the body, in closed form; where round-off leaves
+            # none, the root of the SDF (Illinois regula falsi)
             t0, s0 = zero, sdf_at(k, px, py, pz, body, bint, planes, grid)
             t1, s1 = one, s_in
             if s0 <= zero:
                 t = qmin
             else:
+                t = link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid)
+            if s0 > zero and t < zero:
                 for _ in range(niter):
                     t = (t0 * s1 - t1 * s0) / (s1 - s0)
                     st = sdf_at(k, px - t * cx, py - t * cy, pz - t * cz, body, bint, planes, grid)
@@ -294,7 +301,9 @@ def build_visits(target, real, free_surface: bool = False):
             f[b, p, c] = f[b, p, c] * inv + WR[p] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * uu))
 
     @dev
-    def redistribute(b, c, borigin, grid, block_map, flags0, owner, owner_prev, f):
+    def redistribute(b, c, near, borigin, grid, block_map, flags0, owner, owner_prev, f):
+        if (reach_mask(c) & near[b]) == 0:   # no neighbour in a block with an event
+            return
         if not stable(b, c, flags0, owner, owner_prev):
             return
         gx = borigin[b, 0] * 8 + (c & 7)

@@ -33,6 +33,7 @@ import math
 
 import numpy as np
 
+from iceresist.coupling.bodystate import build_reach_mask
 from iceresist.coupling.cellfunctions import MIRROR_DEPTH, build_geometry_functions, build_refill_functions
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
@@ -43,6 +44,7 @@ def build_surface_visits(target, real, hlat):
     """``classify_refill_fs, redistribute_fs, mirror`` (module docstring) for the h lattice ``hlat``."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
     stable, add_nonequilibrium = build_refill_functions(target, real)
+    reach_mask = build_reach_mask(target)
     zero, half, one, three = real(0.0), real(0.5), real(1.0), real(3.0)
     c45, c15, eps, depth = real(4.5), real(1.5), real(1e-12), real(MIRROR_DEPTH)
     fluid, ghost, gas, near_surface = FL.FLUID, GHOST, FL.GAS, FL.NEAR_SURFACE
@@ -136,7 +138,9 @@ def build_surface_visits(target, real, hlat):
             f[b, m, c] = f[b, m, c] * inv + WR[m] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * vv))
 
     @dev
-    def redistribute_fs(b, c, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h):
+    def redistribute_fs(b, c, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h):
+        if (reach_mask(c) & near[b]) == 0:   # no neighbour in a block with an event
+            return
         if not stable(b, c, flags0, owner, owner_prev):
             return
         liquid = (flags[b, c] & fluid) != 0

@@ -275,11 +275,20 @@ def build_phase_blocks(real, lat: HLattice):
         acc = np.zeros(512, rdtype)
         ln = np.empty(10, rdtype)
         sl = np.empty(10, np.int32)
+        covered = False
+        for c in range(512):
+            if solid[b, c] >= 0:
+                covered = True
         for k in range(nq):
             gather(b, k, h_in, nbr, solid, tmp, ln, sl)
             for c in range(512):
                 acc[c] += tmp[c]
-                h_out[b, k, c] = tmp[c] if solid[b, c] < 0 else h_out[b, k, c]
+            if covered:
+                for c in range(512):
+                    h_out[b, k, c] = tmp[c] if solid[b, c] < 0 else h_out[b, k, c]
+            else:  # a plain store: no read of h_out
+                for c in range(512):
+                    h_out[b, k, c] = tmp[c]
         for c in range(512):
             phi[b, c] = acc[c] if solid[b, c] < 0 else phi[b, c]
 

@@ -21,6 +21,30 @@ from iceresist.lattice import C, Q, W
 MIRROR_DEPTH = 2.0
 
 
+def build_offset(target, real):
+    """``offset(k, px, py, pz, body, grid) -> p - x_s`` of body k (lattice units), the nearest image on periodic
+    axes."""
+    half = real(0.5)
+
+    @target.device
+    def offset(k, px, py, pz, body, grid):
+        dx = px - body[k, 0]
+        dy = py - body[k, 1]
+        dz = pz - body[k, 2]
+        if grid[3] != 0:
+            L = real(grid[0])
+            dx -= L * real(math.floor(dx / L + half))
+        if grid[4] != 0:
+            L = real(grid[1])
+            dy -= L * real(math.floor(dy / L + half))
+        if grid[5] != 0:
+            L = real(grid[2])
+            dz -= L * real(math.floor(dz / L + half))
+        return dx, dy, dz
+
+    return offset
+
+
 def build_geometry_functions(target, real):
     """Small device functions: ``lookup`` of a global cell, ``sdf_at`` a world point, ``wall_velocity``."""
     half, zero, two, big = real(0.5), real(0.0), real(2.0), real(1e30)
@@ -46,22 +70,7 @@ def build_geometry_functions(target, real):
         b = block_map[gx >> 3, gy >> 3, gz >> 3]
         return b, (gx & 7) + 8 * ((gy & 7) + 8 * (gz & 7))
 
-    @dev
-    def offset(k, px, py, pz, body, grid):
-        """p - x_s (lattice units), nearest image on periodic axes."""
-        dx = px - body[k, 0]
-        dy = py - body[k, 1]
-        dz = pz - body[k, 2]
-        if grid[3] != 0:
-            L = real(grid[0])
-            dx -= L * real(math.floor(dx / L + half))
-        if grid[4] != 0:
-            L = real(grid[1])
-            dy -= L * real(math.floor(dy / L + half))
-        if grid[5] != 0:
-            L = real(grid[2])
-            dz -= L * real(math.floor(dz / L + half))
-        return dx, dy, dz
+    offset = build_offset(target, real)
 
     @dev
     def sdf_at(k, px, py, pz, body, bint, planes, grid):
@@ -129,8 +138,9 @@ def build_link_root(target, real):
     max over n . d > 0 of (n . o + e) / (n . d) (o = p - x_s and d = c in the body frame), a union of convex
     pieces by the first entry into a piece the segment crosses. Returns -1 where round-off leaves no entry in
     [0, 1]: the caller then finds the root on the signed distance."""
-    half, zero, one, big = real(0.5), real(0.0), real(1.0), real(1e30)
+    zero, one, big = real(0.0), real(1.0), real(1e30)
     sphere_kind, box_kind = SPHERE, BOX
+    offset = build_offset(target, real)
     dev = target.device
 
     @dev
@@ -142,18 +152,7 @@ def build_link_root(target, real):
 
     @dev
     def link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid):
-        dx = px - body[k, 0]
-        dy = py - body[k, 1]
-        dz = pz - body[k, 2]
-        if grid[3] != 0:
-            L = real(grid[0])
-            dx -= L * real(math.floor(dx / L + half))
-        if grid[4] != 0:
-            L = real(grid[1])
-            dy -= L * real(math.floor(dy / L + half))
-        if grid[5] != 0:
-            L = real(grid[2])
-            dz -= L * real(math.floor(dz / L + half))
+        dx, dy, dz = offset(k, px, py, pz, body, grid)
         ox = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
         oy = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
         oz = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz

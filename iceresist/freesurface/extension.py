@@ -106,11 +106,12 @@ def build_extension_block(real):
     neighbour, _ = build_neighbour(jit.cpu)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
     w = L.W.astype(real)
-    zero, half, two = real(0.0), real(0.5), real(2.0)
+    zero, two = real(0.0), real(2.0)
     int64, int8 = np.int64, np.int8
     unfilled = UNFILLED
     side = 12                                    # 8 cells and a halo of 2 either side
     off = np.array([cx[q] + side * (cy[q] + side * cz[q]) for q in range(27)], dtype=np.int64)
+    extend_cell = build_extension_cell(jit.cpu, real)
     dev = jit.cpu.device
 
     @dev
@@ -118,13 +119,7 @@ def build_extension_block(real):
         b = int64(b)
         if layer == 0:
             for c in range(512):
-                if phi[b, c] >= half:
-                    dist[b, c] = int8(0)
-                else:
-                    dist[b, c] = int8(unfilled)
-                    u[b, 0, c] = zero
-                    u[b, 1, c] = zero
-                    u[b, 2, c] = zero
+                extend_cell(b, c, phi, u, dist, nbr, layer, near)
             return
         if near[b] != 3:
             return

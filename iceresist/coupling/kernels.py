@@ -26,6 +26,8 @@ Passes of one coupling step, each a launch:
    to a newly covered cell takes its share w_q / sum w of that cell's mass excess rho - 1, and next to a
    refilled cell gives back its share of that cell's excess, so that the sum of rho - 1 over the fluid is
    unchanged; the share goes into the rest population. Gathering (each cell writes only itself) makes it race-free;
+   a cell whose 26 neighbours lie in no block with such a cell returns at once (the 27-bit ``near`` mask per block,
+   :func:`iceresist.coupling.bodystate.build_event_mask`);
 4. ``links`` (per body over its cell box): for every covered cell y and direction q with a fluid cell
    x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q (in closed form for spheres,
    boxes, convex polyhedra and their unions, :func:`iceresist.coupling.cellfunctions.build_link_root`), the interpolated bounce-back population of eq. (16) with the wall velocity

@@ -264,12 +264,11 @@ class FluidStructureCoupling:
                         d["owner_prev"], f, evt, Fx, Fy, Fz, phase.phi, phase.h)
         s["near_events"](nb, evt, d["nbr"], d["near"])
         if self.surface is None:
-            k["redistribute"](nb, d["near"], d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"], d["owner"],
-                              d["owner_prev"], f)
+            k["redistribute"](nb, d["near"], d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"],
+                              d["owner"], d["owner_prev"], f)
         else:
             k["redistribute"](nb, d["near"], d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"], flags,
-                              d["owner"],
-                              d["owner_prev"], f, phase.phi, phase.h)
+                              d["owner"], d["owner_prev"], f, phase.phi, phase.h)
             k["mirror"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"],
                         phase.phi)
         if self.debug:

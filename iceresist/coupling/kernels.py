@@ -30,7 +30,8 @@ Passes of one coupling step, each a launch:
    :func:`iceresist.coupling.bodystate.build_event_mask`);
 4. ``links`` (per body over its cell box): for every covered cell y and direction q with a fluid cell
    x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q (in closed form for spheres,
-   boxes, convex polyhedra and their unions, :func:`iceresist.coupling.cellfunctions.build_link_root`), the interpolated bounce-back population of eq. (16) with the wall velocity
+   boxes, convex polyhedra and their unions, :func:`iceresist.coupling.cellfunctions.build_link_root`), the
+   interpolated bounce-back population of eq. (16) with the wall velocity
    v + omega x r at the wall point, written into slot q of y (the fused kernel pulls it from there), and the
    momentum exchange of eq. (17), summed into force and torque (eqs. 18-19) about the centre of mass.
 
@@ -79,7 +80,8 @@ REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flag
 REDIST_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
 POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
 REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
-REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f", "phi", "h")
+REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
+                  "phi", "h")
 MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "phi")
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
@@ -200,11 +202,8 @@ def build_visits(target, real, free_surface: bool = False):
             # none, the root of the SDF (Illinois regula falsi)
             t0, s0 = zero, sdf_at(k, px, py, pz, body, bint, planes, grid)
             t1, s1 = one, s_in
-            if s0 <= zero:
-                t = qmin
-            else:
-                t = link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid)
-            if s0 > zero and t < zero:
+            t = qmin if s0 <= zero else link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid)
+            if t < zero:
                 for _ in range(niter):
                     t = (t0 * s1 - t1 * s0) / (s1 - s0)
                     st = sdf_at(k, px - t * cx, py - t * cy, pz - t * cz, body, bint, planes, grid)
@@ -348,7 +347,8 @@ def build_visits(target, real, free_surface: bool = False):
 #: Modules whose source decides the compiled coupling code (visits, geometry, lattice constants, flags); the key
 #: of the kernel cache.
 KEY_MODULES = ("iceresist.coupling.kernels", "iceresist.coupling.surface_kernels", "iceresist.coupling.cellfunctions",
-               "iceresist.coupling.geometry", "iceresist.grid.flags", "iceresist.lattice", "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
+               "iceresist.coupling.bodystate", "iceresist.coupling.geometry", "iceresist.grid.flags", "iceresist.lattice",
+               "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
 
 
 def variant_of(real, h_lattice=None, free_surface: bool = False) -> str:

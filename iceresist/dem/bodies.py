@@ -39,6 +39,7 @@ class RigidShape:
     sample_half_extent_m: np.ndarray  # (3,) half size of a sample box along the body axes
     model_com_m: np.ndarray = field(default_factory=lambda: np.zeros(3))  # centre of mass in the model frame
     model_to_body: np.ndarray = field(default_factory=lambda: np.eye(3))  # columns: principal axes in the model frame
+    face_pairs: int = 1  # spheres on the largest flat face: the sphere pairs of a face-to-face contact
 
     @property
     def n_spheres(self) -> int:
@@ -113,9 +114,11 @@ def box(size_m, density_kg_m3: float, spacing_m: float | None = None, samples_pe
     sx, sy, sz = np.meshgrid(*c, indexing="ij")
     samples = np.stack([sx.ravel(), sy.ravel(), sz.ravel()], axis=1)
     sample_vol = np.full(len(samples), volume / len(samples))
+    ns_sorted = np.sort(n)
     return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=inertia,
                       sphere_offsets_m=offsets, sphere_radius_m=radius, sample_offsets_m=samples,
-                      sample_volumes_m3=sample_vol, sample_half_extent_m=cell / 2)
+                      sample_volumes_m3=sample_vol, sample_half_extent_m=cell / 2,
+                      face_pairs=int(ns_sorted[1] * ns_sorted[2]))
 
 
 def sphere(radius_m: float, density_kg_m3: float, name: str = "sphere") -> RigidShape:
@@ -243,6 +246,8 @@ def convex_polyhedron(vertices_m, density_kg_m3: float, spacing_m: float, sample
         pts.extend(_sample_triangle(*(inner[k] for k in tri), spacing))
     centres = _dedupe(np.array(pts), 0.5 * spacing)
     offsets = (centres - com) @ axes
+    on_face = np.abs(centres @ shrunk[:, :3].T + shrunk[:, 3]) < 0.25 * spacing
+    face_pairs = int(max(1, on_face.sum(axis=0).max()))
 
     ss = sample_spacing_m or max(spacing, volume ** (1 / 3) / 8)
     samples = _volume_samples(verts, com, ss, lambda p: (p @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 0)
@@ -251,7 +256,7 @@ def convex_polyhedron(vertices_m, density_kg_m3: float, spacing_m: float, sample
     return RigidShape(name=name, mass_kg=mass, volume_m3=volume, inertia_kg_m2=moments,
                       sphere_offsets_m=offsets, sphere_radius_m=radius, sample_offsets_m=(samples - com) @ axes,
                       sample_volumes_m3=sample_vol, sample_half_extent_m=np.full(3, ss / 2),
-                      model_com_m=com, model_to_body=axes)
+                      model_com_m=com, model_to_body=axes, face_pairs=face_pairs)
 
 
 def _mesh_mass_properties(vertices: np.ndarray, faces: np.ndarray):

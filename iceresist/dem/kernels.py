@@ -34,7 +34,7 @@ from iceresist.dem.search import build_cell_hash, build_cell_index, build_grid_s
 DRIFT_ARGS = ["h", "pos", "vel", "vpred", "quat", "angmom", "omega", "inertia", "inv_meff", "kin", "pvel",
               "pomega", "force", "torque"]
 PLACE_ARGS = ["soff", "sbody", "pos", "quat", "xs", "key", "inv_cell", "mask"]
-CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mass", "kin", "mat", "start", "count",
+CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mdamp", "kin", "mat", "start", "count",
                 "order", "mask", "inv_cell", "walls", "n_walls", "params", "h",
                 "hp_old", "hxi_old", "hn_old", "hp_new", "hxi_new", "hn_new", "sforce", "storque", "senergy",
                 "snew", "sover"]
@@ -126,7 +126,7 @@ def build_items(target, real):
         return (zero, zero, zero, 0)
 
     @target.device
-    def contact(i, xs, srad, sbody, pos, vel, omega, inv_mass, kin, mat, start, count, order, mask, inv_cell,
+    def contact(i, xs, srad, sbody, pos, vel, omega, inv_mdamp, kin, mat, start, count, order, mask, inv_cell,
                 walls, n_walls, params, h, hp_old, hxi_old, hn_old, hp_new, hxi_new, hn_new, sforce, storque,
                 senergy, snew, sover):
         bi = sbody[i]
@@ -203,7 +203,7 @@ def build_items(target, real):
                         pcz = za + arm * nz
                         vax, vay, vaz = point_velocity(ba, pos, vel, omega, pcx, pcy, pcz)
                         vbx, vby, vbz = point_velocity(bb, pos, vel, omega, pcx, pcy, pcz)
-                        m_eff = one / (inv_mass[ba] + inv_mass[bb])
+                        m_eff = one / (inv_mdamp[ba] + inv_mdamp[bb])   # the dashpot's effective mass
                         p = 0 if (mat[ba] == 0 and mat[bb] == 0) else 1
                         ox, oy, oz, found = find_old(i, j, hp_old, hxi_old, hn_old)
                         Fx, Fy, Fz, nxx, nxy, nxz, e = contact_force(
@@ -248,7 +248,7 @@ def build_items(target, real):
                 vax, vay, vaz = point_velocity(bi, pos, vel, omega, pcx, pcy, pcz)
                 ox, oy, oz, found = find_old(i, -1 - w, hp_old, hxi_old, hn_old)
                 Fx, Fy, Fz, nxx, nxy, nxz, e = contact_force(
-                    -nwx, -nwy, -nwz, delta, vax, vay, vaz, one / inv_mass[bi], ox, oy, oz,
+                    -nwx, -nwy, -nwz, delta, vax, vay, vaz, one / inv_mdamp[bi], ox, oy, oz,
                     params[1, 0], params[1, 1], params[1, 2], params[1, 3], h)
                 if found == 0:
                     snew[i] += 1

@@ -9,7 +9,18 @@ is the effective mass a body shows at its sphere at lever arm r (translation plu
 ``dt`` is cut into ceil(dt / (safety dt_crit)) sub-steps; a forced sub-step above dt_crit is refused with
 :class:`~iceresist.errors.StabilityError`. The gather kernel also sums each body's contact force and torque over
 the sub-steps of a step (:meth:`DEMSystem.mean_contact_force_on`), so a caller that records a mean over a step
-needs no loop of its own. :meth:`DEMSystem.state` and :meth:`DEMSystem.load_state` carry the contact history,
+needs no loop of its own.
+
+Dashpot (``dashpot``): ``'sphere_pair'`` gives every sphere pair the dashpot of the bodies' effective mass,
+c = 2 zeta sqrt(m_eff k) (:mod:`iceresist.dem.contact`). A flat face of n spheres pressing on another body acts
+through n pairs in parallel: stiffness n k but damping n c, a damping ratio sqrt(n) zeta, so a head-on face impact
+rebounds far below the restitution asked for (3 x 3 spheres per face, e = 0.5: measured below), and where many pairs
+hold two clumps (two cubes of the paper preset interlocked through 12 to 28 pairs) the explicit dashpot outruns the
+sub-step: their rotation flips sign every sub-step and grows (the paper preset's A-c88-v1.0 at t = 5.0 s;
+docs/notes/paper-preset-substep.md). ``'face'`` divides each body's mass in the dashpot by its
+:attr:`~iceresist.dem.bodies.RigidShape.face_pairs`, c = 2 zeta sqrt(m_eff k / n): a face impact of n pairs has the
+damping ratio zeta and rebounds with the restitution asked for, and the damping rate of n pairs grows as sqrt(n)
+like their stiffness. :meth:`DEMSystem.state` and :meth:`DEMSystem.load_state` carry the contact history,
 so a restart continues bit for bit.
 """
 
@@ -32,6 +43,8 @@ from iceresist.errors import InputError, StabilityError
 log = logging.getLogger(__name__)
 
 MATERIALS = {"ice": 0, "ship": 1, "structure": 1}
+#: Dashpot laws (module docstring).
+DASHPOTS = ("sphere_pair", "face")
 
 _LAUNCHERS: dict = {}
 
@@ -63,12 +76,13 @@ class DEMSystem:
     Parameters: ``backend`` ``'cpu'|'cuda'|'auto'``; ``precision`` ``'float64'`` (default: metre positions over
     11 m domains need it) or ``'float32'``; ``gravity_m_s2``; ``ice_ice`` and ``ice_ship`` contact parameter sets
     (``ice_ship`` also serves walls); ``safety`` the sub-step fraction of the critical step; ``history_slots`` the
-    number of contacts per sphere whose tangential history is kept.
+    number of contacts per sphere whose tangential history is kept; ``dashpot`` ``'sphere_pair'`` or ``'face'`` (see
+    the module docstring).
     """
 
     def __init__(self, backend: str = "cpu", precision: str = "float64", gravity_m_s2=(0.0, 0.0, -9.81),
                  ice_ice: ContactParameters | None = None, ice_ship: ContactParameters | None = None,
-                 safety: float = 0.05, history_slots: int = 12):
+                 safety: float = 0.05, history_slots: int = 12, dashpot: str = "sphere_pair"):
         self.target = jit.resolve_backend(backend)
         self.real = jit.real_type(precision)
         self.precision = precision
@@ -78,6 +92,9 @@ class DEMSystem:
         if not (0 < safety <= 1):
             raise InputError(f"safety must lie in (0, 1], got {safety}")
         self.safety = float(safety)
+        if dashpot not in DASHPOTS:
+            raise InputError(f"dashpot must be one of {', '.join(DASHPOTS)}, got {dashpot!r}")
+        self.dashpot = dashpot
         self.history_slots = int(history_slots)
         self.water: Water | None = None
         self._bodies: list[_Body] = []
@@ -196,6 +213,9 @@ class DEMSystem:
         h["mass"] = np.array([s.mass_kg for s in sh], dtype=real)
         h["inv_mass"] = np.where(h["kin"] != 0, 0.0, 1.0 / h["mass"]).astype(real)
         h["inv_meff"] = h["inv_mass"].copy()
+        # the dashpot's inverse masses: per face pair (n / m) with the 'face' dashpot
+        npairs = np.array([s.face_pairs if self.dashpot == "face" else 1 for s in sh], dtype=real)
+        h["inv_mdamp"] = (h["inv_mass"] * npairs).astype(real)
         h["inertia"] = np.array([s.inertia_kg_m2 for s in sh], dtype=real)
         h["volume"] = np.array([s.volume_m3 for s in sh], dtype=real)
         h["blen"] = h["volume"] ** (1.0 / 3.0)
@@ -320,7 +340,7 @@ class DEMSystem:
         old = self._hist(self._cur)
         nxt = "b" if self._cur == "a" else "a"
         new = self._hist(nxt)
-        k["contact"](ns, d["xs"], d["srad"], d["sbody"], d["pos"], d["vpred"], d["omega"], d["inv_mass"], d["kin"],
+        k["contact"](ns, d["xs"], d["srad"], d["sbody"], d["pos"], d["vpred"], d["omega"], d["inv_mdamp"], d["kin"],
                      d["mat"], d["start"], d["count"], d["order"], np.int64(self._mask), r(self._inv_cell),
                      d["walls"], np.int64(len(self._walls)), d["params"], r(h), *old, *new, d["sforce"],
                      d["storque"], d["senergy"], d["snew"], d["sover"])
@@ -541,6 +561,7 @@ class DEMSystem:
             "critical_step_s": self._dt_crit,
             "substep_s": self.substep_s(),
             "safety": self.safety,
+            "dashpot": self.dashpot,
             "gravity_m_s2": self.gravity.tolist(),
             "ice_ice": self.ice_ice.row(),
             "ice_ship": self.ice_ship.row(),

@@ -192,7 +192,7 @@ class BodiesModel(Model):
         return DEMSystem(backend=self.dem_backend, precision="float64", gravity_m_s2=tuple(gravity_m_s2),
                          ice_ice=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_ice),
                          ice_ship=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_hull),
-                         safety=con.dem_safety)
+                         safety=con.dem_safety, dashpot=con.dashpot)
 
     def _add_walls(self, dem):
         """The domain's wall faces as DEM planes, normals into the box."""

@@ -156,7 +156,7 @@ class ShipModel(Model):
         return DEMSystem(backend=backend, precision=precision, gravity_m_s2=tuple(gravity_m_s2),
                          ice_ice=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_ice),
                          ice_ship=ContactParameters(con.stiffness_N_m, kt, con.restitution, con.friction_ice_hull),
-                         safety=con.dem_safety)
+                         safety=con.dem_safety, dashpot=con.dashpot)
 
     def _add_tank_walls(self, dem) -> None:
         """The tank's ends, sides and bottom as DEM planes (the top is open)."""

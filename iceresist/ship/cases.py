@@ -44,6 +44,7 @@ class _Fidelity(_Data):
     hull_band_m: float = Field(gt=0)
     stiffness_N_m: float = Field(gt=0)
     dem_safety: float = Field(gt=0, le=1)
+    dashpot: Literal["sphere_pair", "face"] = "sphere_pair"
     sample_interval_s: float = Field(gt=0)
     dx_m: float = Field(gt=0)
 
@@ -117,7 +118,7 @@ class Case:
 CASES = {c.name: c for c in (Case(r.bow, r.concentration, r.knots) for r in _DATA.cases)}
 
 #: Ice channel, DEM and hull spheres per fidelity: channel_length_m, spheres_per_edge, hull_spacing_m,
-#: hull_band_m, stiffness_N_m, dem_safety, sample_interval_s, dx_m (the tier-1 tank's nominal cell).
+#: hull_band_m, stiffness_N_m, dem_safety, dashpot, sample_interval_s, dx_m (the tier-1 tank's nominal cell).
 FIDELITIES = {name: f.model_dump() for name, f in _DATA.fidelity.items()}
 
 #: Tier-2 (coupled LBM-DEM) tank and lattice per fidelity: domain cells, cell size, water depth, channel start,
@@ -179,5 +180,6 @@ def scene_data(case: str, fidelity: str, tier: int = 1) -> dict:
         "ice": {"concentration": c.concentration, "channel_length_m": f["channel_length_m"],
                 "channel_start_x_m": channel_start, "spheres_per_edge": f["spheres_per_edge"]},
         "contact": {"stiffness_N_m": f["stiffness_N_m"], "dem_safety": f["dem_safety"],
+                    **({"dashpot": f["dashpot"]} if f["dashpot"] != "sphere_pair" else {}),
                     "sample_interval_s": f["sample_interval_s"]},
     }

@@ -3,7 +3,9 @@
 A uniform grid is a forest of blocks of one level; adaptive refinement adds
 levels to the same structure: every block stores its level and integer block
 coordinates, and the neighbour table is built from a dictionary keyed by
-``(level, bx, by, bz)``. Only one level is built today.
+``(level, bx, by, bz)``. The levels of adaptive refinement (which blocks exist at which level, 2:1 balance,
+Morton order over all levels, coarser and finer neighbours) come from :class:`iceresist.grid.octree.BlockOctree`;
+the LBM steps one level's blocks at a time.
 
 Layout: values live per block, ``v[block, cell]`` with ``cell = x + 8*(y + 8*z)``
 (x fastest). Populations are ``f[block, q, cell]``. Blocks without any fluid

@@ -1,0 +1,124 @@
+"""The LBM on the levels of a block octree (iceresist.grid.levels, iceresist.lbm.refinement): ghost blocks and
+their sources, the coarse-to-fine interpolation and fine-to-coarse average against exact answers, and a
+force-driven Poiseuille channel with a refined band against the analytic profile."""
+
+import numpy as np
+import pytest
+
+from iceresist.grid.forest import BlockForest, Face
+from iceresist.grid.levels import FROM_COARSER, FROM_FINER, level_views
+from iceresist.grid.octree import BlockOctree
+from iceresist.lbm.refinement import RefinedLBM, _apply, prolongation_table, restriction_table
+from iceresist.lbm.solver import LBMSolver
+
+PERIODIC_XZ = {"x-": Face("periodic"), "x+": Face("periodic"), "z-": Face("periodic"), "z+": Face("periodic"),
+               "y-": Face("wall"), "y+": Face("wall")}
+
+
+def _band_tree():
+    """4 level-0 blocks across y (walls), the middle two refined: the band 8 <= y < 24 (level-0 cells)."""
+    t = BlockOctree((1, 4, 1), 1, periodic=(True, False, True))
+    return t.refine(lambda lo, hi: np.where((lo[:, 1] >= 8) & (hi[:, 1] <= 24), 1, 0))
+
+
+def test_ghost_blocks_of_a_refined_band():
+    v0, v1 = level_views(_band_tree(), PERIODIC_XZ)
+    assert (v0.nleaves, v0.nghosts) == (2, 2) and (v0.ghost_source == FROM_FINER).all()
+    assert (v1.nleaves, v1.nghosts) == (16, 8) and (v1.ghost_source == FROM_COARSER).all()
+    ghost_y = v1.forest.origin[v1.nleaves:, 1]
+    assert set(ghost_y.tolist()) == {1, 6}            # one fine block row on each side of the band
+
+
+def test_prolongation_reproduces_a_linear_field_and_restriction_averages_exactly():
+    """Trilinear interpolation is exact for fields linear in x, y, z; the average of eight children is exact for
+    them too (the coarse cell centre is their centroid)."""
+    t = BlockOctree((2, 2, 2), 1, periodic=(False, False, False)).refine(
+        lambda lo, hi: np.where((lo < 8).all(axis=1), 1, 0))
+    faces = {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")}
+    v0, v1 = level_views(t, faces)
+    a = np.array([0.3, -0.2, 0.7])
+
+    def field(view, lv):
+        x, y, z = view.forest.cell_coordinates()
+        xs = [(c + 0.5) / 2 ** lv for c in (x, y, z)]                  # level-0 cell units
+        val = 1e-3 * (a[0] * xs[0] + a[1] * xs[1] + a[2] * xs[2])
+        return np.repeat(val[:, None, :], 27, axis=1) * np.arange(1, 28)[None, :, None]
+    f0, f1 = field(v0, 0), field(v1, 1)
+    periodic = (False, False, False)
+    # interior fine ghost cells (away from the clamped domain faces) get the exact linear value
+    pt = prolongation_table(v1, v0, periodic)
+    g1 = f1.copy()
+    g1[v1.nleaves:] = 0.0
+    _apply(pt, g1, f0)
+    x, y, z = v1.forest.cell_coordinates()
+    inner = (x > 0) & (y > 0) & (z > 0) & (x < 31) & (y < 31) & (z < 31)
+    ghost = np.zeros(x.shape, dtype=bool)
+    ghost[v1.nleaves:] = True
+    sel = ghost & inner
+    assert sel.sum() > 0
+    assert np.abs(g1.transpose(0, 2, 1)[sel] - f1.transpose(0, 2, 1)[sel]).max() < 1e-15
+    # coarse ghost cells over the fine leaves get the exact value
+    rt = restriction_table(v0, v1, periodic)
+    g0 = f0.copy()
+    g0[v0.nleaves:] = 0.0
+    _apply(rt, g0, f1)
+    assert np.abs(g0[v0.nleaves:] - f0[v0.nleaves:]).max() < 1e-15
+
+
+def _poiseuille(tau0, steps, rescale=True):
+    """Relative L2 error of the refined band channel and of the uniform level-0 grid, both started from the
+    analytic profile (equilibrium populations), after ``steps`` level-0 steps."""
+    H, umax = 32, 0.02
+    nu0 = (tau0 - 0.5) / 3
+    g = 8 * nu0 * umax / H ** 2
+
+    def prof(y):
+        return g / (2 * nu0) * y * (H - y)
+
+    def init(solver, lv):
+        shape = solver.forest.shape_cells
+        u = np.zeros((3, *shape))
+        u[0] = prof((np.arange(shape[1]) + 0.5) / 2 ** lv)[None, :, None]
+        solver.initialize(u=u)
+
+    m = RefinedLBM(_band_tree(), tau0=tau0, force0=(g, 0, 0), faces=PERIODIC_XZ, rescale=rescale)
+    for lv, s in m.solvers.items():
+        init(s, lv)
+    m.step(steps)
+    y = np.concatenate([((m.leaf_fields(lv)[2][1] + 0.5) / 2 ** lv).ravel() for lv in m.levels])
+    u = np.concatenate([m.leaf_fields(lv)[1][0].ravel() for lv in m.levels])
+    refined = np.sqrt(np.mean((u - prof(y)) ** 2) / np.mean(prof(y) ** 2))
+    s = LBMSolver(BlockForest.uniform((8, 32, 8), PERIODIC_XZ), tau=tau0, force=(g, 0, 0), operator="bgk",
+                  precision="float64")
+    init(s, 0)
+    s.step(steps)
+    _, uu = s.macroscopic()
+    yc = np.arange(32) + 0.5
+    coarse = np.sqrt(np.mean((uu[0].mean(axis=(0, 2)) - prof(yc)) ** 2) / np.mean(prof(yc) ** 2))
+    return refined, coarse
+
+
+def test_refined_band_poiseuille_with_the_rescaled_interface():
+    """BGK, float64, tau0 = 1.4 (fine level 2.3), 1500 level-0 steps from the analytic profile: relative L2 error
+    0.15 % on the refined grid against 0.44 % on the uniform level-0 grid (its bounce-back wall error at this tau;
+    run from rest to steady state, 10 000 steps: 0.16 % against 0.44 %; 2-core x86 VM, 2026-11-26). Planted: the
+    paper's unscaled non-equilibrium part (rescale=False) gives 15 % and fails. Not yet met: at tau0 = 0.56-0.8 the
+    interface's own error, a momentum deficit at the level interface, is 0.8-1.7 % against 0.1 % on the coarse grid
+    (AMR part 1 keeps it open)."""
+    refined, coarse = _poiseuille(1.4, 1500)
+    assert refined < coarse
+    assert refined < 0.003
+
+
+@pytest.mark.slow   # about 40 s on a 2-core x86 VM
+def test_the_papers_unscaled_interface_loses_the_stress():
+    """Interpolating post-collision populations without rescaling their non-equilibrium part (the paper's choice)
+    carries the coarse level's stress into the fine level unchanged, although it scales as (tau - 1) dx: the band
+    channel is off by 15 % after 1500 steps at tau0 = 1.4 and by 28 % at 0.8 (measured)."""
+    refined, _ = _poiseuille(1.4, 1500, rescale=False)
+    assert refined > 0.1
+
+
+def test_tau_one_cannot_be_rescaled():
+    with pytest.raises(Exception, match="tau = 1 on level"):
+        RefinedLBM(_band_tree(), tau0=0.75, faces=PERIODIC_XZ)

@@ -7,7 +7,7 @@ C_d the mean over the last quarter (12-16 d/U; from 8 d/U on the means over 2 d/
 0.7 % at Re = 100).
 
 Measured at d = 16 cells (192 x 128 x 128 = 3.1 M cells, 2560 steps; 2-core x86 VM shared with other work,
-one numba thread, 20-29 min per Re at 4.6-6.8 MLUPS, ~9 min at the ~15 MLUPS of a free core; docs/VALIDATION.md, "Coupling"):
+one numba thread, 20-29 min per Re at 4.6-6.8 MLUPS, ~9 min at the ~15 MLUPS of a free core; docs/VALIDATION.md, "Fixed sphere in uniform flow"):
 
     Re = 10:  C_d = 4.454 against 4.151, +7.3 %   (d = 8: +9.0 %,  d = 12: +7.5 %)
     Re = 50:  C_d = 1.642 against 1.538, +6.8 %   (d = 8: +13.7 %, d = 12: +8.3 %)

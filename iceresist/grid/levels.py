@@ -40,10 +40,12 @@ class LevelView:
     @property
     def block_map(self) -> np.ndarray:
         """(nbx, nby, nbz) int64 at this level: the forest block at each block position, -1 where none."""
-        m = np.full(self.forest.shape_blocks, -1, dtype=np.int64)
-        o = self.forest.origin
-        m[o[:, 0], o[:, 1], o[:, 2]] = np.arange(self.forest.nblocks)
-        return m
+        if getattr(self, "_block_map", None) is None:
+            m = np.full(self.forest.shape_blocks, -1, dtype=np.int64)
+            o = self.forest.origin
+            m[o[:, 0], o[:, 1], o[:, 2]] = np.arange(self.forest.nblocks)
+            self._block_map = m
+        return self._block_map
 
 
 def level_views(octree: BlockOctree, faces: dict | None = None) -> list[LevelView]:

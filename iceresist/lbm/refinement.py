@@ -12,7 +12,10 @@ Level interfaces, through the ghost blocks of each level (:mod:`iceresist.grid.l
   that stream without colliding (explosion): the fine leaves pull at each sub-step the packets that reach them; then
   the coarse step pulls, for every population that crossed the interface, the mean of the eight fine packets that
   reached its sub-cells over the two sub-steps, each taken where it last collided (coalescence). Every packet is
-  consumed once, so mass and momentum cross the interface exactly (mass to round-off: 2e-16 over 1000 steps);
+  consumed once, so mass and momentum cross the interface exactly (mass to round-off: 2e-16 over 1000 steps).
+  ``reconstruction='linear'`` (default) gives the packets of a coarse cell its value plus the central-difference
+  gradient times the sub-cell's offset (+-1/4 cell; the eight still sum to the cell's mass): a Taylor-Green vortex
+  with a refined centre decays at the fine grid's viscosity +0.34 %, where ``'constant'`` packets give +3.0 %;
 * ``'interpolate'`` (the paper's): a ghost cell of level l + 1 inside a leaf of level l takes the trilinear
   interpolation of the post-collision populations f - w of the eight nearest cells of level l (at the half step
   from the mean of level l before and after its step), and a ghost cell of level l over level l + 1 the mean of
@@ -133,6 +136,26 @@ SCHEMES = ("conservative", "interpolate")
 COARSE_T, FINE_T, FINE_HALF = 0, 1, 2
 
 
+def _coarse_stencil(coarse: LevelView, pos, periodic):
+    """For packets at fine cells ``pos`` (..., 3) taken from their coarse cells: the offset of the sub-cell from
+    its coarse cell's centre (coarse units, +-1/4 per axis) and the (block, cell) of the coarse neighbours at -1
+    and +1 along each axis (the cell itself where a neighbour is missing), for a linear reconstruction."""
+    pos = np.asarray(pos, dtype=np.int64)
+    X = pos >> 1
+    off = ((pos & 1) - 0.5) / 2.0
+    b0, c0, _ = _locate(coarse, X, periodic)
+    nbrs = []
+    for a in range(3):
+        for d in (-1, 1):
+            e = np.zeros(3, dtype=np.int64)
+            e[a] = d
+            b, c, inside = _locate(coarse, X + e, periodic)
+            ok = inside & (b >= 0)
+            nbrs.append((np.where(ok, b, b0), np.where(ok, c, c0), ok))
+    # one-sided where a neighbour is missing: the difference over the cells that exist
+    return off, nbrs
+
+
 def explosion_tables(fine: LevelView, coarse: LevelView, periodic):
     """The populations a fine level pulls from its ghost cells in the coarser level during the two fine
     sub-steps of one coarse step, conservatively (Rohde et al. 2006): the coarse cells are cut into eight
@@ -157,19 +180,19 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic):
         hk, hbk, hck = h[keep], hb[keep], hc[keep]
         cb, cc, _ = _locate(coarse, hk >> 1, periodic)
         qq = np.full(len(hk), q)
-        tables[0].append((hbk, qq, hck, np.full(len(hk), COARSE_T), cb, cc))
+        tables[0].append((hbk, qq, hck, np.full(len(hk), COARSE_T), cb, cc, hk))
         p = hk - cq
         pb, pc, pin = _locate(fine, p, periodic)
         from_fine = pin & (pb >= 0) & (pb < fine.nleaves)
         ob, oc, _ = _locate(coarse, np.where(pin[:, None], p, hk) >> 1, periodic)
         tables[1].append((hbk, qq, hck, np.where(from_fine, FINE_T, COARSE_T), np.where(from_fine, pb, ob),
-                          np.where(from_fine, pc, oc)))
+                          np.where(from_fine, pc, oc), np.where(pin[:, None], p, hk)))
     out = []
     for t in tables:
-        cols = [np.concatenate([row[k] for row in t]) for k in range(6)]
+        cols = [np.concatenate([row[k] for row in t]) for k in range(7)]
         if (cols[4] < 0).any():
             raise InputError("a fine ghost cell has no coarse cell to take its packets from")
-        out.append(tuple(cols))
+        out.append((*cols[:6], _coarse_stencil(coarse, cols[6], periodic)))
     return out
 
 
@@ -206,21 +229,37 @@ def coalescence_table(coarse: LevelView, fine: LevelView, periodic):
         yb, yc, _ = _locate(coarse, X[touch] - cq, periodic)
         if (yb < 0).any() or (sb < 0).any():
             raise InputError("a coarse cell next to the finer level has no neighbour to pull from")
-        rows.append((yb, np.full(len(yb), q), yc, tag, sb, sc))
-    return tuple(np.concatenate([r[k] for r in rows]) for k in range(6))
+        rows.append((yb, np.full(len(yb), q), yc, tag, sb, sc, o))
+    cols = [np.concatenate([r[k] for r in rows]) for k in range(7)]
+    return (*cols[:6], _coarse_stencil(coarse, cols[6], periodic))
 
 
-def _apply_slots(table, dst, sources, weight: float = 1.0):
-    """dst[b, q, c] = weight * sum over the table's source columns of sources[tag][sb, q, sc] (in place)."""
-    db, q, dc, tag, sb, sc = table
+def _apply_slots(table, dst, sources, weight: float = 1.0, linear: bool = False):
+    """dst[b, q, c] = weight * sum over the table's source columns of sources[tag][sb, q, sc] (in place); with
+    ``linear`` a packet from the coarse level is its cell's value plus the central-difference gradient times the
+    sub-cell's offset (the eight sub-cells of a coarse cell still sum to eight times its value)."""
+    db, q, dc, tag, sb, sc, (off, nbrs) = table
     if tag.ndim == 1:
         tag, sb, sc = tag[:, None], sb[:, None], sc[:, None]
+        off = off[:, None, :]
+        nbrs = [(b[:, None], c[:, None], ok[:, None]) for b, c, ok in nbrs]
+    qq = np.broadcast_to(q[:, None], tag.shape)
     acc = np.zeros(len(db), dtype=np.float64)
-    for k in range(tag.shape[1]):
-        for t, src in enumerate(sources):
-            sel = tag[:, k] == t
-            if sel.any():
-                acc[sel] += src[sb[sel, k], q[sel], sc[sel, k]]
+    for t, src in enumerate(sources):
+        sel = tag == t
+        if not sel.any():
+            continue
+        vals = np.zeros(tag.shape, dtype=np.float64)
+        vals[sel] = src[sb[sel], qq[sel], sc[sel]]
+        if linear and t == COARSE_T:
+            for a in range(3):
+                (bm, cm, okm), (bp, cp, okp) = nbrs[2 * a], nbrs[2 * a + 1]
+                fm = src[bm[sel], qq[sel], cm[sel]].astype(np.float64)
+                fp = src[bp[sel], qq[sel], cp[sel]].astype(np.float64)
+                span = okm[sel].astype(np.float64) + okp[sel]
+                grad = np.divide(fp - fm, span, out=np.zeros_like(fp), where=span > 0)
+                vals[sel] += off[..., a][sel] * grad
+        acc += vals.sum(axis=1)
     dst[db, q, dc] = (weight * acc).astype(dst.dtype)
 
 
@@ -250,13 +289,16 @@ class RefinedLBM:
 
     def __init__(self, octree: BlockOctree, *, tau0: float, force0=(0.0, 0.0, 0.0), faces: dict | None = None,
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
-                 scheme: str = "conservative"):
+                 scheme: str = "conservative", reconstruction: str = "linear"):
         from iceresist.lbm.solver import LBMSolver
 
         self.rescale = bool(rescale)
         if scheme not in SCHEMES:
             raise InputError(f"scheme must be one of {', '.join(SCHEMES)}, got {scheme!r}")
         self.scheme = scheme
+        if reconstruction not in ("constant", "linear"):
+            raise InputError(f"reconstruction must be 'constant' or 'linear', got {reconstruction!r}")
+        self.reconstruction = reconstruction
         if self.rescale and scheme == "conservative":
             raise InputError("rescale: the conservative scheme moves whole packets across the interface (rescaling "
                              "a packet's non-equilibrium part changes the mass it carries; measured 15 % off in a "
@@ -287,6 +329,8 @@ class RefinedLBM:
             self.explode = {lv: explosion_tables(self.views[lv], self.views[lv - 1], self.periodic)
                             for lv in self.levels[1:]}
             self.coalesce = {lv: coalescence_table(self.views[lv], self.views[lv + 1], self.periodic)
+                             for lv in self.levels[:-1]}
+            self.restrict = {lv: restriction_table(self.views[lv], self.views[lv + 1], self.periodic)
                              for lv in self.levels[:-1]}
         for lv in self.levels[1:]:
             if self.rescale and (self.tau[lv - 1] == 1.0 or self.tau[lv] == 1.0):
@@ -327,18 +371,20 @@ class RefinedLBM:
         finer = lv + 1 if lv + 1 in self.solvers else None
         if finer is not None:
             sf = self.solvers[finer]
-            c_t = self._scaled(s.state.copy(), finer, True)
+            linear = self.reconstruction == "linear"
+            if linear and self.restrict[lv] is not None:
+                _apply(self.restrict[lv], s.state, sf.state)    # the gradient across the interface sees the fine level
+            c_t = s.state.copy()
             f_t = sf.state.copy()
             tables = self.explode[finer]
             for sub in (0, 1):
                 if tables is not None:
-                    _apply_slots(tables[sub], sf.state, (c_t, f_t))
+                    _apply_slots(tables[sub], sf.state, (c_t, f_t), linear=linear)
                 if sub == 1:
                     f_half = sf.state.copy()
                 self._advance_conservative(finer)
             if self.coalesce[lv] is not None:
-                sources = (s.state.copy(), self._scaled(f_t, finer, False), self._scaled(f_half, finer, False))
-                _apply_slots(self.coalesce[lv], s.state, sources, weight=0.125)
+                _apply_slots(self.coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
         s.step()
 
     def _advance(self, lv: int):

@@ -1,14 +1,15 @@
 """The models: state plus one time step of the components a scene uses, no I/O (DESIGN.md sections 2, 6).
 
-=========================  ======================================================  =============================
-model                      what it holds                                           scene sections
-=========================  ======================================================  =============================
-:class:`FluidModel`        block forest + LBM                                      no optional section
-:class:`FreeSurfaceModel`  LBM + phase field (eqs. 1-11)                           ``[free_surface]``
-:class:`Tier1Model`        DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
-:class:`Tier2Model`        free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
-:class:`BodiesModel`       LBM (free surface optional) + DEM + coupling            ``[[bodies]]`` (no ship)
-=========================  ======================================================  =============================
+==========================  ======================================================  =============================
+model                       what it holds                                           scene sections
+==========================  ======================================================  =============================
+:class:`FluidModel`         block forest + LBM                                      no optional section
+:class:`FreeSurfaceModel`   LBM + phase field (eqs. 1-11)                           ``[free_surface]``
+:class:`Tier1Model`         DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
+:class:`Tier2Model`         free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
+:class:`BodiesModel`        LBM (free surface optional) + DEM + coupling            ``[[bodies]]`` (no ship)
+:class:`RefinedFluidModel`  LBM on refined levels (CPU)                             ``[refinement]`` alone
+==========================  ======================================================  =============================
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
 asks for.
@@ -20,10 +21,12 @@ from iceresist.errors import InputError
 from iceresist.models.base import Model
 from iceresist.models.bodies import BodiesModel
 from iceresist.models.fluid import FluidModel, FreeSurfaceModel
+from iceresist.models.refined import RefinedFluidModel
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "Tier1Model", "Tier2Model", "BodiesModel",
+           "build_model"]
 
 
 def build_model(scene, *, backend: str | None = None, precision: str | None = None) -> Model:
@@ -37,6 +40,12 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
         model = Tier2Model if scene.ship.tier == 2 else Tier1Model
         return model(scene, backend=backend, precision=precision)
     extra = scene.optional_sections()
+    if "refinement" in extra:
+        if extra != ["refinement"]:
+            others = ", ".join("[" + s + "]" for s in extra if s != "refinement")
+            raise InputError(f"{scene.source_name}: refinement: a refined scene is the fluid alone so far; remove "
+                             f"[refinement] to run {others} on a uniform grid")
+        return RefinedFluidModel(scene, backend=backend, precision=precision)
     wants = [f for f in scene.output.fields if f in ("phi", "surface")]
     if wants and scene.free_surface is None:
         raise InputError(f"output.fields: {', '.join(wants)} need a [free_surface] section; "

@@ -28,6 +28,8 @@ SECTIONS = [
     ("[ice] (optional)", S.Ice, "ice"),
     ("[contact] (optional)", S.Contact, "contact"),
     ("[[bodies]] (optional, repeatable)", S.Body, "bodies[]"),
+    ("[refinement] (optional)", S.Refinement, "refinement"),
+    ("[[refinement.boxes]] (repeatable)", S.RefinementBox, "refinement.boxes[]"),
 ]
 
 _UNITS = [("_m2_s", "m^2/s"), ("_m_s2", "m/s^2"), ("_m_s", "m/s"), ("_kg_m3", "kg/m^3"), ("_N_m3", "N/m^3"),
@@ -408,7 +410,8 @@ def scenes_markdown() -> str:
     for name, what in (("cavity", "Lid-driven cavity in lattice units (the default scene)"),
                        ("poiseuille", "Plane Poiseuille flow of water in SI units"),
                        ("still_tank", "Still water in a closed tank (free surface), lattice units"),
-                       ("dam_break", "Dam break in a flume (free surface), lattice units")):
+                       ("dam_break", "Dam break in a flume (free surface), lattice units"),
+                       ("refined_channel", "Plane Poiseuille flow on two levels of blocks (static refinement)")):
         out.append(f"### `{name}` — {what}\n\n```toml\n{preset_text(name).rstrip()}\n```\n\n")
     for title, text in BODY_EXAMPLES:
         out.append(f"### {title}\n\n```toml\n{text.rstrip()}\n```\n\n")

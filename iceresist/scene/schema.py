@@ -439,6 +439,43 @@ class Body(_Section):
         return self
 
 
+class RefinementBox(_Section):
+    """``[[refinement.boxes]]``: a box whose blocks are refined to ``level``."""
+
+    lo_m: Vec3 = Field(..., description="Low corner (m; cells in a lattice scene).")
+    hi_m: Vec3 = Field(..., description="High corner (m; cells in a lattice scene).")
+    level: int = Field(..., ge=1, description="Level of the blocks the box overlaps (cells dx_m / 2^level).")
+
+    @model_validator(mode="after")
+    def _corners(self):
+        if not all(h > lo for lo, h in zip(self.lo_m, self.hi_m)):
+            raise ValueError("hi_m: each coordinate must exceed lo_m's")
+        return self
+
+
+class Refinement(_Section):
+    """``[refinement]`` (optional): static block refinement (paper section 2.5). Level 0 is the grid of
+    ``domain.dx_m``; level l has cells dx_m / 2^l and time steps dt / 2^l (acoustic scaling, the same physical
+    viscosity). A block takes the highest level of the boxes it overlaps; 2:1 balance adds the levels between.
+    Fluid-only scenes, on the CPU, so far (iceresist.lbm.refinement)."""
+
+    levels: int = Field(..., ge=1, le=6, description="The finest level (cells dx_m / 2^levels).")
+    boxes: list[RefinementBox] = Field(..., min_length=1, description="Regions and their levels, see "
+                                       "`[[refinement.boxes]]`.")
+    scheme: Literal["conservative", "interpolate"] = Field(
+        "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
+        "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
+        "part rescaled as Dupuis and Chopard; mass drifts about 7e-6 per 1000 steps).")
+
+    @model_validator(mode="after")
+    def _levels(self):
+        for i, b in enumerate(self.boxes):
+            if b.level > self.levels:
+                raise ValueError(f"boxes[{i}].level: {b.level} is finer than levels = {self.levels}; use a level "
+                                 f"<= {self.levels} or raise levels")
+        return self
+
+
 # ---------------------------------------------------------------------------------------------------------
 class Scene(_Section):
     """A whole scene file. Build one with :func:`iceresist.scene.load.load_scene`."""
@@ -455,6 +492,7 @@ class Scene(_Section):
     contact: Contact | None = Field(None, description="Optional DEM contact law (defaults apply where ice is present).")
     bodies: list[Body] = Field([], description="Optional extra rigid bodies.")
     case: CaseBase | None = Field(None, description="Optional ship case this scene starts from.")
+    refinement: Refinement | None = Field(None, description="Optional static block refinement.")
 
     _source_text: str = PrivateAttr("")
     _source_name: str = PrivateAttr("scene.toml")
@@ -487,6 +525,12 @@ class Scene(_Section):
         names = [b.name for b in self.bodies]
         if len(set(names)) != len(names):
             raise ValueError("bodies: body names must be unique")
+        if self.refinement is not None:
+            size = self.domain.size_m or tuple(n * (self.domain.dx_m or 1.0) for n in self.domain.cells or (0, 0, 0))
+            for i, b in enumerate(self.refinement.boxes):
+                if any(lo < 0 or h > L * (1 + 1e-9) for lo, h, L in zip(b.lo_m, b.hi_m, size)):
+                    raise ValueError(f"refinement.boxes[{i}]: the box must lie inside the domain "
+                                     f"[0, 0, 0] - {list(size)}")
         return self
 
     # -- derived values --------------------------------------------------------------------------------
@@ -544,5 +588,5 @@ class Scene(_Section):
 
     def optional_sections(self) -> list[str]:
         """Names of the optional sections this scene uses."""
-        used = [k for k in ("free_surface", "ship", "ice", "contact") if getattr(self, k) is not None]
+        used = [k for k in ("free_surface", "ship", "ice", "contact", "refinement") if getattr(self, k) is not None]
         return used + (["bodies"] if self.bodies else [])

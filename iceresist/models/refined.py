@@ -1,0 +1,213 @@
+"""The LBM fluid on refined levels: a fluid-only scene with ``[refinement]`` (paper section 2.5).
+
+:class:`RefinedFluidModel` builds the block octree from the scene's boxes (level 0 is the grid of ``domain.dx_m``),
+reports the memory its blocks take before it allocates them (and refuses a scene that does not fit the machine),
+and steps :class:`~iceresist.lbm.refinement.RefinedLBM`: one model step is one level-0 step, level l taking 2^l
+steps in it. Fields are written on the level-0 grid (each level-0 cell the mean of the leaf cells inside it);
+diagnostics sum every leaf with its own cell volume. CPU only so far.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.grid.forest import CELLS
+from iceresist.lattice import Q
+from iceresist.models.base import Model
+from iceresist.models.fluid import check_block_shape, forest_faces, resolve_target
+from iceresist.scene.schema import Scene
+
+log = logging.getLogger(__name__)
+
+#: Share of the machine's available memory a refined scene may take.
+MEMORY_SHARE = 0.8
+
+
+def available_memory_bytes() -> int:
+    """Memory the machine has available now (bytes), from the OS."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
+        return 1 << 62
+
+
+def build_octree(scene: Scene):
+    """The static octree of a scene's ``[refinement]``: level-0 blocks of ``domain.dx_m``; a block takes the highest
+    level of the boxes its box overlaps, then 2:1 balance."""
+    from iceresist.grid.octree import BlockOctree
+
+    ref = scene.refinement
+    dx = scene.domain.dx_m or 1.0
+    shape = scene.domain.shape_cells()
+    periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
+    t = BlockOctree(tuple(n // 8 for n in shape), ref.levels, periodic=periodic)
+    boxes = [(np.asarray(b.lo_m) / dx, np.asarray(b.hi_m) / dx, b.level) for b in ref.boxes]
+
+    def wanted(lo, hi):
+        level = np.zeros(len(lo), dtype=np.int64)
+        for blo, bhi, lv in boxes:
+            overlap = ((lo < bhi[None, :]) & (hi > blo[None, :])).all(axis=1)
+            level = np.where(overlap, np.maximum(level, lv), level)
+        return level
+
+    return t.refine(wanted)
+
+
+class RefinedFluidModel(Model):
+    """The LBM fluid alone on the levels of a scene's ``[refinement]`` (CPU)."""
+
+    components = ("fluid", "refinement")
+
+    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
+        from iceresist.grid.levels import level_views
+        from iceresist.limits import check_fluid
+        from iceresist.lbm.refinement import RefinedLBM
+
+        self.scene = scene
+        self.units = u = scene.units()
+        if scene.domain.pad_to_blocks:
+            raise InputError("domain.pad_to_blocks: a refined scene needs whole 8x8x8 blocks; give domain cells in "
+                             "multiples of 8 and leave pad_to_blocks out")
+        self.shape_cells = scene.domain.shape_cells()
+        check_block_shape(self.shape_cells)
+        check_fluid(scene, u)
+        self.backend = backend or scene.numerics.backend
+        self.target = resolve_target(self.backend)
+        if self.target.is_cuda:
+            raise InputError("numerics.backend: a refined scene runs on the CPU so far; use backend = \"cpu\"")
+        self.precision = precision or scene.numerics.precision
+        self.octree = build_octree(scene)
+        views = level_views(self.octree, forest_faces(scene, u))
+        itemsize = np.dtype(self.precision).itemsize
+        self.level_bytes = {v.level: 2 * Q * CELLS * itemsize * v.forest.nblocks for v in views if v is not None}
+        total = sum(self.level_bytes.values())
+        for lv, nbytes in self.level_bytes.items():
+            v = views[lv]
+            log.info("refinement level %d: dx %.4g m, %d leaf blocks + %d ghost blocks, %.3g MB", lv,
+                     u.dx_m / 2 ** lv, v.nleaves, v.nghosts, nbytes / 1e6)
+        free = available_memory_bytes()
+        if total > MEMORY_SHARE * free:
+            raise InputError(f"refinement.levels: the blocks need {total / 2**30:.3g} GiB, more than "
+                             f"{MEMORY_SHARE:.0%} of the {free / 2**30:.3g} GiB available; use fewer levels or "
+                             f"smaller refinement.boxes")
+        fl = scene.fluid
+        self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
+                                   for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
+        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
+                              operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
+                              rescale=scene.refinement.scheme == "interpolate")
+        u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
+        self.lbm.initialize(1.0, u0)
+        self.cells_per_level = {lv: int(self.lbm.views[lv].nleaves) * CELLS for lv in self.lbm.levels}
+        self.cells = int(sum(self.cells_per_level.values()))
+        self.dt_s = u.dt_s
+
+    # -- protocol -------------------------------------------------------------------------------------
+    @property
+    def iteration(self) -> int:
+        return int(self.lbm.iteration)
+
+    def step(self, n: int = 1):
+        self.lbm.step(n)
+
+    @property
+    def lattice_updates_per_step(self) -> int:
+        """Cell updates in one level-0 step: level l's cells 2^l times."""
+        return int(sum(n * 2 ** lv for lv, n in self.cells_per_level.items()))
+
+    def _level0(self):
+        """Density and velocity (lattice units) on the level-0 grid: each cell the mean of the leaf cells in it."""
+        shape = tuple(self.shape_cells)
+        acc = np.zeros((4, *shape))
+        weight = np.zeros(shape)
+        for lv in self.lbm.levels:
+            rho, u, (x, y, z) = self.lbm.leaf_fields(lv)
+            idx = (x.ravel() >> lv, y.ravel() >> lv, z.ravel() >> lv)
+            w = 1.0 / 8 ** lv
+            np.add.at(weight, idx, w)
+            for k, v in enumerate((rho, *u)):
+                np.add.at(acc[k], idx, w * v.ravel())
+        acc /= np.where(weight > 0, weight, np.nan)
+        return acc[0], acc[1:]
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """rho (kg/m^3), u (m/s), pressure (Pa, gauge) and flags on the level-0 grid."""
+        from iceresist.grid import flags as FL
+
+        rho_lat, u_lat = self._level0()
+        u = self.units
+        return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
+                "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
+                "flags": np.full(self.shape_cells, FL.FLUID, dtype=np.uint8)}
+
+    @staticmethod
+    def field_units(lattice: bool) -> dict[str, str]:
+        if lattice:
+            return {"rho": "lattice", "u": "lattice", "pressure": "lattice", "flags": "bits"}
+        return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits"}
+
+    def is_finite(self) -> bool:
+        return math.isfinite(self.lbm.mass())
+
+    def diagnostics(self) -> dict[str, float]:
+        """Fluid mass (kg) and kinetic energy (J) over every leaf with its own cell volume, the largest speed."""
+        u = self.units
+        mass = ke = 0.0
+        umax = 0.0
+        for lv in self.lbm.levels:
+            rho, vel, _ = self.lbm.leaf_fields(lv)
+            vol = (u.dx_m / 2 ** lv) ** 3
+            speed2 = (vel ** 2).sum(axis=0)
+            mass += float(u.density_to_physical(rho).sum() * vol)
+            ke += float(0.5 * (u.density_to_physical(rho) * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
+            umax = max(umax, float(np.sqrt(speed2.max())))
+        return {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
+                "max_lattice_speed": umax}
+
+    def watchdog_probe(self) -> dict:
+        from iceresist.models.probe import fluid_probe
+
+        rho_lat, u_lat = self._level0()
+        u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
+                    0.1 * self.scene.numerics.mach)
+        return fluid_probe(rho_lat, u_lat, np.isfinite(rho_lat), 0.5 * rho_lat.size * u_ref ** 2)
+
+    def state(self) -> dict:
+        """Every level's populations in storage precision (bit for bit) and the iteration."""
+        return {"f": {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()},
+                "iteration": np.int64(self.iteration), "precision": self.precision,
+                "blocks": np.array([self.lbm.views[lv].forest.nblocks for lv in self.lbm.levels], dtype=np.int64)}
+
+    def load_state(self, state: dict):
+        from iceresist.models.fluid import _set_populations
+
+        if state.get("precision", self.precision) != self.precision:
+            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
+                             f"restart with --precision {state.get('precision')}")
+        f = state.get("f", {})
+        for lv, s in self.lbm.solvers.items():
+            arr = np.asarray(f.get(str(lv), np.zeros(0)))
+            if arr.shape != (s.forest.nblocks, Q, CELLS):
+                raise InputError(f"checkpoint populations of level {lv} have shape {arr.shape}, this scene needs "
+                                 f"{(s.forest.nblocks, Q, CELLS)}: it belongs to another scene or refinement")
+            _set_populations(s, arr.astype(s.real))
+            s.iteration = int(state["iteration"]) * 2 ** lv
+        self.lbm.iteration = int(state["iteration"])
+
+    def describe(self) -> dict:
+        per = self.octree.blocks_per_level()
+        return {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
+                "levels": len(per) - 1, "leaf_blocks_per_level": [int(n) for n in per],
+                "cells_per_level": {str(k): v for k, v in self.cells_per_level.items()},
+                "scheme": self.scene.refinement.scheme, "operator": self.scene.fluid.operator,
+                "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
+                "force_lattice": list(self.force_lattice), "unit_system": self.scene.scene.units}
+
+    def allocation(self) -> dict[str, int]:
+        """Bytes of the populations of every level (leaves and ghost blocks, both buffers)."""
+        return {f"lbm_level{lv}": int(n) for lv, n in self.level_bytes.items()}

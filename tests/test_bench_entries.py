@@ -19,6 +19,7 @@ TINY = [
     pytest.param("dem", ["--n", "8", "--steps", "2"], id="dem"),
     pytest.param("coupling", ["--n", "16", "--bodies", "2", "--steps", "2"], id="coupling"),
     pytest.param("freesurface", ["--n", "8", "--steps", "2"], id="freesurface"),
+    pytest.param("amr", ["--n", "16", "--steps", "2", "--precision", "float64"], id="amr"),
     pytest.param("ship", ["--preset", "quick", "--records", "1"], id="ship", marks=SLOW),
     pytest.param("gpu_build", [], id="gpu_build", marks=SLOW),
 ]

@@ -56,6 +56,9 @@ def test_a_refined_run_restarts_bit_for_bit():
     b.step(20)
     for lv in a.lbm.levels:
         assert np.array_equal(a.lbm.solvers[lv].populations(), b.lbm.solvers[lv].populations())
+    other = build_model(_scene(REFINED.replace("levels = 1", "levels = 2").replace("level = 1", "level = 2")))
+    with pytest.raises(Exception, match="block octree differs"):
+        other.load_state(state)
 
 
 @pytest.mark.parametrize("edit, needle", [

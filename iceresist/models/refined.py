@@ -178,10 +178,11 @@ class RefinedFluidModel(Model):
         return fluid_probe(rho_lat, u_lat, np.isfinite(rho_lat), 0.5 * rho_lat.size * u_ref ** 2)
 
     def state(self) -> dict:
-        """Every level's populations in storage precision (bit for bit) and the iteration."""
+        """Every level's populations in storage precision (bit for bit), the iteration and the block octree
+        (the level and coordinates of every leaf)."""
         return {"f": {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()},
                 "iteration": np.int64(self.iteration), "precision": self.precision,
-                "blocks": np.array([self.lbm.views[lv].forest.nblocks for lv in self.lbm.levels], dtype=np.int64)}
+                "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}
 
     def load_state(self, state: dict):
         from iceresist.models.fluid import _set_populations
@@ -189,6 +190,11 @@ class RefinedFluidModel(Model):
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
+        lev, coord = state.get("octree_level"), state.get("octree_coord")
+        if lev is None or coord is None or not (np.array_equal(lev, self.octree.level)
+                                                and np.array_equal(coord, self.octree.coord)):
+            raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or boxes "
+                             "changed): run the scene again without --pickup")
         f = state.get("f", {})
         for lv, s in self.lbm.solvers.items():
             arr = np.asarray(f.get(str(lv), np.zeros(0)))

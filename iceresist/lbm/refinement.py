@@ -25,7 +25,8 @@ Level interfaces, through the ghost blocks of each level (:mod:`iceresist.grid.l
 
 Every level's leaves are then stepped by the fused stream-collide kernel of the uniform grid
 (:class:`~iceresist.lbm.solver.LBMSolver`), which also steps the ghost blocks (their values are refilled before
-they are read). This is the host (NumPy) orchestration of the level exchange, CPU only.
+they are read). The conservative transfers run as one kernel on the target (:mod:`iceresist.lbm.exchange`, CPU or
+CUDA, the state never leaves the device); the interpolating scheme runs in NumPy on the CPU.
 """
 
 from __future__ import annotations
@@ -263,6 +264,24 @@ def _apply_slots(table, dst, sources, weight: float = 1.0, linear: bool = False)
     dst[db, q, dc] = (weight * acc).astype(dst.dtype)
 
 
+def restriction_as_transfer(table):
+    """A :func:`restriction_table` in the form of the transfer kernel: every slot of every coarse ghost cell whose
+    eight children are fine leaves, eight packets of the fine level (tag 1) at weight 1/8 each (the kernel's
+    ``weight``)."""
+    if table is None:
+        return None
+    gb, gc, b, c, w = table
+    full = (w > 0).all(axis=-1)
+    gb, gc, b, c = gb[full], gc[full], b[full], c[full]
+    n = len(gb)
+    q = np.tile(np.arange(27), n)
+    rep = lambda a: np.repeat(a, 27, axis=0)  # noqa: E731
+    tag = np.full((n * 27, 8), FINE_T, dtype=np.int64)
+    zeros = np.zeros((n * 27, 8), dtype=np.int64)
+    stencil = (np.zeros((n * 27, 8, 3)), [(zeros, zeros, zeros.astype(bool))] * 6)
+    return rep(gb), q, rep(gc), tag, rep(b), rep(c), stencil
+
+
 def _apply(table, dst, src, neq_scale: float = 1.0):
     """dst[gb, :, gc] = sum_k w_k src[b_k, :, c_k] over the cells of a transfer table (in place), the
     non-equilibrium part (about the equilibrium of the result's own density and velocity) times ``neq_scale``."""
@@ -289,8 +308,14 @@ class RefinedLBM:
 
     def __init__(self, octree: BlockOctree, *, tau0: float, force0=(0.0, 0.0, 0.0), faces: dict | None = None,
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
-                 scheme: str = "conservative", reconstruction: str = "linear"):
+                 scheme: str = "conservative", reconstruction: str = "linear", target=None):
+        from iceresist.backends import jit
         from iceresist.lbm.solver import LBMSolver
+
+        self.target = target or jit.cpu
+        if self.target.is_cuda and scheme != "conservative":
+            raise InputError("scheme: the interpolating level interface runs on the CPU only; use the conservative "
+                             "scheme on CUDA")
 
         self.rescale = bool(rescale)
         if scheme not in SCHEMES:
@@ -319,7 +344,7 @@ class RefinedLBM:
             g = tuple(float(a) / 2 ** lv for a in force0)
             self.tau[lv] = tau
             self.solvers[lv] = LBMSolver(self.views[lv].forest, tau=tau, force=g, operator=operator,
-                                         precision=precision)
+                                         precision=precision, target=self.target)
         if scheme == "interpolate":
             self.prolong = {lv: prolongation_table(self.views[lv], self.views[lv - 1], self.periodic)
                             for lv in self.levels[1:]}
@@ -332,6 +357,7 @@ class RefinedLBM:
                              for lv in self.levels[:-1]}
             self.restrict = {lv: restriction_table(self.views[lv], self.views[lv + 1], self.periodic)
                              for lv in self.levels[:-1]}
+            self._kernel_tables(precision)
         for lv in self.levels[1:]:
             if self.rescale and (self.tau[lv - 1] == 1.0 or self.tau[lv] == 1.0):
                 raise InputError(f"tau = 1 on level {lv - 1 if self.tau[lv - 1] == 1.0 else lv}: its post-collision "
@@ -364,27 +390,58 @@ class RefinedLBM:
         feq = _equilibrium_minus_w(rho, u[0], u[1], u[2]).transpose(1, 0, 2)
         return feq + k * (f - feq)
 
+    def _kernel_tables(self, precision: str):
+        """The conservative transfer tables packed for the transfer kernel (:mod:`iceresist.lbm.exchange`) on the
+        target, and a scratch copy of every level's populations (the coarse level at t, the fine one at t and
+        t + 1/2)."""
+        from iceresist.lbm.exchange import pack_table, transfer_launcher
+
+        real = np.dtype(precision).type
+        dev = self.target.to_device
+
+        def packed(table):
+            if table is None:
+                return None
+            p = pack_table(table, real)
+            keys = ("db", "dq", "dc", "tag", "sb", "sc", "off", "nb", "nc", "nok")
+            return len(p["db"]), tuple(dev(p[k]) for k in keys)
+
+        self._transfer = transfer_launcher(self.target, real)
+        self._real = real
+        self._k_explode = {lv: None if t is None else (packed(t[0]), packed(t[1])) for lv, t in self.explode.items()}
+        self._k_coalesce = {lv: packed(t) for lv, t in self.coalesce.items()}
+        self._k_restrict = {lv: packed(restriction_as_transfer(t)) for lv, t in self.restrict.items()}
+        shape = {lv: (self.views[lv].forest.nblocks, 27, 512) for lv in self.levels}
+        self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv in self.levels for k in ("t", "half")}
+
+    def _launch(self, packed, dst, sources, weight=1.0, linear=False):
+        if packed is None or packed[0] == 0:
+            return
+        n, cols = packed
+        self._transfer(n, *cols, self._real(weight), np.int64(linear), *sources, dst)
+
     def _advance_conservative(self, lv: int):
         """Level lv from t to t + 1: its finer level first (two sub-steps, fed by exploded packets of level lv at
-        t), then level lv, pulling the coalesced packets of the finer level."""
+        t), then level lv, pulling the coalesced packets of the finer level. Every transfer is a kernel launch on
+        the target; nothing crosses to the host."""
         s = self.solvers[lv]
         finer = lv + 1 if lv + 1 in self.solvers else None
         if finer is not None:
             sf = self.solvers[finer]
             linear = self.reconstruction == "linear"
-            if linear and self.restrict[lv] is not None:
-                _apply(self.restrict[lv], s.state, sf.state)    # the gradient across the interface sees the fine level
-            c_t = s.state.copy()
-            f_t = sf.state.copy()
-            tables = self.explode[finer]
+            if linear:     # the gradient across the interface sees the fine level
+                self._launch(self._k_restrict[lv], s.state, (sf.state, sf.state, sf.state), weight=0.125)
+            c_t, f_t, f_half = self._scratch[(lv, "t")], self._scratch[(finer, "t")], self._scratch[(finer, "half")]
+            self.target.copy(c_t, s.state)
+            self.target.copy(f_t, sf.state)
+            tables = self._k_explode[finer]
             for sub in (0, 1):
                 if tables is not None:
-                    _apply_slots(tables[sub], sf.state, (c_t, f_t), linear=linear)
+                    self._launch(tables[sub], sf.state, (c_t, f_t, f_t), linear=linear)
                 if sub == 1:
-                    f_half = sf.state.copy()
+                    self.target.copy(f_half, sf.state)
                 self._advance_conservative(finer)
-            if self.coalesce[lv] is not None:
-                _apply_slots(self.coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
+            self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
         s.step()
 
     def _advance(self, lv: int):

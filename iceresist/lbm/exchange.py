@@ -1,0 +1,81 @@
+"""The level-interface transfer of block refinement as a kernel, one source for CPU and CUDA.
+
+Each item of a transfer table (:func:`iceresist.lbm.refinement.explosion_tables`,
+:func:`~iceresist.lbm.refinement.coalescence_table`) writes one population slot:
+
+    dst[db, q, dc] = weight * sum_k packet_k
+
+where packet k is slot q of cell (sb_k, sc_k) of the source array its tag names (0: the coarse level at t, 1: the
+fine level at t, 2: the fine level at t + 1/2), and, for coarse packets with the linear reconstruction, plus the
+central difference over the coarse neighbours (nb, nc)[k, 2a], (nb, nc)[k, 2a + 1] along axis a times the packet's
+offset (span: how many of the two neighbours exist). The host form is the NumPy reference
+(:func:`iceresist.lbm.refinement._apply_slots`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iceresist.backends.launch import ItemLauncher
+
+TRANSFER_ARGS = ("db", "dq", "dc", "tag", "sb", "sc", "off", "nb", "nc", "nok", "weight", "linear", "src0", "src1",
+                 "src2", "dst")
+
+
+def build_transfer(target, real):
+    """The item function ``transfer(i, *TRANSFER_ARGS)`` (module docstring)."""
+    zero = real(0.0)
+
+    @target.device
+    def packet(src, b, q, c, k, i, nb, nc, nok, off, linear, is_coarse):
+        v = src[b, q, c]
+        if linear != 0 and is_coarse:
+            for a in range(3):
+                m = 2 * a
+                p = 2 * a + 1
+                span = real(nok[i, k, m] + nok[i, k, p])
+                if span > zero:
+                    v += off[i, k, a] * (src[nb[i, k, p], q, nc[i, k, p]] - src[nb[i, k, m], q, nc[i, k, m]]) / span
+        return v
+
+    @target.device
+    def transfer(i, db, dq, dc, tag, sb, sc, off, nb, nc, nok, weight, linear, src0, src1, src2, dst):
+        q = dq[i]
+        acc = zero
+        for k in range(tag.shape[1]):
+            t = tag[i, k]
+            if t == 0:
+                acc += packet(src0, sb[i, k], q, sc[i, k], k, i, nb, nc, nok, off, linear, True)
+            elif t == 1:
+                acc += packet(src1, sb[i, k], q, sc[i, k], k, i, nb, nc, nok, off, linear, False)
+            else:
+                acc += packet(src2, sb[i, k], q, sc[i, k], k, i, nb, nc, nok, off, linear, False)
+        dst[db[i], q, dc[i]] = weight * acc
+
+    return transfer
+
+
+_CACHE: dict = {}
+
+
+def transfer_launcher(target, real) -> ItemLauncher:
+    """The compiled transfer launcher ``launcher(n, *TRANSFER_ARGS)`` (cached per target and precision)."""
+    key = (target.name, target.simulator, np.dtype(real).name)
+    if key not in _CACHE:
+        _CACHE[key] = ItemLauncher(target, build_transfer(target, real), TRANSFER_ARGS, label="level_transfer")
+    return _CACHE[key]
+
+
+def pack_table(table, real) -> dict:
+    """A transfer table (tuple of NumPy columns) as the flat arrays of :data:`TRANSFER_ARGS` (host)."""
+    db, q, dc, tag, sb, sc, (off, nbrs) = table
+    if tag.ndim == 1:
+        tag, sb, sc = tag[:, None], sb[:, None], sc[:, None]
+        off = off[:, None, :]
+        nbrs = [(b[:, None], c[:, None], ok[:, None]) for b, c, ok in nbrs]
+    nb = np.stack([b for b, _, _ in nbrs], axis=-1)
+    nc = np.stack([c for _, c, _ in nbrs], axis=-1)
+    nok = np.stack([ok for _, _, ok in nbrs], axis=-1)
+    as_int = {k: np.ascontiguousarray(v, dtype=np.int64) for k, v in
+              dict(db=db, dq=q, dc=dc, tag=tag, sb=sb, sc=sc, nb=nb, nc=nc).items()}
+    return {**as_int, "nok": np.ascontiguousarray(nok, dtype=np.int8), "off": np.ascontiguousarray(off, dtype=real)}

@@ -19,7 +19,7 @@ from iceresist.errors import InputError
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import Q
 from iceresist.models.base import Model
-from iceresist.models.fluid import check_block_shape, forest_faces, resolve_target
+from iceresist.models.fluid import FluidModel, check_block_shape, forest_faces, resolve_target
 from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)
@@ -145,11 +145,8 @@ class RefinedFluidModel(Model):
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
                 "flags": np.full(self.shape_cells, FL.FLUID, dtype=np.uint8)}
 
-    @staticmethod
-    def field_units(lattice: bool) -> dict[str, str]:
-        if lattice:
-            return {"rho": "lattice", "u": "lattice", "pressure": "lattice", "flags": "bits"}
-        return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits"}
+    #: The fluid model's fields, so their units too.
+    field_units = staticmethod(FluidModel.field_units)
 
     def is_finite(self) -> bool:
         return math.isfinite(self.lbm.mass())

@@ -379,17 +379,6 @@ class RefinedLBM:
             s.initialize(rho=rho, u=u)
         self.iteration = 0
 
-    def _scaled(self, state, fine: int, to_fine: bool):
-        """``state`` with its non-equilibrium part times :meth:`neq_scale` (a copy; the state itself where 1)."""
-        k = self.neq_scale(fine, to_fine)
-        if k == 1.0:
-            return state
-        f = state.astype(np.float64)
-        rho = 1.0 + f.sum(axis=1)
-        u = np.einsum("qa,bqc->abc", C.astype(np.float64), f) / rho
-        feq = _equilibrium_minus_w(rho, u[0], u[1], u[2]).transpose(1, 0, 2)
-        return feq + k * (f - feq)
-
     def _kernel_tables(self, precision: str):
         """The conservative transfer tables packed for the transfer kernel (:mod:`iceresist.lbm.exchange`) on the
         target, and a scratch copy of every level's populations (the coarse level at t, the fine one at t and

@@ -64,7 +64,7 @@ def level_views(octree: BlockOctree, faces: dict | None = None) -> list[LevelVie
         for off in OFFSETS:
             if not off.any():
                 continue
-            t, inside = octree._neighbour_coords(np.full(len(co), lv), co, off)
+            t, inside = octree.neighbour_coords(np.full(len(co), lv), co, off)
             t = t[inside]
             is_leaf = octree.find(np.full(len(t), lv), t) >= 0
             ghosts.update(map(tuple, t[~is_leaf].tolist()))

@@ -117,7 +117,7 @@ class BlockOctree:
             idx[new], lev[new] = hit[new], m[new]
         return idx, lev
 
-    def _neighbour_coords(self, level, coord, offset):
+    def neighbour_coords(self, level, coord, offset):
         """Coordinates of the block at ``offset`` from each (level, coord), wrapped on periodic axes; ``inside``
         False where it lies beyond a closed face."""
         shape = self.root[None, :] << np.asarray(level, dtype=np.int64)[:, None]
@@ -172,7 +172,7 @@ class BlockOctree:
             for off in OFFSETS:
                 if not off.any():
                     continue
-                t, inside = self._neighbour_coords(lv, co, off)
+                t, inside = self.neighbour_coords(lv, co, off)
                 idx, lev = self.leaf_at(lv[inside], t[inside])
                 bad = (idx >= 0) & (lev < lv[inside] - 1)
                 coarse[idx[bad]] = True
@@ -191,7 +191,7 @@ class BlockOctree:
         for k, off in enumerate(OFFSETS):
             if not off.any():
                 continue
-            t, inside = self._neighbour_coords(self.level, self.coord, off)
+            t, inside = self.neighbour_coords(self.level, self.coord, off)
             rows = np.flatnonzero(inside)
             idx, lev = self.leaf_at(self.level[rows], t[rows])
             is_same = (idx >= 0) & (lev == self.level[rows])

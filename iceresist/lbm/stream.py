@@ -124,11 +124,15 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
         else:
             s += f"            ul{comp} = (zero{expr} - half * F{comp}) / rho_l\n"
     if free_surface:
+        # the sub-cell depth of the cell itself only where a gas source is possible: a GAS neighbour makes the
+        # cell NEAR_SURFACE (reflag), and NEED_U holds that bit; a cell near a wall alone skips the artanh
         s += "        uu_l = ulx * ulx + uly * uly + ulz * ulz\n"
         s += "        g3 = -three * Fz\n"
-        s += "        t = two * phi[b, c] - one\n"
-        s += "        t = min(max(t, -tclip), tclip)\n"
-        s += "        s_c = half_width * atanh(t)\n"
+        s += "        s_c = zero\n"
+        s += "        if flag & NEED_U:\n"
+        s += "            t = two * phi[b, c] - one\n"
+        s += "            t = min(max(t, -tclip), tclip)\n"
+        s += "            s_c = half_width * atanh(t)\n"
     for q in range(1, Q):
         key, cell = _source_lines(q)
         cx, cy, cz = (int(v) for v in C[q])
@@ -319,9 +323,11 @@ def stream_collide_block_source(free_surface: bool = False) -> str:
     rho g, as in :func:`stream_collide_source`).
 
     1. pull: the 27 populations of the 512 cells into a block scratch, population q of cell c at
-       ``tmp[q * PLANE + 8 + c]``; a block whose cells are all FLUID is gathered line by line
-       (:func:`_line_gather`) without per-cell neighbour lookups, any other block cell by cell with
-       the boundary rules of the per-cell update;
+       ``tmp[q * PLANE + 8 + c]``, gathered line by line (:func:`_line_gather`) without per-cell neighbour
+       look-ups; then, in a block with other cells than plain FLUID ones, those cells are pulled again one by one
+       with the boundary rules of the per-cell update (a line from a missing block reads some row of ``src``, in
+       bounds, and every cell it lands in is such a cell). A block with no FLUID cell returns at once: it
+       writes nothing in any form;
     2. collide: one branch-free loop over the 512 cells reading and writing ``tmp`` at constant
        offsets, which LLVM vectorises across cells (8 float32 or 4 float64 cells per AVX2 register);
     3. write: ``tmp`` to ``dst[b]`` (fluid cells only in a mixed block).
@@ -329,15 +335,19 @@ def stream_collide_block_source(free_surface: bool = False) -> str:
     Same arithmetic as the per-cell form, cell by cell; only the order of the work differs.
     """
     s = f"def stream_collide_block(b, {', '.join(FS_ARGS if free_surface else ARGS)}):\n"
+    s += "    full = True\n    wet = False\n"
+    s += (f"    for c in range({CELLS}):\n        fc = flags[b, c]\n        if fc != FLUID:\n            full = False\n"
+          "        if fc & FLUID:\n            wet = True\n")
+    s += "    if not wet:\n        return\n"   # no cell to update: nothing is written
     s += f"    tmp = np.empty({Q * PLANE}, rdtype)\n"
-    s += "    full = True\n"
-    s += f"    for c in range({CELLS}):\n        if flags[b, c] != FLUID:\n            full = False\n"
-    s += "    if full:\n"
-    s += "".join("    " + ln + "\n" for q in range(Q) for ln in _line_gather(q).splitlines())
-    s += "    else:\n"
+    # every block is gathered line by line; the cells with a boundary link (or none to update) are then pulled
+    # again one by one, so only those pay for the neighbour look-ups
+    s += "".join(ln + "\n" for q in range(Q) for ln in _line_gather(q).splitlines())
+    s += "    if not full:\n"
     zero_fill = "".join(f"                tmp[{_slot(q)} + c] = zero\n" for q in range(Q))
     body = _pull_body(free_surface).replace("        return\n", zero_fill + "                continue\n", 1)
     s += f"        for c in range({CELLS}):\n"
+    s += "            if flags[b, c] == FLUID:\n                continue\n"
     s += "".join("        " + ln + "\n" for ln in body.splitlines())
     s += "".join(f"            tmp[{_slot(q)} + c] = f{q}\n" for q in range(Q))
     # 2. collide, vectorised across cells

@@ -268,11 +268,54 @@ def build_phase_blocks(real, lat: HLattice):
                     tmp[c0 + x] = ln[x + o] if sl[x + o] < 0 else own
 
     @dev
-    def stream_block(b, h_in, h_out, phi, nbr, solid):
-        """Pass 1 for block b: h_out = pulled h, phi = sum_k of them; a solid cell keeps its h and phi."""
+    def stream_clear(b, h_in, h_out, phi, nbr, acc):
+        """Pass 1 for a block whose 26 neighbours exist and which, like them, holds no solid cell: every source is a
+        plain pull, so the lines go straight into ``h_out`` (no scratch, no bounce-back select). The same values
+        and the same sums as the general form."""
+        for k in range(nq):
+            cx = hcx[k]
+            cy = hcy[k]
+            cz = hcz[k]
+            for z in range(8):
+                for y in range(8):
+                    bm, sbase = neighbour(nbr, b, 0, y, z, 0, -cy, -cz)
+                    c0 = 8 * (y + 8 * z)
+                    if cx == 0:
+                        for x in range(8):
+                            v = h_in[bm, k, sbase + x]
+                            h_out[b, k, c0 + x] = v
+                            acc[c0 + x] += v
+                    elif cx == 1:   # cell x pulls from x - 1; cell 0 from the -x block
+                        be, ce = neighbour(nbr, b, 0, y, z, -1, -cy, -cz)
+                        v = h_in[be, k, ce]
+                        h_out[b, k, c0] = v
+                        acc[c0] += v
+                        for x in range(1, 8):
+                            v = h_in[bm, k, sbase + x - 1]
+                            h_out[b, k, c0 + x] = v
+                            acc[c0 + x] += v
+                    else:           # cell x pulls from x + 1; cell 7 from the +x block
+                        for x in range(7):
+                            v = h_in[bm, k, sbase + x + 1]
+                            h_out[b, k, c0 + x] = v
+                            acc[c0 + x] += v
+                        be, ce = neighbour(nbr, b, 7, y, z, 1, -cy, -cz)
+                        v = h_in[be, k, ce]
+                        h_out[b, k, c0 + 7] = v
+                        acc[c0 + 7] += v
+        for c in range(512):
+            phi[b, c] = acc[c]
+
+    @dev
+    def stream_block(b, h_in, h_out, phi, nbr, solid, clear):
+        """Pass 1 for block b: h_out = pulled h, phi = sum_k of them; a solid cell keeps its h and phi.
+        ``clear[b]`` (:func:`build_clear_blocks`): b and its 26 neighbours exist and hold no solid cell."""
         b = np.int64(b)
-        tmp = np.empty(512, rdtype)
         acc = np.zeros(512, rdtype)
+        if clear[b]:
+            stream_clear(b, h_in, h_out, phi, nbr, acc)
+            return
+        tmp = np.empty(512, rdtype)
         ln = np.empty(10, rdtype)
         sl = np.empty(10, np.int32)
         covered = False
@@ -378,6 +421,43 @@ def build_phase_blocks(real, lat: HLattice):
     return stream_block, collide_block
 
 
+def build_clear_blocks():
+    """Compile ``(solid_block, clear_block)``, the CPU passes that find the blocks where pass 1 is a plain pull:
+
+    * ``solid_block(b, solid, has)``: ``has[b]`` = 1 where a cell of b is covered by a solid (``solid >= 0``);
+    * ``clear_block(b, has, nbr, clear)``: ``clear[b]`` = 1 where b and its 26 neighbour blocks exist and none
+      holds a solid cell (no source of b is a wall or a solid: no bounce-back)."""
+    int8, int64 = np.int8, np.int64
+
+    def solid_block(b, solid, has):
+        b = int64(b)
+        m = int8(0)
+        for c in range(CELLS):
+            if solid[b, c] >= 0:
+                m = int8(1)
+        has[b] = m
+
+    def clear_block(b, has, nbr, clear):
+        b = int64(b)
+        m = int8(1) if has[b] == 0 else int8(0)
+        for q in range(1, 27):
+            bn = nbr[b, q]
+            if bn < 0:
+                m = int8(0)
+            elif has[bn] != 0:
+                m = int8(0)
+        clear[b] = m
+
+    return jit.cpu.device(solid_block), jit.cpu.device(clear_block)
+
+
+@lru_cache(maxsize=None)
+def clear_launchers():
+    solid_block, clear_block = build_clear_blocks()
+    return (BlockLauncher(jit.cpu, solid_block, ("solid", "has"), label="h_clear"),
+            BlockLauncher(jit.cpu, clear_block, ("has", "nbr", "clear"), label="h_clear"))
+
+
 @lru_cache(maxsize=None)
 def phase_launchers(target, precision: str, lattice_name: str, vector: bool = True):
     """Compile (once per target, precision and h lattice) the launchers ``(stream, collide, init)``; on the
@@ -390,7 +470,7 @@ def phase_launchers(target, precision: str, lattice_name: str, vector: bool = Tr
         return (CellLauncher(target, stream_cell, st_args, label="h_stream"),
                 CellLauncher(target, collide_cell, co_args, label="h_collide"), init)
     stream_block, collide_block = build_phase_blocks(real, lat)
-    return (CellLauncher(target, stream_block, st_args, per_block=True, label="h_stream"),
+    return (CellLauncher(target, stream_block, st_args + ("clear",), per_block=True, label="h_stream"),
             CellLauncher(target, collide_block, co_args, per_block=True, label="h_collide"), init)
 
 
@@ -441,6 +521,8 @@ class PhaseField:
         nbr = forest.nbr
         self.nblocks = int(nbr.shape[0])
         self._stream, self._collide, self._init = phase_launchers(target, precision, self.lat.name, vector)
+        #: the block form of pass 1 takes the blocks it may pull plainly (:func:`build_clear_blocks`)
+        self._block_form = vector and not target.is_cuda
         self.nbr = self._to_target(np.ascontiguousarray(nbr, dtype=np.int64))
         shape = (self.nblocks, self.lat.q, CELLS)
         self.h = self._to_target(np.zeros(shape, self.real))
@@ -449,6 +531,7 @@ class PhaseField:
         #: Body covering each cell (-1: none), ``[block, cell]`` int32; the coupling replaces it by its own table.
         self.solid = self._to_target(np.full((self.nblocks, CELLS), -1, np.int32))
         self._volume = None  # (launcher, per-block sums), made at the first volume()
+        self._clear = None   # (launchers, has-solid and clear flags per block), made at the first block-form step
 
     @property
     def omega(self):
@@ -476,7 +559,15 @@ class PhaseField:
 
     def step(self, u) -> None:
         """One time step: h and phi(t+1) by pull streaming, then collide h with u (``[block, 3, cell]``)."""
-        self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid)
+        if self._block_form:
+            if self._clear is None:
+                self._clear = (*clear_launchers(), np.zeros(self.nblocks, np.int8), np.zeros(self.nblocks, np.int8))
+            solid_block, clear_block, has, clear = self._clear
+            solid_block(self.nblocks, self.solid, has)
+            clear_block(self.nblocks, has, self.nbr, clear)
+            self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid, clear)
+        else:
+            self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid)
         self._collide(self.nblocks, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa, self.solid)
         self.h, self.h_next = self.h_next, self.h
 

@@ -189,7 +189,7 @@ def build_velocity_block(real):
     (:func:`build_surface_cells`): the sums over the 27 populations run across the 512 cells of the block at once
     (vectorised), each cell's in the order of the cell form, so u is the same bit for bit (a product c_q f_q
     with c_q in {-1, 0, 1} is exact; the zero terms are left out)."""
-    ex, ey, ez = (L.C[:, a].astype(np.int64) for a in range(3))
+    e = np.ascontiguousarray(L.C.T.astype(np.int64))       # e[a, q]: component a of c_q
     zero, one, half = real(0.0), real(1.0), real(0.5)
     fluid = np.uint8(FL.FLUID)
     int64 = np.int64
@@ -203,40 +203,27 @@ def build_velocity_block(real):
                     u[b, a, c] = zero
             return
         rho = np.empty(CELLS, real)
-        jx = np.empty(CELLS, real)
-        jy = np.empty(CELLS, real)
-        jz = np.empty(CELLS, real)
+        j = np.empty((3, CELLS), real)
         for c in range(CELLS):
             rho[c] = one
-            jx[c] = zero
-            jy[c] = zero
-            jz[c] = zero
+        for a in range(3):
+            for c in range(CELLS):
+                j[a, c] = zero
         for q in range(27):
             for c in range(CELLS):
                 rho[c] += f[s, q, c]
-            if ex[q] > 0:
-                for c in range(CELLS):
-                    jx[c] += f[s, q, c]
-            elif ex[q] < 0:
-                for c in range(CELLS):
-                    jx[c] -= f[s, q, c]
-            if ey[q] > 0:
-                for c in range(CELLS):
-                    jy[c] += f[s, q, c]
-            elif ey[q] < 0:
-                for c in range(CELLS):
-                    jy[c] -= f[s, q, c]
-            if ez[q] > 0:
-                for c in range(CELLS):
-                    jz[c] += f[s, q, c]
-            elif ez[q] < 0:
-                for c in range(CELLS):
-                    jz[c] -= f[s, q, c]
+            for a in range(3):
+                if e[a, q] > 0:
+                    for c in range(CELLS):
+                        j[a, c] += f[s, q, c]
+                elif e[a, q] < 0:
+                    for c in range(CELLS):
+                        j[a, c] -= f[s, q, c]
         for c in range(CELLS):
             if flags[b, c] & fluid:
-                u[b, 0, c] = jx[c] / rho[c] - half * gx
-                u[b, 1, c] = jy[c] / rho[c] - half * gy
-                u[b, 2, c] = jz[c] / rho[c] - half * gz
+                u[b, 0, c] = j[0, c] / rho[c] - half * gx
+                u[b, 1, c] = j[1, c] / rho[c] - half * gy
+                u[b, 2, c] = j[2, c] / rho[c] - half * gz
             else:
                 u[b, 0, c] = zero
                 u[b, 1, c] = zero

@@ -4,7 +4,7 @@ spacing. Per level: cells, steps per level-0 step, seconds in its fused kernel a
 (host NumPy) apart; the whole step as fine-equivalent cell updates per second (the uniform finest grid's cells
 times its steps, over the refined run's wall time) beside the uniform finest grid's own rate. BGK, CPU.
 
-    python -m validation.bench amr [--n 32] [--steps 20] [--precision float32] [--json]
+    python -m validation.bench amr [--n 64] [--steps 20] [--precision float32] [--json]
 """
 
 from __future__ import annotations

@@ -133,7 +133,8 @@ def check_finite(sim):
 
 # -- output writers -------------------------------------------------------------------------------------
 class FieldWriter:
-    """Snapshots of ``model.fields()`` (or the names in ``fields``) into a :class:`~iceresist.io.hdf5.RunFile`."""
+    """Snapshots of ``model.fields()`` (or the names in ``fields``) into a :class:`~iceresist.io.hdf5.RunFile`; for a
+    model with ``level_fields`` (block refinement) also the leaf cells of every level."""
 
     def __init__(self, runfile, schedule, fields=None, *, units: dict | None = None, write_final: bool = True):
         self.runfile, self.schedule, self.fields = runfile, schedule, fields
@@ -149,6 +150,9 @@ class FieldWriter:
             sim.diverge()
             return
         self.runfile.write_fields(model.iteration, model.time_s, data, units=self.units)
+        level_fields = getattr(model, "level_fields", None)     # a refined model: every level's leaf cells too
+        if level_fields is not None:
+            self.runfile.write_level_fields(model.iteration, model.time_s, level_fields(self.fields), units=self.units)
         self.last_iteration = model.iteration
 
     def pickup(self, sim):

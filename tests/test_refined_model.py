@@ -76,3 +76,61 @@ def test_bad_refinement_exits_2_with_one_line(tmp_path, main, edit, needle):  # 
     rc, err = main(p, "--output", tmp_path / "out")
     _one_line_error(rc, err, needle)
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_refined_run_writes_every_level_for_paraview(tmp_path, main):  # noqa: F811
+    """`iceresist run` of the refined channel (20 level-0 steps, fields at 0.1 s): the result holds level 0 (the
+    upper block, 512 cells of 1 mm) and level 1 (the lower half, 4096 cells of 0.5 mm) as hexahedra that tile the
+    domain once (their volumes sum to the domain's, each cell's corners span its own cell size), the fields of each
+    level's cells in the order of its hexahedra (the level-0 grid's lower cells are the means of eight level-1
+    cells), and a levels sidecar naming both levels' meshes and fields in the file. Planted: nodes at the
+    coarse cell size on every level (volumes 8x too large on level 1) or the cells written in another order than
+    the values fail."""
+    import xml.etree.ElementTree as ET
+
+    from iceresist.io.hdf5 import RunFile
+
+    p = tmp_path / "refined_channel.toml"
+    p.write_text(REFINED.replace("end_time_s = 20.0", "steps = 20").replace("fields_every_s = 5.0",
+                                                                             "fields_every_s = 0.1"))
+    rc, err = main(p, "--output", tmp_path / "out")
+    assert rc == 0, err
+    h5 = tmp_path / "out" / "refined_channel.h5"
+    with RunFile(h5) as rf:
+        its = rf.level_snapshot_iterations()
+        assert its == rf.snapshot_iterations() and its[-1] == 20
+        volume = 0.0
+        for lv, n, dx in ((0, 512, 1e-3), (1, 4096, 5e-4)):
+            nodes, hexes = rf.level_mesh(lv)
+            assert hexes.shape == (n, 8)
+            corners = nodes[hexes]                                   # (n, 8, 3)
+            span = corners.max(axis=1) - corners.min(axis=1)
+            assert np.allclose(span, dx)
+            volume += float(np.prod(span, axis=1).sum())
+            centres = corners.mean(axis=1)
+            if lv == 0:
+                assert centres[:, 2].min() > 0.008
+            else:
+                assert centres[:, 2].max() < 0.008
+        assert volume == pytest.approx(0.008 * 0.008 * 0.016, rel=1e-12)
+        # level 1's u_x against the level-0 grid's lower half, by position
+        nodes, hexes = rf.level_mesh(1)
+        centres = nodes[hexes].mean(axis=1)
+        u1 = rf.read_level_field(20, 1, "u")[:, 0]
+        u0 = rf.read_field(20, "u")[..., 0]
+        cell0 = np.floor(centres / 1e-3).astype(int)
+        means = np.zeros(u0.shape)
+        np.add.at(means, tuple(cell0.T), u1 / 8.0)
+        assert np.abs(means[:, :, :8] - u0[:, :, :8]).max() < 1e-6 * np.abs(u0).max()
+        assert np.abs(u1).max() > 0.0
+    xml = ET.parse(h5.with_suffix(".levels.xdmf")).getroot()
+    grids = xml.findall("./Domain/Grid/Grid")
+    assert len(grids) == len(its)
+    names = [g.get("Name") for g in grids[-1].findall("Grid")]
+    assert names == ["level_0", "level_1"]
+    import h5py
+    with h5py.File(h5, "r") as f:
+        for item in grids[-1].iter("DataItem"):
+            path = item.text.split(":", 1)[1]
+            assert path in f
+            assert " ".join(map(str, f[path].shape)) == item.get("Dimensions")

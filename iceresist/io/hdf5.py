@@ -11,6 +11,8 @@ Layout::
         flags [z, y, x]       uint8
     timeseries/               one resizable 1-D (or (n, k)) dataset per column;
       iteration, time_s, ...  rows appended as the run goes
+    levels/                   a refined run only: every level's leaf cells as hexahedra and their
+                              snapshots, with a second sidecar <name>.levels.xdmf (:mod:`iceresist.io.levels`)
 
 Datasets are stored ``[z, y, x]`` (x fastest) because XDMF/ParaView read the
 last index as x; :meth:`RunFile.read_field` returns the ``[x, y, z]`` array the
@@ -28,6 +30,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from iceresist.io import levels as io_levels
 from iceresist.io import xdmf
 
 log = logging.getLogger(__name__)
@@ -105,6 +108,7 @@ class RunFile:
             if self._write_xdmf:
                 self.flush()
                 self.write_xdmf()
+                self.write_levels_xdmf()
             self.h5.close()
 
     def flush(self):
@@ -189,6 +193,75 @@ class RunFile:
             return None
         return xdmf.write(self.xdmf_path, self.path, shape, self.dx_m, self.origin_m, self._snapshots())
 
+    # -- refinement levels ----------------------------------------------------------------------------
+    @property
+    def levels_xdmf_path(self) -> Path:
+        return self.path.with_suffix(".levels.xdmf")
+
+    def write_level_fields(self, iteration: int, time_s: float, levels, units: dict | None = None):
+        """One snapshot of the leaf cells of every refinement level: ``levels`` is a list of dicts with ``level``,
+        ``dx_m``, ``cells_ijk`` ((n, 3) cell indices of that level) and ``fields`` (name -> (n,) or (n, 3) array in
+        the order of ``cells_ijk``). A level's mesh is written the first time it appears (static refinement)."""
+        root = self.h5.require_group("levels")
+        mesh = root.require_group("mesh")
+        for lv in levels:
+            name = f"level_{int(lv['level'])}"
+            if name not in mesh:
+                nodes, hexes = io_levels.hexahedra(lv["cells_ijk"], lv["dx_m"], self.origin_m)
+                g = mesh.create_group(name)
+                g.attrs["level"] = int(lv["level"])
+                g.attrs["dx_m"] = float(lv["dx_m"])
+                g.create_dataset("nodes", data=nodes)
+                g.create_dataset("hexahedra", data=hexes)
+        snap = root.create_group(_SNAP_FMT.format(int(iteration)))
+        snap.attrs["iteration"] = int(iteration)
+        snap.attrs["time_s"] = float(time_s)
+        for lv in levels:
+            n = mesh[f"level_{int(lv['level'])}/hexahedra"].shape[0]
+            for fname, arr in lv["fields"].items():
+                arr = np.asarray(arr)
+                if arr.shape[0] != n:
+                    raise ValueError(f"level {lv['level']} field {fname!r} has {arr.shape[0]} rows, the level has "
+                                     f"{n} cells")
+                if np.issubdtype(arr.dtype, np.floating):
+                    arr = arr.astype(np.float32)
+                ds = snap.create_dataset(f"level_{int(lv['level'])}/{fname}", data=arr)
+                if units and fname in units:
+                    ds.attrs["units"] = units[fname]
+        self.flush()
+        if self._write_xdmf:
+            self.write_levels_xdmf()
+
+    def level_snapshot_iterations(self) -> list[int]:
+        if "levels" not in self.h5:
+            return []
+        return sorted(int(k) for k in self.h5["levels"].keys() if k != "mesh")
+
+    def read_level_field(self, iteration: int, level: int, name: str) -> np.ndarray:
+        """A stored level field, (n,) or (n, 3), rows in the order of the level's hexahedra."""
+        return self.h5["levels"][_SNAP_FMT.format(int(iteration))][f"level_{int(level)}"][name][...]
+
+    def level_mesh(self, level: int):
+        """(nodes (m, 3) metres, hexahedra (n, 8)) of one level."""
+        g = self.h5["levels"]["mesh"][f"level_{int(level)}"]
+        return g["nodes"][...], g["hexahedra"][...]
+
+    def write_levels_xdmf(self):
+        """(Re)write the levels sidecar listing every level snapshot in the file (none without levels)."""
+        if "levels" not in self.h5:
+            return None
+        mesh = self.h5["levels"]["mesh"]
+        meshes = sorted((io_levels.LevelMesh(int(g.attrs["level"]), float(g.attrs["dx_m"]), g["nodes"].shape[0],
+                                             g["hexahedra"].shape[0]) for g in mesh.values()), key=lambda m: m.level)
+        snaps = []
+        for key in sorted(k for k in self.h5["levels"].keys() if k != "mesh"):
+            g = self.h5["levels"][key]
+            arrays = tuple((int(lname.split("_")[1]),
+                            xdmf.Array(n, f"/levels/{key}/{lname}/{n}", tuple(ds.shape), ds.dtype.str[1:]))
+                           for lname, lg in g.items() for n, ds in lg.items())
+            snaps.append(xdmf.Snapshot(float(g.attrs["time_s"]), int(g.attrs["iteration"]), arrays))
+        return io_levels.write(self.levels_xdmf_path, self.path, meshes, snaps)
+
     # -- time series ----------------------------------------------------------------------------------
     def append_timeseries(self, row: dict, group: str = "timeseries"):
         """Append one row; each key is a column (scalar or fixed-shape array). Missing values are NaN."""
@@ -225,6 +298,9 @@ class RunFile:
         for key in list(self.h5["fields"].keys()):
             if int(key) > iteration:
                 del self.h5["fields"][key]
+        for key in self.level_snapshot_iterations():
+            if key > iteration:
+                del self.h5["levels"][_SNAP_FMT.format(key)]
         for gname in list(self.h5.keys()):
             g = self.h5[gname]
             if isinstance(g, h5py.Group) and "iteration" in g and isinstance(g["iteration"], h5py.Dataset):
@@ -235,3 +311,4 @@ class RunFile:
         self.flush()
         if self._write_xdmf:
             self.write_xdmf()
+            self.write_levels_xdmf()

@@ -3,8 +3,9 @@
 :class:`RefinedFluidModel` builds the block octree from the scene's boxes (level 0 is the grid of ``domain.dx_m``),
 reports the memory its blocks take before it allocates them (and refuses a scene that does not fit the machine),
 and steps :class:`~iceresist.lbm.refinement.RefinedLBM`: one model step is one level-0 step, level l taking 2^l
-steps in it. Fields are written on the level-0 grid (each level-0 cell the mean of the leaf cells inside it);
-diagnostics sum every leaf with its own cell volume. CPU only so far.
+steps in it. Fields are written on the level-0 grid (each level-0 cell the mean of the leaf cells inside it) and, for
+ParaView, every level's leaf cells as hexahedra (``<run>.levels.xdmf``, :mod:`iceresist.io.levels`); diagnostics
+sum every leaf with its own cell volume. CPU only so far.
 """
 
 from __future__ import annotations
@@ -144,6 +145,22 @@ class RefinedFluidModel(Model):
         return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
                 "flags": np.full(self.shape_cells, FL.FLUID, dtype=np.uint8)}
+
+    def level_fields(self, names=None) -> list[dict]:
+        """rho (kg/m^3), u (m/s) and pressure (Pa, gauge) on the leaf cells of every level, each level with its cell
+        size and cell indices (:meth:`iceresist.io.hdf5.RunFile.write_level_fields`); ``names`` picks fields."""
+        u = self.units
+        out = []
+        for lv in self.lbm.levels:
+            rho, vel, (x, y, z) = self.lbm.leaf_fields(lv)
+            rho = rho.ravel()
+            f = {"rho": u.density_to_physical(rho), "u": u.velocity_to_physical(vel.reshape(3, -1).T),
+                 "pressure": u.pressure_to_physical((rho - 1.0) / 3.0)}
+            if names is not None:
+                f = {k: v for k, v in f.items() if k in names}
+            out.append({"level": lv, "dx_m": u.dx_m / 2 ** lv, "fields": f,
+                        "cells_ijk": np.stack([x.ravel(), y.ravel(), z.ravel()], axis=-1)})
+        return out
 
     #: The fluid model's fields, so their units too.
     field_units = staticmethod(FluidModel.field_units)

@@ -113,7 +113,9 @@ the ship, the ice field, the contact law and extra bodies. Run one with
 
 `iceresist run cavity` (or `poiseuille`) runs a built-in scene. The result is
 `<output.directory>/<scene.name>.h5` with an XDMF sidecar `<scene.name>.xdmf`
-(open it in ParaView) and a checkpoint `<scene.name>.checkpoint.h5`. An
+(open it in ParaView; a scene with `[refinement]` also writes
+`<scene.name>.levels.xdmf`, every level's cells at their own size, one block per
+level) and a checkpoint `<scene.name>.checkpoint.h5`. An
 existing result is never overwritten without `--force`; `--pickup` continues it
 from its checkpoint to the (new) stop criterion. The result's `steps` and
 `wall_time_s` then count the work it kept over all its legs (`legs`), not the

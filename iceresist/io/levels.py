@@ -1,0 +1,107 @@
+"""The leaves of every refinement level as hexahedra, with an XDMF sidecar so ParaView opens the levels of a refined
+run as one multiblock data set (paper section 2.5, fig. 1).
+
+A level's leaf cells are written once (static refinement) as an unstructured mesh: shared corner nodes ``nodes``
+(m, 3) in metres, x y z, and ``hexahedra`` (n, 8), the eight node indices of each cell in VTK's order (the bottom
+face counter-clockwise, then the top face). Field values sit at the cell centres (``Center="Cell"``), one row per
+leaf cell, in the order of the mesh. The sidecar is a temporal collection of spatial collections, one grid per level
+named ``level_<l>``, so ParaView shows each level as a block that can be coloured, hidden or thresholded on its own.
+
+Layout inside the run's HDF5 file (:class:`~iceresist.io.hdf5.RunFile`)::
+
+    levels/                   attrs: levels (the levels present)
+      mesh/level_1/           attrs: level, dx_m
+        nodes       [m, 3]    float64, metres
+        hexahedra   [n, 8]    int64
+      0000000100/             one snapshot, attrs: iteration, time_s
+        level_1/rho [n]       float32
+        level_1/u   [n, 3]    float32
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from xml.sax.saxutils import escape, quoteattr
+
+import numpy as np
+
+from iceresist.io.xdmf import _NUMBER_TYPES
+
+#: Corner offsets of a cell in VTK hexahedron order.
+HEX_CORNERS = np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],
+                       dtype=np.int64)
+
+
+
+def hexahedra(cells_ijk, dx_m: float, origin_m=(0.0, 0.0, 0.0)):
+    """Shared nodes (m, 3) in metres and connectivity (n, 8) of the cells ``cells_ijk`` (n, 3) (integer cell indices
+    of one level, cell size ``dx_m``)."""
+    cells = np.asarray(cells_ijk, dtype=np.int64).reshape(-1, 3)
+    corners = cells[:, None, :] + HEX_CORNERS[None, :, :]                 # (n, 8, 3)
+    span = corners.reshape(-1, 3).max(axis=0) + 1 if len(cells) else np.ones(3, dtype=np.int64)
+    key = (corners[..., 2] * span[1] + corners[..., 1]) * span[0] + corners[..., 0]
+    unique, inverse = np.unique(key.ravel(), return_inverse=True)
+    ijk = np.stack([unique % span[0], (unique // span[0]) % span[1], unique // (span[0] * span[1])], axis=-1)
+    nodes = np.asarray(origin_m, dtype=np.float64)[None, :] + ijk * float(dx_m)
+    return nodes, inverse.reshape(-1, 8).astype(np.int64)
+
+
+@dataclass(frozen=True)
+class LevelMesh:
+    level: int
+    dx_m: float
+    nodes: int
+    cells: int
+
+
+def _grid(h5_name: str, mesh: LevelMesh, arrays) -> list[str]:
+    base = f"/levels/mesh/level_{mesh.level}"
+    out = [f'        <Grid Name="level_{mesh.level}" GridType="Uniform">\n',
+           f'          <Topology TopologyType="Hexahedron" NumberOfElements="{mesh.cells}">\n',
+           f'            <DataItem Dimensions="{mesh.cells} 8" NumberType="Int" Precision="8" Format="HDF">'
+           f'{escape(h5_name)}:{base}/hexahedra</DataItem>\n',
+           '          </Topology>\n',
+           '          <Geometry GeometryType="XYZ">\n',
+           f'            <DataItem Dimensions="{mesh.nodes} 3" NumberType="Float" Precision="8" Format="HDF">'
+           f'{escape(h5_name)}:{base}/nodes</DataItem>\n',
+           '          </Geometry>\n']
+    for a in arrays:
+        if a.dtype not in _NUMBER_TYPES:
+            raise ValueError(f"no XDMF number type for dtype {a.dtype!r} of {a.name}")
+        number, precision = _NUMBER_TYPES[a.dtype]
+        kind = "Vector" if len(a.shape) == 2 and a.shape[1] == 3 else "Scalar"
+        dims = " ".join(str(n) for n in a.shape)
+        out += [f'          <Attribute Name={quoteattr(a.name)} AttributeType="{kind}" Center="Cell">\n',
+                f'            <DataItem Dimensions="{dims}" NumberType="{number}" Precision="{precision}" '
+                f'Format="HDF">{escape(h5_name)}:{escape(a.h5_path)}</DataItem>\n',
+                '          </Attribute>\n']
+    out.append('        </Grid>\n')
+    return out
+
+
+def render(h5_name: str, meshes, snapshots) -> str:
+    """The XDMF text: a temporal collection of ``snapshots`` (:class:`iceresist.io.xdmf.Snapshot` whose arrays are
+    (level, :class:`~iceresist.io.xdmf.Array`) pairs, the shapes (n,) or (n, 3)), each a spatial collection of the
+    ``meshes`` (one grid per level)."""
+    out = ['<?xml version="1.0" ?>\n', '<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n', '<Xdmf Version="2.0">\n',
+           '  <Domain>\n', '    <Grid Name="levels" GridType="Collection" CollectionType="Temporal">\n']
+    for snap in snapshots:
+        out += [f'      <Grid Name="iteration_{snap.iteration}" GridType="Collection" CollectionType="Spatial">\n',
+                f'        <Time Value="{snap.time_s!r}"/>\n']
+        for mesh in meshes:
+            out += _grid(h5_name, mesh, [a for lv, a in snap.arrays if lv == mesh.level])
+        out.append('      </Grid>\n')
+    out += ['    </Grid>\n', '  </Domain>\n', '</Xdmf>\n']
+    return "".join(out)
+
+
+def write(xdmf_path, h5_path, meshes, snapshots) -> Path:
+    """Write the levels sidecar atomically (temporary name, then rename) next to the HDF5 file it points to."""
+    xdmf_path = Path(xdmf_path)
+    text = render(Path(h5_path).name, meshes, snapshots)
+    tmp = xdmf_path.with_name(f".{xdmf_path.name}.tmp{os.getpid()}")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, xdmf_path)
+    return xdmf_path

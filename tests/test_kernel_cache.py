@@ -74,3 +74,41 @@ def test_second_process_loads_the_dem_kernels_from_the_cache(capsys):
     for name, (hits, misses) in there["stats"].items():
         assert hits == 1 and misses == 0, name  # loaded, not compiled
     assert there["x"] == here["x"]
+
+
+SCRIPT_TANK = textwrap.dedent("""
+    import gc, json
+    from iceresist.backends.launch import _GeneratedLauncher
+    from iceresist.models import build_model
+    from iceresist.scene import parse_scene, preset_text
+    text = preset_text("still_tank")
+    model = build_model(parse_scene(text, "still_tank.toml"))
+    model.step(2)
+    stats = {}
+    for o in gc.get_objects():
+        if isinstance(o, _GeneratedLauncher) and not o.target.is_cuda:
+            st = getattr(o.kernel, "stats", None)
+            if st is not None and (st.cache_hits or st.cache_misses):
+                stats[o.label] = [len(st.cache_hits), len(st.cache_misses)]
+    print(json.dumps({"stats": stats, "mass": float(model.diagnostics()["mass_kg"])}))
+""")
+
+
+def test_second_process_loads_every_free_surface_kernel_from_the_cache(capsys):
+    """Every CPU launcher a free-surface scene calls (the pooled stream-collide, the phase field, velocity,
+    extension, reflag, pool, probe) is loaded from the kernel cache by a second process, none compiled; the same
+    mass bit for bit. Planted: the phase-field launchers built without their cache key fail (h_stream compiled)."""
+    import json
+
+    if cache.cache_dir() is None:
+        pytest.skip("the kernel cache is switched off (ICERESIST_CACHE=off)")
+    exec(SCRIPT_TANK, {})
+    here = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), env.get("PYTHONPATH", "")])
+    run = subprocess.run([sys.executable, "-c", SCRIPT_TANK], env=env, check=True, capture_output=True, text=True)
+    there = json.loads(run.stdout.strip().splitlines()[-1])
+    assert {"f_update", "h_stream", "h_collide", "velocity", "reflag", "extension"} <= set(there["stats"])
+    for name, (hits, misses) in there["stats"].items():
+        assert misses == 0 and hits >= 1, name  # loaded, not compiled
+    assert there["mass"] == here["mass"]

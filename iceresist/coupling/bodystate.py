@@ -231,6 +231,9 @@ def build_reach_mask(target):
 
 _LAUNCHERS: dict = {}
 
+#: Modules whose source decides the compiled body-state launchers (the key of their on-disk kernel cache).
+KEY_MODULES = ("iceresist.coupling.bodystate", "iceresist.freesurface.layout")
+
 
 def body_state_launchers(target, real) -> dict:
     """``{"body_rows", "active_rows", "row_sums", "fluid_loads", "near_events"}``: launchers over launch rows,
@@ -239,15 +242,17 @@ def body_state_launchers(target, real) -> dict:
     redistribution reaches)."""
     key = (target.name, target.simulator, np.dtype(real).name)
     if key not in _LAUNCHERS:
+        from iceresist.backends import cache
         from iceresist.backends.launch import BlockLauncher
 
         body_row, active_row, row_sums, fluid_loads = build_body_state(target, real)
         near = build_event_mask(target)
+        k = None if target.is_cuda else cache.fingerprint(f"body_state|{np.dtype(real).name}", KEY_MODULES)
         _LAUNCHERS[key] = {
-            "body_rows": BlockLauncher(target, body_row, BODY_ROW_ARGS, label="body_rows"),
-            "active_rows": BlockLauncher(target, active_row, ACTIVE_ROW_ARGS, label="active_rows"),
-            "row_sums": BlockLauncher(target, row_sums, ROW_SUMS_ARGS, label="row_sums"),
-            "fluid_loads": BlockLauncher(target, fluid_loads, FLUID_LOADS_ARGS, label="fluid_loads"),
-            "near_events": BlockLauncher(target, near, ("evt", "nbr", "near"), label="near_events"),
+            "body_rows": BlockLauncher(target, body_row, BODY_ROW_ARGS, label="body_rows", cache_key=k),
+            "active_rows": BlockLauncher(target, active_row, ACTIVE_ROW_ARGS, label="active_rows", cache_key=k),
+            "row_sums": BlockLauncher(target, row_sums, ROW_SUMS_ARGS, label="row_sums", cache_key=k),
+            "fluid_loads": BlockLauncher(target, fluid_loads, FLUID_LOADS_ARGS, label="fluid_loads", cache_key=k),
+            "near_events": BlockLauncher(target, near, ("evt", "nbr", "near"), label="near_events", cache_key=k),
         }
     return _LAUNCHERS[key]

@@ -30,6 +30,7 @@ import numpy as np
 from iceresist import lattice as L
 from iceresist.backends import jit
 from iceresist.backends.launch import CellLauncher
+from iceresist.freesurface import kernel_key
 from iceresist.freesurface.layout import build_neighbour
 
 UNFILLED = 127
@@ -192,10 +193,12 @@ def extension_launcher(target, precision: str, vector: bool = True) -> CellLaunc
     """The launcher of one extension pass: per cell on CUDA (and with ``vector=False``), per block on the CPU
     (:func:`build_extension_block`)."""
     args = ("phi", "u", "dist", "nbr", "layer", "near")
+    k = kernel_key(target, f"extension|{precision}|vector={bool(vector)}")
     if target.is_cuda or not vector:
-        return CellLauncher(target, build_extension_cell(target, jit.real_type(precision)), args, label="extension")
+        return CellLauncher(target, build_extension_cell(target, jit.real_type(precision)), args, label="extension",
+                            cache_key=k)
     return CellLauncher(target, build_extension_block(jit.real_type(precision)), args, per_block=True,
-                        label="extension")
+                        label="extension", cache_key=k)
 
 
 def extend_velocity(launch: CellLauncher, nblocks: int, phi, u, dist, nbr, layers: int = 3, near=None) -> None:

@@ -34,6 +34,7 @@ from iceresist import lattice as L
 from iceresist.backends import jit
 from iceresist.backends.launch import BlockLauncher, CellLauncher, copy_into
 from iceresist.errors import InputError
+from iceresist.freesurface import kernel_key
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
 from iceresist.freesurface.layout import build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
@@ -180,8 +181,9 @@ def build_block_phases(target, real):
 @lru_cache(maxsize=None)
 def block_phase_launchers(target, precision: str):
     phases, near = build_block_phases(target, jit.real_type(precision))
-    return (BlockLauncher(target, phases, ("phi", "flags", "phases"), label="block_phases"),
-            BlockLauncher(target, near, ("phases", "nbr", "near"), label="block_phases_near"))
+    k = kernel_key(target, f"block_phases|{precision}")
+    return (BlockLauncher(target, phases, ("phi", "flags", "phases"), label="block_phases", cache_key=k),
+            BlockLauncher(target, near, ("phases", "nbr", "near"), label="block_phases_near", cache_key=k))
 
 
 def build_velocity_block(real):
@@ -238,14 +240,15 @@ def surface_launchers(target, precision: str, vector: bool = True):
     unless ``vector=False``."""
     vel, reflag = build_surface_cells(target, jit.real_type(precision))
     vel_args = ("f", "fslot", "flags", "u", "gx", "gy", "gz")
+    k = kernel_key(target, f"surface|{precision}|vector={bool(vector)}")
     if vector and not target.is_cuda:
         velocity = CellLauncher(target, build_velocity_block(jit.real_type(precision)), vel_args, per_block=True,
-                                label="velocity")
+                                label="velocity", cache_key=k)
     else:
-        velocity = CellLauncher(target, vel, vel_args, label="velocity")
+        velocity = CellLauncher(target, vel, vel_args, label="velocity", cache_key=k)
     return (velocity,
             CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width",
-                                          "near"), label="reflag"))
+                                          "near"), label="reflag", cache_key=k))
 
 
 class FreeSurfaceFluid:

@@ -43,6 +43,7 @@ import numpy as np
 from iceresist import lattice as L
 from iceresist.backends import jit
 from iceresist.errors import InputError
+from iceresist.freesurface import kernel_key
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
 from iceresist.backends.launch import BlockLauncher, CellLauncher
@@ -454,8 +455,9 @@ def build_clear_blocks():
 @lru_cache(maxsize=None)
 def clear_launchers():
     solid_block, clear_block = build_clear_blocks()
-    return (BlockLauncher(jit.cpu, solid_block, ("solid", "has"), label="h_clear"),
-            BlockLauncher(jit.cpu, clear_block, ("has", "nbr", "clear"), label="h_clear"))
+    k = kernel_key(jit.cpu, "h_clear")
+    return (BlockLauncher(jit.cpu, solid_block, ("solid", "has"), label="h_clear", cache_key=k),
+            BlockLauncher(jit.cpu, clear_block, ("has", "nbr", "clear"), label="h_clear", cache_key=k))
 
 
 @lru_cache(maxsize=None)
@@ -465,13 +467,14 @@ def phase_launchers(target, precision: str, lattice_name: str, vector: bool = Tr
     real, lat = jit.real_type(precision), lookup_h_lattice(lattice_name)
     stream_cell, collide_cell, init_cell = build_phase_cells(target, real, lat)
     st_args, co_args = ("h_in", "h_out", "phi", "nbr", "solid"), ("h_out", "phi", "u", "nbr", "omega", "kappa", "solid")
-    init = CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa"), label="h_init")
+    k = kernel_key(target, f"phase|{precision}|{lattice_name}|vector={bool(vector)}")
+    init = CellLauncher(target, init_cell, ("h_out", "phi", "u", "nbr", "kappa"), label="h_init", cache_key=k)
     if target.is_cuda or not vector:
-        return (CellLauncher(target, stream_cell, st_args, label="h_stream"),
-                CellLauncher(target, collide_cell, co_args, label="h_collide"), init)
+        return (CellLauncher(target, stream_cell, st_args, label="h_stream", cache_key=k),
+                CellLauncher(target, collide_cell, co_args, label="h_collide", cache_key=k), init)
     stream_block, collide_block = build_phase_blocks(real, lat)
-    return (CellLauncher(target, stream_block, st_args + ("clear",), per_block=True, label="h_stream"),
-            CellLauncher(target, collide_block, co_args, per_block=True, label="h_collide"), init)
+    return (CellLauncher(target, stream_block, st_args + ("clear",), per_block=True, label="h_stream", cache_key=k),
+            CellLauncher(target, collide_block, co_args, per_block=True, label="h_collide", cache_key=k), init)
 
 
 @lru_cache(maxsize=None)
@@ -489,7 +492,8 @@ def volume_launcher(target, lattice_name: str) -> BlockLauncher:
                     acc += f64(h[b, k, c])
         out[b] = acc
 
-    return BlockLauncher(target, target.device(volume_block), ("h", "solid", "out"), label="water_volume")
+    return BlockLauncher(target, target.device(volume_block), ("h", "solid", "out"), label="water_volume",
+                         cache_key=kernel_key(target, f"water_volume|{lattice_name}"))
 
 
 class PhaseField:

@@ -30,7 +30,8 @@ from iceresist.backends import jit
 from iceresist.backends.launch import CellLauncher
 from iceresist.errors import InputError
 from iceresist.grid.forest import CELLS
-from iceresist.lbm.solver import collide_builder
+from iceresist.freesurface import kernel_key
+from iceresist.lbm.solver import CUMULANT_MODULES, collide_builder
 from iceresist.lbm.stream import (POOL_ARGS, _namespace, block_namespace, cell_device, pooled_source,
                                   stream_collide_block_source, stream_collide_source)
 from iceresist.lbm.codegen import compile_source
@@ -52,12 +53,13 @@ def pooled_fused_launcher(target, precision: str, operator: str) -> CellLauncher
         fn = compile_source(pooled_source(stream_collide_source(free_surface=True)), "stream_collide_cell",
                             _namespace(target, real, collide), cell_device(target))
         return CellLauncher(target, fn, POOL_ARGS, label="f_update")
+    key = kernel_key(target, f"f_update|{precision}|{operator}", CUMULANT_MODULES if operator == "cumulant" else ())
     # the vectorised block form: an all-liquid block gathered line by line and collided across its cells
     src = pooled_source(stream_collide_block_source(free_surface=True))
     head, body = src.split("\n", 1)
     fn = compile_source(f"{head}\n    sb = fslot[b]\n{body}", "stream_collide_block",
                         block_namespace(target, real, collide), cell_device(target))
-    return CellLauncher(target, fn, POOL_ARGS, per_block=True, label="f_update")
+    return CellLauncher(target, fn, POOL_ARGS, per_block=True, label="f_update", cache_key=key)
 
 
 def build_pool_cells(target, real):
@@ -98,8 +100,9 @@ def build_pool_cells(target, real):
 @lru_cache(maxsize=None)
 def pool_launchers(target, precision: str):
     wet, fill = build_pool_cells(target, jit.real_type(precision))
-    return (CellLauncher(target, wet, ("phi", "wet"), label="pool_wet"),
-            CellLauncher(target, fill, ("blocks", "fslot", "fa", "fb", "u"), label="pool_fill"))
+    k = kernel_key(target, f"pool|{precision}")
+    return (CellLauncher(target, wet, ("phi", "wet"), label="pool_wet", cache_key=k),
+            CellLauncher(target, fill, ("blocks", "fslot", "fa", "fb", "u"), label="pool_fill", cache_key=k))
 
 
 def needed_blocks(wet: np.ndarray, nbr: np.ndarray) -> np.ndarray:

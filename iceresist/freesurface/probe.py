@@ -27,6 +27,7 @@ import numpy as np
 
 from iceresist import lattice as L
 from iceresist.backends.launch import BlockLauncher
+from iceresist.freesurface import kernel_key
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import BLOCK
 
@@ -121,7 +122,8 @@ def probe_launcher(target) -> BlockLauncher:
         out[b, 11] = ke
 
     return BlockLauncher(target, target.device(probe_block),
-                         ("f", "fslot", "flags", "u", "phi", "full", "half_g", "out"), label="probe")
+                         ("f", "fslot", "flags", "u", "phi", "full", "half_g", "out"), label="probe",
+                         cache_key=kernel_key(target, "probe"))
 
 
 class FluidProbe:

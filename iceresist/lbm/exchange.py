@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from iceresist.backends import cache
 from iceresist.backends.launch import ItemLauncher
 
 TRANSFER_ARGS = ("db", "dq", "dc", "tag", "sb", "sc", "off", "nb", "nc", "nok", "weight", "linear", "src0", "src1",
@@ -62,7 +63,10 @@ def transfer_launcher(target, real) -> ItemLauncher:
     """The compiled transfer launcher ``launcher(n, *TRANSFER_ARGS)`` (cached per target and precision)."""
     key = (target.name, target.simulator, np.dtype(real).name)
     if key not in _CACHE:
-        _CACHE[key] = ItemLauncher(target, build_transfer(target, real), TRANSFER_ARGS, label="level_transfer")
+        k = None if target.is_cuda else cache.fingerprint(f"level_transfer|{np.dtype(real).name}",
+                                                          ("iceresist.lbm.exchange",))
+        _CACHE[key] = ItemLauncher(target, build_transfer(target, real), TRANSFER_ARGS, label="level_transfer",
+                                   cache_key=k)
     return _CACHE[key]
 
 

@@ -15,7 +15,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from iceresist.backends import jit
+from iceresist.backends import cache, jit
 from iceresist.backends.launch import CellLauncher
 from iceresist.errors import InputError, StabilityError
 from iceresist.lattice import C, Q, W
@@ -24,6 +24,13 @@ from iceresist.lbm.stream import ARGS, build_stream_collide, build_stream_collid
 log = logging.getLogger(__name__)
 
 OPERATORS = ("cumulant", "bgk")
+
+#: Modules whose source decides the compiled stream-collide launcher (the key of its on-disk cache,
+#: :mod:`iceresist.backends.cache`).
+KEY_MODULES = ("iceresist.lbm.stream", "iceresist.lbm.boundary", "iceresist.lbm.codegen", "iceresist.lbm.collide",
+               "iceresist.lattice", "iceresist.grid.flags", "iceresist.grid.forest")
+#: ... and those of the cumulant operator (not imported by a BGK run: the generator needs sympy).
+CUMULANT_MODULES = ("iceresist.lbm.cumulant", "iceresist.lbm.cumulant_gen", "iceresist.lbm.operators")
 
 
 def collide_builder(operator: str):
@@ -57,15 +64,18 @@ def operator_available(operator: str) -> bool:
 
 @lru_cache(maxsize=None)
 def fused_launcher(target, precision: str, operator: str, free_surface: bool = False) -> CellLauncher:
-    """Compile (once per target, precision, operator) the fused stream-collide launcher;
-    ``free_surface``: the variant with eq. (11) at gas cells and the force rho g (:mod:`iceresist.lbm.stream`)."""
+    """Compile (once per target, precision, operator) the fused stream-collide launcher, on the CPU from the on-disk
+    kernel cache; ``free_surface``: the variant with eq. (11) at gas cells and the force rho g
+    (:mod:`iceresist.lbm.stream`)."""
     real = jit.real_type(precision)
     collide = collide_builder(operator)(target, real)
     if target.is_cuda:
         return CellLauncher(target, build_stream_collide(target, real, collide, free_surface), ARGS,
                             label="lbm_stream_collide")
+    modules = KEY_MODULES + (CUMULANT_MODULES if operator == "cumulant" else ())
+    key = cache.fingerprint(f"{precision}|{operator}|fs={bool(free_surface)}", modules)
     return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface=free_surface), ARGS,
-                        per_block=True, label="lbm_stream_collide")
+                        per_block=True, label="lbm_stream_collide", cache_key=key)
 
 
 def _equilibrium_minus_w(rho, ux, uy, uz):

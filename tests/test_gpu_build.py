@@ -12,14 +12,15 @@ import pytest
 
 from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
 
-#: Kernels that must be in the check: each part of a tier-2 step and of tier 1 (LBM, free surface, coupling, DEM).
+#: Kernels that must be in the check: each part of a tier-2 step and of tier 1 (LBM, free surface, coupling, DEM)
+#: and the level transfer of block refinement.
 EXPECTED = {
     "f_update", "h_stream", "h_collide", "h_init", "velocity", "reflag", "extension", "water_volume", "probe",
     "pool_wet", "pool_fill", "lbm_stream_collide", "block_phases", "block_phases_near",
     "mark", "links", "mirror", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
     "near_events", "fill",
     "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero2", "count_k", "chunk_sum", "scan_sums",
-    "chunk_scan", "scatter",
+    "chunk_scan", "scatter", "level_transfer",
 }
 
 
@@ -48,7 +49,7 @@ def test_every_kernel_is_traced(builds):
     names = {r["name"] for r in rows}
     assert EXPECTED <= names, sorted(EXPECTED - names)
     scenes = {s for r in rows for s in r["scenes"].split(",")}
-    assert {"tier1", "tier2-float32", "tier2-float64", "lbm-float32", "lbm-float64"} <= scenes
+    assert {"tier1", "tier2-float32", "tier2-float64", "lbm-float32", "lbm-float64", "refined_channel"} <= scenes
 
 
 def test_every_kernel_compiles_for_sm90_and_launches(builds):

@@ -5,7 +5,7 @@ reports the memory its blocks take before it allocates them (and refuses a scene
 and steps :class:`~iceresist.lbm.refinement.RefinedLBM`: one model step is one level-0 step, level l taking 2^l
 steps in it. Fields are written on the level-0 grid (each level-0 cell the mean of the leaf cells inside it) and, for
 ParaView, every level's leaf cells as hexahedra (``<run>.levels.xdmf``, :mod:`iceresist.io.levels`); diagnostics
-sum every leaf with its own cell volume. CPU only so far.
+sum every leaf with its own cell volume. CPU and CUDA (the conservative interface).
 """
 
 from __future__ import annotations
@@ -60,7 +60,8 @@ def build_octree(scene: Scene):
 
 
 class RefinedFluidModel(Model):
-    """The LBM fluid alone on the levels of a scene's ``[refinement]`` (CPU)."""
+    """The LBM fluid alone on the levels of a scene's ``[refinement]`` (CPU or CUDA; on CUDA the conservative
+    interface, every level's state and the transfers on the device)."""
 
     components = ("fluid", "refinement")
 
@@ -79,8 +80,9 @@ class RefinedFluidModel(Model):
         check_fluid(scene, u)
         self.backend = backend or scene.numerics.backend
         self.target = resolve_target(self.backend)
-        if self.target.is_cuda:
-            raise InputError("numerics.backend: a refined scene runs on the CPU so far; use backend = \"cpu\"")
+        if self.target.is_cuda and scene.refinement.scheme != "conservative":
+            raise InputError("refinement.scheme: the interpolating level interface runs on the CPU only; use "
+                             "scheme = \"conservative\" with backend = \"cuda\"")
         self.precision = precision or scene.numerics.precision
         self.octree = build_octree(scene)
         views = level_views(self.octree, forest_faces(scene, u))
@@ -101,7 +103,7 @@ class RefinedFluidModel(Model):
                                    for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
-                              rescale=scene.refinement.scheme == "interpolate")
+                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
         u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
         self.lbm.initialize(1.0, u0)
         self.cells_per_level = {lv: int(self.lbm.views[lv].nleaves) * CELLS for lv in self.lbm.levels}

@@ -457,7 +457,7 @@ class Refinement(_Section):
     """``[refinement]`` (optional): static block refinement (paper section 2.5). Level 0 is the grid of
     ``domain.dx_m``; level l has cells dx_m / 2^l and time steps dt / 2^l (acoustic scaling, the same physical
     viscosity). A block takes the highest level of the boxes it overlaps; 2:1 balance adds the levels between.
-    Fluid-only scenes, on the CPU, so far (iceresist.lbm.refinement)."""
+    Fluid-only scenes so far, on the CPU or (the conservative interface) CUDA (iceresist.lbm.refinement)."""
 
     levels: int = Field(..., ge=1, le=6, description="The finest level (cells dx_m / 2^levels).")
     boxes: list[RefinementBox] = Field(..., min_length=1, description="Regions and their levels, see "
@@ -465,7 +465,7 @@ class Refinement(_Section):
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
-        "part rescaled as Dupuis and Chopard; mass drifts about 7e-6 per 1000 steps).")
+        "part rescaled as Dupuis and Chopard; mass drifts about 7e-6 per 1000 steps; CPU only).")
 
     @model_validator(mode="after")
     def _levels(self):

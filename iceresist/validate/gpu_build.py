@@ -3,9 +3,9 @@
 The CUDA simulator runs kernels as Python, so it passes code that the GPU compiler refuses (a float64 ``xor``
 once stopped the DEM at its first sub-step on a real GPU). This check compiles what a real device would run:
 
-1. **Trace.** A CI-sized scene of each tier, the built-in dam break and the plain LBM step are built and stepped on
-   the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand in for device arrays
-   and every launch is recorded instead of run.
+1. **Trace.** A CI-sized scene of each tier, the built-in dam break, the refined channel and the plain LBM step are
+   built and stepped on the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand
+   in for device arrays and every launch is recorded instead of run.
 2. **Compile.** Each kernel, with the argument types of its launches, by
    :func:`iceresist.backends.buildcheck.compile_kernel`: PTX for sm_90 by NVVM, a cubin by ptxas.
 3. **Judge.** A kernel builds when both steps succeed; it launches when registers x threads per block fit the
@@ -27,8 +27,9 @@ from iceresist.backends import jit
 from iceresist.backends.buildcheck import KernelBuild, compile_kernel, toolkit, tracing
 
 def check_scenes():
-    """``{label: scene}``: the CI-sized tier-1 and tier-2 cases, tier 2 in both precisions, and the built-in dam
-    break (a free surface whose population pool follows the water: its wet and fill kernels)."""
+    """``{label: scene}``: the CI-sized tier-1 and tier-2 cases, tier 2 in both precisions, the built-in dam
+    break (a free surface whose population pool follows the water: its wet and fill kernels) and the built-in
+    refined channel (two levels: the level transfer kernel)."""
     from iceresist.scene.load import load_scene
     from iceresist.ship.presets import case_scene
     from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES
@@ -38,7 +39,7 @@ def check_scenes():
     return {"tier1": case_scene("A-c68-v1.0", "quick", 1, **TINY_OVERRIDES),
             "tier2-float32": case_scene("A-c68-v1.0", "quick", 2, **t2),
             "tier2-float64": case_scene("A-c68-v1.0", "quick", 2, **t2_64),
-            "dam_break": load_scene("dam_break")}
+            "dam_break": load_scene("dam_break"), "refined_channel": load_scene("refined_channel")}
 
 
 def fluid_launches(precision: str):

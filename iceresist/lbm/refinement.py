@@ -363,7 +363,16 @@ class RefinedLBM:
                 raise InputError(f"tau = 1 on level {lv - 1 if self.tau[lv - 1] == 1.0 else lv}: its post-collision "
                                  "populations hold no stress to rescale across the level interface; choose a tau0 "
                                  "whose levels avoid 1 (e.g. tau0 = 0.6), or rescale=False")
+        self.steppers = {lv: self.solvers[lv].step for lv in self.levels}
         self.iteration = 0
+
+    def set_stepper(self, level: int, step):
+        """Advance level ``level`` by ``step()`` (one step of that level) instead of its bare LBM step: a coupling
+        that moves bodies on that level (:meth:`iceresist.coupling.FluidStructureCoupling.step` on the level's
+        solver) sets its boundaries, steps the level's LBM and takes the forces at the level's own time step."""
+        if level not in self.solvers:
+            raise InputError(f"level {level} holds no leaves (levels {self.levels[0]}..{self.levels[-1]})")
+        self.steppers[level] = step
 
     def neq_scale(self, fine: int, to_fine: bool) -> float:
         """Factor on the post-collision non-equilibrium populations across the interface of levels fine - 1 and
@@ -431,7 +440,7 @@ class RefinedLBM:
                     self.target.copy(f_half, sf.state)
                 self._advance_conservative(finer)
             self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
-        s.step()
+        self.steppers[lv]()
 
     def _advance(self, lv: int):
         if self.scheme == "conservative":
@@ -441,7 +450,7 @@ class RefinedLBM:
             _apply(self.restrict[lv], s.state, self.solvers[lv + 1].state, self.neq_scale(lv + 1, False))
         finer = lv + 1 if lv + 1 in self.solvers else None
         before = s.state.copy() if finer is not None else None
-        s.step()
+        self.steppers[lv]()
         if finer is None:
             return
         table = self.prolong[finer]

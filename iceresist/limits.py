@@ -175,6 +175,10 @@ def check_memory(scene, precision: str | None = None, available: int | None = No
     free = available if available is not None else available_memory_bytes()
     shape = scene.shape_cells()
     cells = math.prod(shape)
+    if cells > 10 ** 15:        # beyond any machine; the counts themselves would not print
+        raise InputError(f"{scene.source_name}: domain.dx_m: {scene.domain.dx_m:g} gives about 1e{len(str(cells)) - 1} "
+                         f"cells, beyond any machine: use a coarser domain.dx_m (a hundredth of the domain's longest "
+                         f"side gives about 1e6 cells)")
     need = populations_bytes(cells, precision)
     if free is None or need <= free:
         return

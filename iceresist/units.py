@@ -136,7 +136,7 @@ class Units:
                     f"numerics.dt_s: {dt_s:.4g} s puts the reference speed max(u_max, sqrt(g h)) = {u_ref:.4g} m/s at "
                     f"{u_lat:.4g} in lattice units, above the limit {mach_lattice:.3g} (numerics.mach): use "
                     f"numerics.dt_s <= {mach_lattice * dx_m / u_ref:.4g} s, or leave it out")
-            tau_dt = 0.5 + nu_m2_s * dt_s / (CS2 * dx_m * dx_m)
+            tau_dt = 0.5 + nu_m2_s * (dt_s / dx_m) / (CS2 * dx_m)    # dx^2 alone underflows at dx ~ 1e-160
             if tau_dt - 0.5 < min_tau_excess:
                 raise StabilityError(
                     f"numerics.dt_s: {dt_s:.4g} s gives tau - 1/2 = {tau_dt - 0.5:.3g}, below the floor "
@@ -144,7 +144,7 @@ class Units:
                     f"{min_tau_excess * CS2 * dx_m * dx_m / nu_m2_s:.4g} s, or leave it out")
         check_lattice_velocity(u_ref * dt_s / dx_m, mach_lattice,
                                what="the reference speed max(u_max, sqrt(g h))")
-        tau = 0.5 + nu_m2_s * dt_s / (CS2 * dx_m * dx_m)
+        tau = 0.5 + nu_m2_s * (dt_s / dx_m) / (CS2 * dx_m)
         check_tau(tau, min_tau_excess=min_tau_excess)
         return cls(dx_m=float(dx_m), dt_s=float(dt_s), rho0_kg_m3=float(rho0_kg_m3), nu_m2_s=float(nu_m2_s),
                    tau=float(tau))

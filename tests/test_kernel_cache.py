@@ -86,7 +86,11 @@ SCRIPT_TANK = textwrap.dedent("""
     model.step(2)
     stats = {}
     for o in gc.get_objects():
-        if isinstance(o, _GeneratedLauncher) and not o.target.is_cuda:
+        try:
+            mine = isinstance(o, _GeneratedLauncher) and not o.target.is_cuda
+        except ReferenceError:      # a weak proxy whose object is gone
+            continue
+        if mine:
             st = getattr(o.kernel, "stats", None)
             if st is not None and (st.cache_hits or st.cache_misses):
                 stats[o.label] = [len(st.cache_hits), len(st.cache_misses)]

@@ -55,6 +55,7 @@ def _one_line_error(rc, err, *needles):
 
 @pytest.mark.parametrize("edit, needle", [
     (("dx_m = 0.001", "dx_m = -1"), "domain.dx_m: must be > 0 (got -1)"),
+    (("dx_m = 0.001", "dx_m = 1e-287"), "domain.dx_m: 1e-287 gives about 1e855 cells, beyond any machine"),
     (("dx_m = 0.001", "dx_m = = 1"), "TOML syntax error"),
     (("[fluid]", "[fluid]\nviscosity = 1"), "fluid.viscosity: unknown key"),
     (("nu_m2_s = 1.0e-6", 'nu_m2_s = "water"'), "fluid.nu_m2_s: must be a number"),

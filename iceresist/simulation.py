@@ -424,6 +424,8 @@ class Simulation:
         for _, act in self._actions():
             if act.schedule is not None:
                 act.schedule.initialize(self)
+                if pickup and isinstance(act.schedule, TimeInterval):
+                    act.schedule(self)     # what was due here the leg before wrote: move past it
         if not pickup:
             self._actuate()
         self._check_stop()

@@ -238,6 +238,18 @@ def test_pickup_continues_a_result(tmp_path, main, fake_model):
         assert a.meta["steps"] == 1200 and a.meta["iteration"] == 1200
 
 
+def test_a_pickup_where_a_snapshot_was_due_does_not_write_it_again(tmp_path, main, fake_model):
+    """Picked up at iteration 1000, where the fields (every 500 steps) were due and written by the leg before: the
+    next snapshot is at 1200 (the stop), not at 1001, and the time series has no row twice. Planted: the time
+    schedules left as they are at a pickup (a snapshot at 1001) fails."""
+    assert main("poiseuille", "--output", tmp_path, "--steps", "1000")[0] == 0
+    assert main("poiseuille", "--output", tmp_path, "--steps", "1200", "--pickup")[0] == 0
+    with RunFile(tmp_path / "poiseuille.h5") as a:
+        assert a.snapshot_iterations() == [0, 500, 1000, 1200]
+        its = a.timeseries()["iteration"]
+        assert len(its) == len(set(its.tolist()))
+
+
 @pytest.mark.parametrize("damage", ["truncated", "empty", "random"])
 def test_pickup_from_a_bad_checkpoint_leaves_the_result_as_it_was(tmp_path, main, fake_model, damage):
     """A checkpoint that cannot be read is refused in one line before the finished result is opened."""

@@ -424,9 +424,11 @@ class Simulation:
         for _, act in self._actions():
             if act.schedule is not None:
                 act.schedule.initialize(self)
-                if pickup and isinstance(act.schedule, TimeInterval):
-                    act.schedule(self)     # what was due here the leg before wrote: move past it
-        if not pickup:
+        if pickup:      # the leg before served this instant: the schedules move past it, as at a start, acting not
+            for _, act in self._actions():
+                if act.schedule is not None:
+                    act.schedule(self)
+        else:
             self._actuate()
         self._check_stop()
         total, first = self._steps_to_stop(), self.steps_done

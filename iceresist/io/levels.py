@@ -23,11 +23,11 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from xml.sax.saxutils import escape, quoteattr
+from xml.sax.saxutils import escape
 
 import numpy as np
 
-from iceresist.io.xdmf import _NUMBER_TYPES
+from iceresist.io.xdmf import attribute
 
 #: Corner offsets of a cell in VTK hexahedron order.
 HEX_CORNERS = np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],
@@ -67,16 +67,7 @@ def _grid(h5_name: str, mesh: LevelMesh, arrays) -> list[str]:
            f'            <DataItem Dimensions="{mesh.nodes} 3" NumberType="Float" Precision="8" Format="HDF">'
            f'{escape(h5_name)}:{base}/nodes</DataItem>\n',
            '          </Geometry>\n']
-    for a in arrays:
-        if a.dtype not in _NUMBER_TYPES:
-            raise ValueError(f"no XDMF number type for dtype {a.dtype!r} of {a.name}")
-        number, precision = _NUMBER_TYPES[a.dtype]
-        kind = "Vector" if len(a.shape) == 2 and a.shape[1] == 3 else "Scalar"
-        dims = " ".join(str(n) for n in a.shape)
-        out += [f'          <Attribute Name={quoteattr(a.name)} AttributeType="{kind}" Center="Cell">\n',
-                f'            <DataItem Dimensions="{dims}" NumberType="{number}" Precision="{precision}" '
-                f'Format="HDF">{escape(h5_name)}:{escape(a.h5_path)}</DataItem>\n',
-                '          </Attribute>\n']
+    out += [attribute(h5_name, a, indent="          ") for a in arrays]
     out.append('        </Grid>\n')
     return out
 

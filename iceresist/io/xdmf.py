@@ -39,16 +39,18 @@ class Snapshot:
     arrays: tuple[Array, ...]
 
 
-def _attribute(h5_name: str, a: Array) -> str:
+def attribute(h5_name: str, a: Array, indent: str = "        ") -> str:
+    """The cell attribute of one dataset: a vector where its last axis holds 3 components of a grid ([z, y, x, 3])
+    or of a cell list ([n, 3]), else a scalar."""
     if a.dtype not in _NUMBER_TYPES:
         raise ValueError(f"no XDMF number type for dtype {a.dtype!r} of {a.name}")
     number, precision = _NUMBER_TYPES[a.dtype]
-    kind = "Vector" if len(a.shape) == 4 and a.shape[3] == 3 else "Scalar"
+    kind = "Vector" if len(a.shape) in (2, 4) and a.shape[-1] == 3 else "Scalar"
     dims = " ".join(str(n) for n in a.shape)
-    return (f'        <Attribute Name={quoteattr(a.name)} AttributeType="{kind}" Center="Cell">\n'
-            f'          <DataItem Dimensions="{dims}" NumberType="{number}" Precision="{precision}" '
+    return (f'{indent}<Attribute Name={quoteattr(a.name)} AttributeType="{kind}" Center="Cell">\n'
+            f'{indent}  <DataItem Dimensions="{dims}" NumberType="{number}" Precision="{precision}" '
             f'Format="HDF">{escape(h5_name)}:{escape(a.h5_path)}</DataItem>\n'
-            f'        </Attribute>\n')
+            f'{indent}</Attribute>\n')
 
 
 def render(h5_name: str, shape_cells_xyz, dx_m: float, origin_m_xyz, snapshots) -> str:
@@ -67,7 +69,7 @@ def render(h5_name: str, shape_cells_xyz, dx_m: float, origin_m_xyz, snapshots) 
         out.append(f'          <DataItem Dimensions="3" NumberType="Float" Precision="8" Format="XML">'
                    f'{dx_m!r} {dx_m!r} {dx_m!r}</DataItem>\n')
         out.append('        </Geometry>\n')
-        out.extend(_attribute(h5_name, a) for a in snap.arrays)
+        out.extend(attribute(h5_name, a) for a in snap.arrays)
         out.append('      </Grid>\n')
     out += ['    </Grid>\n', '  </Domain>\n', '</Xdmf>\n']
     return "".join(out)

@@ -304,11 +304,16 @@ class RefinedLBM:
     ``tau0`` and ``force0`` are the relaxation time and body-force acceleration of level 0 (lattice units of level
     0); each finer level gets tau and force by acoustic scaling. ``step()`` advances level 0 by one step and every
     level l by 2^l steps.
+
+    ``solver_factory(level, forest, tau, force)``, if given, builds each level's solver instead of
+    :class:`~iceresist.lbm.solver.LBMSolver`: anything with ``state`` (the populations f - w ``[block, q, cell]`` the
+    next step pulls from), ``step()`` and ``initialize(rho, u)`` (the free surface on levels,
+    :mod:`iceresist.freesurface.refined`).
     """
 
     def __init__(self, octree: BlockOctree, *, tau0: float, force0=(0.0, 0.0, 0.0), faces: dict | None = None,
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
-                 scheme: str = "conservative", reconstruction: str = "linear", target=None):
+                 scheme: str = "conservative", reconstruction: str = "linear", target=None, solver_factory=None):
         from iceresist.backends import jit
         from iceresist.lbm.solver import LBMSolver
 
@@ -343,8 +348,11 @@ class RefinedLBM:
             tau = 0.5 + (tau0 - 0.5) * 2 ** lv
             g = tuple(float(a) / 2 ** lv for a in force0)
             self.tau[lv] = tau
-            self.solvers[lv] = LBMSolver(self.views[lv].forest, tau=tau, force=g, operator=operator,
-                                         precision=precision, target=self.target)
+            if solver_factory is None:
+                self.solvers[lv] = LBMSolver(self.views[lv].forest, tau=tau, force=g, operator=operator,
+                                             precision=precision, target=self.target)
+            else:
+                self.solvers[lv] = solver_factory(lv, self.views[lv].forest, tau, g)
         if scheme == "interpolate":
             self.prolong = {lv: prolongation_table(self.views[lv], self.views[lv - 1], self.periodic)
                             for lv in self.levels[1:]}

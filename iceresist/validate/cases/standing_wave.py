@@ -162,3 +162,64 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
                       steps=rung.steps, wall_s=rung.run_time_s, quantity="period (steps)", value=period,
                       reference=th["period_steps"], error=relative_error(period, th["period_steps"]),
                       backend=backend, precision=precision, extra=extra)
+
+
+def run_on_levels(params: dict, *, precision: str = "float32") -> CaseResult:
+    """The standing wave with its surface in the finer of two levels (:mod:`iceresist.freesurface.refined`): the
+    rung's wavelength, depth, amplitude and time step on level 1 (``cells_per_wavelength`` a multiple of 16), a slab
+    of 16 level-1 cells along y, level 0 below the deepest multiple of 16 level-1 cells that leaves 8 of them of
+    liquid under the trough, level 1 above it to the lid. The period against linear theory, as :func:`run`."""
+    import time
+
+    from iceresist.errors import InputError
+    from iceresist.freesurface.refined import RefinedFreeSurface
+    from iceresist.grid.forest import Face
+    from iceresist.grid.octree import BlockOctree
+
+    p = {**DEFAULTS, **params}
+    th = theory(p)
+    lam = int(p["cells_per_wavelength"])
+    if lam % 16:
+        raise InputError(f"cells_per_wavelength must be a multiple of 16 on levels (two level-0 blocks per 16 "
+                         f"level-1 cells), not {lam}")
+    h, a = th["h"], th["a"]
+    z_int = 16 * math.floor((h - a - 8.0) / 16.0)
+    top = 16 * math.ceil((h + a + 8.0) / 16.0)
+    if z_int < 16:
+        raise InputError(f"depth_wavelengths: the water ({h:g} level-1 cells) leaves no level-0 block under the "
+                         f"surface with 8 cells to spare; deepen it to {(24 + a) / lam:.3g} wavelengths or more")
+    tree = BlockOctree((lam // 16, 1, top // 16), 1, periodic=(True, True, False)).refine(
+        lambda lo, hi: np.where(lo[:, 2] >= z_int // 2, 1, 0))
+    faces = {"x-": Face("periodic"), "x+": Face("periodic"), "y-": Face("periodic"), "y+": Face("periodic"),
+             "z-": Face("wall"), "z+": Face("wall")}
+    m = RefinedFreeSurface(tree, tau0=0.5 + (p["tau"] - 0.5) / 2, gravity0=2.0 * th["g"], depth0=h / 2,
+                           mobility=p["mobility"], width=3.0, operator=p["operator"], precision=precision,
+                           faces=faces)
+    x = np.arange(lam) + 0.5
+    m.initialize(surface=np.broadcast_to(((h + a * np.cos(th["k"] * x)) / 2)[:, None], (lam, 16)))
+    v0 = m.volume()
+    steps = steps_for(p)
+    sample = max(2, 2 * int(th["period_steps"] // 80))   # fine steps per sample, even
+    t, amp = [0.0], [mode_amplitude(m.surface_height(), th["k"])]
+    t0 = time.perf_counter()
+    while t[-1] < steps:
+        m.step(sample // 2)
+        t.append(t[-1] + sample)
+        amp.append(mode_amplitude(m.surface_height(), th["k"]))
+    wall = time.perf_counter() - t0
+    t, amp = np.array(t), np.array(amp)
+    omega, gamma, a0 = fit_damped_cosine(t, amp, th["omega"])
+    period = 2.0 * math.pi / omega
+    cells = int(sum(m.views[lv].nleaves for lv in m.levels) * 512)
+    fine_cells = lam * 16 * top
+    extra = dict(omega=omega, omega_theory=th["omega"], decay_per_step=gamma, decay_lamb=th["decay"],
+                 amplitude0=a0, g=th["g"], tau=p["tau"], operator=p["operator"], level_interface_cells=z_int,
+                 volume_change=(m.volume() - v0) / v0, max_speed=m.max_speed(), cells_per_level=[
+                     int(m.views[lv].nleaves * 512) for lv in m.levels], fine_grid_cells=fine_cells,
+                 t=t.tolist(), amplitude=amp.tolist())
+    log.info("standing wave on levels %s: period %.1f steps vs %.1f (%.2f %%), volume %+.2e", p.get("label", ""),
+             period, th["period_steps"], 100 * relative_error(period, th["period_steps"]), extra["volume_change"])
+    return CaseResult(case=NAME, label=f"{lam} cells/wavelength on two levels", resolution=float(lam), cells=cells,
+                      steps=int(t[-1]), wall_s=wall, quantity="period (steps)", value=period,
+                      reference=th["period_steps"], error=relative_error(period, th["period_steps"]),
+                      backend="cpu", precision=precision, extra=extra)

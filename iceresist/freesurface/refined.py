@@ -1,0 +1,305 @@
+"""The free surface on the levels of a block octree (paper sections 2.2 and 2.5): the surface in the finest level.
+
+The paper keeps the water surface, like the ice and the hull, inside the finest blocks; so does this module. The
+finest level runs the whole free-surface step (:class:`~iceresist.freesurface.fluid.FreeSurfaceFluid`: the fused
+update with eq. (11), the velocity and its extension, the phase field (h, phi) and reflag). Every coarser level is
+liquid throughout and runs the same fused update with phi = 1 (the same body force rho g, so the hydrostatic
+density is the same function of depth on every level), and the liquid crosses the level interfaces by the
+conservative scheme of :class:`~iceresist.lbm.refinement.RefinedLBM` (mass to round-off).
+
+The phase field needs values in the finest level's ghost blocks (they lie inside coarse leaves): the bulk liquid,
+phi = 1 and h = h^eq(1, u) = w_k (1 + c_k.u / c_s^2 + ...) with u the velocity of the coarse cell under the ghost
+cell (its populations at the coarse step's start, the half-force shift removed), refilled after every fine step
+(:func:`build_ghost_phase_cell`). The phi flux the leaves pull from the ghosts is then the liquid's own flux u: the
+volume of the finest level changes only by the liquid's compressibility.
+
+Where that picture does not hold the scene is refused: a coarser level (or a ghost of the finest) holding cells
+with phi < 1 - 1e-4 at the start (the tanh profile's tail 3.5 widths below the surface) (the surface or the gas outside the finest level). The water volume
+(:meth:`RefinedFreeSurface.volume`) is the finest level's sum of phi plus the coarser levels' liquid cells, in
+level-0 cells.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from iceresist import lattice as L
+from iceresist.backends import jit
+from iceresist.backends.launch import CellLauncher
+from iceresist.errors import InputError
+from iceresist.freesurface import kernel_key
+from iceresist.freesurface.fluid import FreeSurfaceFluid
+from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
+from iceresist.freesurface.pool import PooledLBM
+from iceresist.grid.forest import CELLS
+from iceresist.grid.levels import FROM_COARSER
+from iceresist.grid.octree import BlockOctree
+from iceresist.lbm.refinement import RefinedLBM, _locate
+
+#: A coarse level's cells must start at least this liquid (phi >= 1 - PHI_BULK_TOL).
+PHI_BULK_TOL = 1e-4
+
+
+def build_ghost_phase_cell(target, real, lattice_name: str):
+    """``ghost_phase_cell(i, c, b0, pb, pc, fc, gc, h, phi)``: cell c of ghost block b0 + i of the finest level
+    takes phi = 1 and h_k = w_k (1 + c_k.u / c_s^2 + ((c_k.u)^2 - c_s^2 u.u) / (2 c_s^4)) (h^eq of eqs. 7-8 at
+    phi = 1, where theta = 0), u the velocity of the coarse cell (``pb[i, c]``, ``pc[i, c]``) from its
+    populations ``fc`` (f - w) with the half-force shift of the coarse level's gravity ``gc`` (lattice units of
+    that level, acting along -z) removed: u = sum c f / rho + (0, 0, gc / 2)."""
+    lat = lookup_h_lattice(lattice_name)
+    nq = lat.q
+    hc = np.asarray(lat.c, dtype=np.float64)
+    hx, hy, hz = (np.ascontiguousarray(hc[:, a].astype(real)) for a in range(3))
+    hw = np.array(lat.w, dtype=real)
+    ex, ey, ez = (np.ascontiguousarray(L.C[:, a].astype(real)) for a in range(3))
+    zero, one, half = real(0.0), real(1.0), real(0.5)
+    cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
+    int64 = np.int64
+
+    @target.device
+    def ghost_phase_cell(i, c, b0, pb, pc, fc, gc, h, phi):
+        i = int64(i)
+        b = int64(b0) + i
+        sb = int64(pb[i, c])
+        sc = int64(pc[i, c])
+        rho = one
+        jx = zero
+        jy = zero
+        jz = zero
+        for q in range(27):
+            fq = fc[sb, q, sc]
+            rho += fq
+            jx += ex[q] * fq
+            jy += ey[q] * fq
+            jz += ez[q] * fq
+        ux = jx / rho
+        uy = jy / rho
+        uz = jz / rho + half * gc
+        uu = ux * ux + uy * uy + uz * uz
+        phi[b, c] = one
+        for k in range(nq):
+            cu = hx[k] * ux + hy[k] * uy + hz[k] * uz
+            h[b, k, c] = hw[k] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu))
+
+    return ghost_phase_cell
+
+
+@lru_cache(maxsize=None)
+def ghost_phase_launcher(target, precision: str, lattice_name: str) -> CellLauncher:
+    cell = build_ghost_phase_cell(target, jit.real_type(precision), lattice_name)
+    return CellLauncher(target, cell, ("b0", "pb", "pc", "fc", "gc", "h", "phi"), label="ghost_phase",
+                        cache_key=kernel_key(target, f"ghost_phase|{precision}|{lattice_name}",
+                                             ("iceresist.freesurface.refined",)))
+
+
+class _LiquidLevel:
+    """A coarser level: liquid throughout, the free-surface fused update with phi = 1 (populations in every block,
+    the pool's identity map), so the body force is rho g as on the finest level."""
+
+    def __init__(self, forest, tau, force, *, operator, precision, target, half_width):
+        self.forest = forest
+        self.fluid = PooledLBM(forest, tau=tau, force=force, operator=operator, precision=precision, target=target,
+                               margin=None)
+        self.real = jit.real_type(precision)
+        self.force = tuple(float(v) for v in force)
+        self._phi = target.to_device(np.ones((forest.nblocks, CELLS), self.real))
+        self._half_width = self.real(half_width)
+
+    @property
+    def state(self):
+        return self.fluid.state
+
+    def step(self):
+        self.fluid.step(1, self._phi, self._half_width)
+
+    def initialize(self, rho_blocks, u):
+        self.fluid.initialize(self.forest.to_dense(rho_blocks), u, wet=np.ones(self.forest.nblocks, bool))
+
+    def macroscopic_blocks(self):
+        f = self.fluid.populations()
+        rho = 1.0 + f.sum(axis=1)
+        j = np.einsum("qa,bqc->abc", L.C.astype(np.float64), f)
+        u = j / rho - 0.5 * np.asarray(self.force)[:, None, None]
+        return rho, u
+
+
+class _SurfaceLevel:
+    """The finest level: the whole free-surface step, then the ghost blocks refilled with bulk liquid."""
+
+    def __init__(self, fs: FreeSurfaceFluid, refill):
+        self.fs = fs
+        self.forest = fs.forest
+        self.refill = refill
+
+    @property
+    def state(self):
+        return self.fs.fluid.state
+
+    def step(self):
+        self.fs.step()
+        self.refill()
+
+    def macroscopic_blocks(self):
+        f = self.fs.fluid.populations()
+        rho = 1.0 + f.sum(axis=1)
+        j = np.einsum("qa,bqc->abc", L.C.astype(np.float64), f)
+        u = j / rho
+        u[2] += 0.5 * self.fs.g
+        return rho, u
+
+
+class RefinedFreeSurface:
+    """Liquid with a free surface under gravity on every level of ``octree`` (module docstring).
+
+    ``tau0``: the relaxation time on level 0 (each finer level by acoustic scaling); ``gravity0``: g on level 0
+    (lattice units, acting along -z; halved per level); ``depth0``: the still-water level in level-0 cells from the
+    bottom; ``mobility``, ``width``, ``h_lattice``: the phase field on the finest level (its lattice units);
+    ``faces``, ``operator``, ``precision``, ``target`` as for :class:`~iceresist.lbm.refinement.RefinedLBM`.
+    ``lbm`` is the :class:`RefinedLBM` that steps the levels; ``surface`` the finest level's
+    :class:`FreeSurfaceFluid`.
+    """
+
+    def __init__(self, octree: BlockOctree, *, tau0: float, gravity0: float, depth0: float, mobility: float = 0.05,
+                 width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
+                 precision: str = "float32", target=None, faces: dict | None = None):
+        self.target = target or jit.cpu
+        self.precision = precision
+        self.octree = octree
+        self.g0 = float(gravity0)
+        self.depth0 = float(depth0)
+        self.h_lattice = h_lattice
+        finest = int(octree.level.max())
+        self.finest = finest
+        self.width = float(width)
+        built = {}
+
+        def factory(lv, forest, tau, force):
+            if lv == finest:
+                fs = FreeSurfaceFluid(forest, tau=tau, gravity_lattice=-force[2], depth_cells=self.depth0 * 2 ** lv,
+                                      mobility=mobility, width=width, h_lattice=h_lattice, operator=operator,
+                                      precision=precision, target=self.target, f_pool_margin=None)
+                built["surface"] = fs
+                return _SurfaceLevel(fs, self._refill_ghosts)
+            return _LiquidLevel(forest, tau, force, operator=operator, precision=precision, target=self.target,
+                                half_width=0.5 * width)
+
+        self.lbm = RefinedLBM(octree, tau0=tau0, force0=(0.0, 0.0, -self.g0), faces=faces, operator=operator,
+                              precision=precision, scheme="conservative", target=self.target,
+                              solver_factory=factory)
+        self.surface: FreeSurfaceFluid = built["surface"]
+        self.levels = self.lbm.levels
+        self.views = self.lbm.views
+        self._ghost_table()
+
+    # ------------------------------------------------------------------ ghosts
+    def _ghost_table(self):
+        """The coarse cell under every cell of the finest level's ghost blocks (all lie inside coarser leaves)."""
+        v = self.views[self.finest]
+        self._nleaves = v.nleaves
+        self._nghosts = v.nghosts
+        if self._nghosts == 0 or len(self.levels) == 1:
+            self._ghost = None
+            return
+        if not np.all(v.ghost_source == FROM_COARSER):
+            raise InputError("refinement: the finest level has ghosts over a finer level")
+        coarse = self.views[self.finest - 1]
+        o = v.forest.origin[v.nleaves:] * 8
+        from iceresist.grid.forest import LX, LY, LZ
+        pts = np.stack([o[:, a:a + 1] + Lc for a, Lc in enumerate((LX, LY, LZ))], axis=-1) >> 1
+        pb, pc, _ = _locate(coarse, pts, self.lbm.periodic)
+        if (pb < 0).any():
+            raise InputError("refinement: a ghost block of the finest level lies over no coarse block")
+        dev = self.target.to_device
+        real = jit.real_type(self.precision)
+        self._ghost = (ghost_phase_launcher(self.target, self.precision, self.surface.phase.lat.name),
+                       np.int64(v.nleaves), dev(np.ascontiguousarray(pb, np.int64)),
+                       dev(np.ascontiguousarray(pc, np.int64)), real(self.g0 / 2 ** (self.finest - 1)))
+
+    def _refill_ghosts(self):
+        if self._ghost is None:
+            return
+        launch, b0, pb, pc, gc = self._ghost
+        coarse = self.lbm.solvers[self.finest - 1]
+        launch(self._nghosts, b0, pb, pc, coarse.state, gc, self.surface.phase.h, self.surface.phase.phi)
+
+    # ------------------------------------------------------------------ state
+    def initialize(self, surface=None, u=(0.0, 0.0, 0.0)):
+        """Still water in hydrostatic balance under the surface z_s(x, y) (``surface``: heights in level-0 cells, an
+        (nx, ny) array of the finest level's columns, default the flat ``depth0``), moving with ``u`` (lattice
+        units, the same on every level). Refused where a coarser level or a ghost of the finest level would hold
+        a cell less liquid than phi = 1 - 1e-4 (module docstring)."""
+        fs = self.surface
+        lv = self.finest
+        nx, ny, _ = fs.forest.shape_cells
+        zs = np.full((nx, ny), self.depth0) if surface is None else np.asarray(surface, dtype=float)
+        if zs.shape != (nx, ny):
+            raise InputError(f"surface must be an array of shape ({nx}, {ny}) (heights in level-0 cells, one per "
+                             f"column of the finest level), got {zs.shape}")
+        for level in self.levels:
+            view = self.views[level]
+            x, y, z = view.forest.cell_coordinates()
+            scale = 2 ** (lv - level)            # finest cells per cell of this level
+            n = view.nleaves if level < lv else view.forest.nblocks
+            first = 0 if level < lv else view.nleaves
+            sel = slice(first, n)
+            # the surface height over each cell: the lowest of its finest columns (the most demanding)
+            col = zs.reshape(nx // scale, scale, ny // scale, scale).min(axis=(1, 3))
+            s_cells = col[x[sel], y[sel]] * 2 ** level - (z[sel] + 0.5)
+            phi = 0.5 + 0.5 * np.tanh(2.0 * s_cells * scale / self.width)
+            if s_cells.size and phi.min() < 1.0 - PHI_BULK_TOL:
+                where = "a ghost block of the finest level" if level == lv else f"level {level}"
+                raise InputError(f"refinement.regions: {where} reaches the free surface (phi = {phi.min():.3g} "
+                                 f"at the start); the surface and the gas above it must lie in the finest level "
+                                 f"(level {lv}), {int(np.ceil(2.5 * self.width))} of its cells or more from its edge: "
+                                 f"extend the finest region around the surface")
+        surface_fine = zs * 2 ** lv
+        fs.initialize(surface=surface_fine, u=u)
+        for level in self.levels[:-1]:
+            view = self.views[level]
+            x, y, z = view.forest.cell_coordinates()
+            scale = 2 ** (lv - level)
+            col = zs.reshape(nx // scale, scale, ny // scale, scale).mean(axis=(1, 3)) * 2 ** level
+            s_cells = col[x, y] - (z + 0.5)
+            g = self.g0 / 2 ** level
+            rho = np.exp(3.0 * g * np.maximum(s_cells, 0.0))
+            self.lbm.solvers[level].initialize(rho, tuple(float(v) for v in u))
+        self._refill_ghosts()
+        self.lbm.iteration = 0
+
+    def step(self, n: int = 1):
+        """Advance level 0 by ``n`` steps (the finest level by n 2^L)."""
+        self.lbm.step(n)
+
+    @property
+    def iteration(self) -> int:
+        return self.lbm.iteration
+
+    # ------------------------------------------------------------------ diagnostics
+    def volume(self) -> float:
+        """The water volume in level-0 cells: the finest level's leaves' sum of phi over 8^L, plus every coarser
+        level's leaf cells (liquid throughout) over 8^l."""
+        phi = np.asarray(self.target.to_host(self.surface.phase.phi), dtype=np.float64)[:self._nleaves]
+        total = phi.sum() / 8.0 ** self.finest
+        for level in self.levels[:-1]:
+            total += self.views[level].nleaves * CELLS / 8.0 ** level
+        return float(total)
+
+    def surface_height(self) -> np.ndarray:
+        """Height of the phi = 1/2 surface over each column of the finest level (nx, ny), in finest-level cells
+        from the bottom (:meth:`FreeSurfaceFluid.surface_height`)."""
+        return self.surface.surface_height()
+
+    def max_speed(self) -> float:
+        """max |u| (lattice units) over the liquid leaf cells of every level."""
+        out = 0.0
+        for level in self.levels:
+            rho, u = self.lbm.solvers[level].macroscopic_blocks()
+            n = self.views[level].nleaves
+            u = u[:, :n]
+            if level == self.finest:
+                phi = np.asarray(self.target.to_host(self.surface.phase.phi))[:n]
+                u = u[:, phi >= 0.5]
+            out = max(out, float(np.sqrt((u ** 2).sum(axis=0)).max()))
+        return out

@@ -20,7 +20,7 @@ EXPECTED = {
     "mark", "links", "mirror", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
     "near_events", "fill",
     "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero2", "count_k", "chunk_sum", "scan_sums",
-    "chunk_scan", "scatter", "level_transfer",
+    "chunk_scan", "scatter", "level_transfer", "ghost_phase",
 }
 
 
@@ -49,7 +49,8 @@ def test_every_kernel_is_traced(builds):
     names = {r["name"] for r in rows}
     assert EXPECTED <= names, sorted(EXPECTED - names)
     scenes = {s for r in rows for s in r["scenes"].split(",")}
-    assert {"tier1", "tier2-float32", "tier2-float64", "lbm-float32", "lbm-float64", "refined_channel"} <= scenes
+    assert {"tier1", "tier2-float32", "tier2-float64", "lbm-float32", "lbm-float64", "refined_channel",
+            "refined_surface-float32"} <= scenes
 
 
 def test_every_kernel_compiles_for_sm90_and_launches(builds):

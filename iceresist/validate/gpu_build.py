@@ -3,8 +3,8 @@
 The CUDA simulator runs kernels as Python, so it passes code that the GPU compiler refuses (a float64 ``xor``
 once stopped the DEM at its first sub-step on a real GPU). This check compiles what a real device would run:
 
-1. **Trace.** A CI-sized scene of each tier, the built-in dam break, the refined channel and the plain LBM step are
-   built and stepped on the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand
+1. **Trace.** A CI-sized scene of each tier, the built-in dam break, the refined channel, the free surface on two
+   levels and the plain LBM step are built and stepped on the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand
    in for device arrays and every launch is recorded instead of run.
 2. **Compile.** Each kernel, with the argument types of its launches, by
    :func:`iceresist.backends.buildcheck.compile_kernel`: PTX for sm_90 by NVVM, a cubin by ptxas.
@@ -52,6 +52,23 @@ def fluid_launches(precision: str):
     solver.step(1)
 
 
+def refined_surface_launches(precision: str):
+    """Launches of one level-0 step of the free surface on two levels (:mod:`iceresist.freesurface.refined`: the
+    ghost refill of the finest level, the liquid level's fused update, the level transfers) on a 16 x 16 x 32
+    level-1 column."""
+    from iceresist.freesurface.refined import RefinedFreeSurface
+    from iceresist.grid.forest import Face
+    from iceresist.grid.octree import BlockOctree
+
+    faces = {k: Face("periodic") for k in ("x-", "x+", "y-", "y+")} | {"z-": Face("wall"), "z+": Face("wall")}
+    tree = BlockOctree((1, 1, 2), 1, periodic=(True, True, False)).refine(
+        lambda lo, hi: np.where(lo[:, 2] >= 8, 1, 0))
+    m = RefinedFreeSurface(tree, tau0=0.55, gravity0=2e-4, depth0=12.0, mobility=0.01, width=3.0,
+                           precision=precision, faces=faces, target=jit.cuda())
+    m.initialize()
+    m.step(1)
+
+
 @contextlib.contextmanager
 def _all_blocks_wet():
     """Traced kernels do not run, so no block ever turns wet and a population pool never fills a new row: within,
@@ -86,6 +103,7 @@ def trace(steps: int = 2) -> dict:
     jobs = [(label, lambda s=scene, r=label.startswith("tier"): run(s, r))
             for label, scene in check_scenes().items()]
     jobs += [(f"lbm-{p}", lambda p=p: fluid_launches(p)) for p in ("float32", "float64")]
+    jobs += [("refined_surface-float32", lambda: refined_surface_launches("float32"))]
     for label, job in jobs:
         with tracing() as launches:
             job()

@@ -48,6 +48,10 @@ def build_octree(scene: Scene):
     periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
     t = BlockOctree(tuple(n // 8 for n in shape), ref.levels, periodic=periodic)
     boxes = [(np.asarray(b.lo_m) / dx, np.asarray(b.hi_m) / dx, b.level) for b in ref.boxes]
+    if ref.surface_band_m is not None:
+        depth, band = scene.free_surface.water_depth_m / dx, ref.surface_band_m / dx
+        boxes.append((np.array([-np.inf, -np.inf, depth - band]), np.array([np.inf, np.inf, depth + band]),
+                      ref.levels))
 
     def wanted(lo, hi):
         level = np.zeros(len(lo), dtype=np.int64)
@@ -68,7 +72,6 @@ class RefinedFluidModel(Model):
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
         from iceresist.grid.levels import level_views
         from iceresist.limits import check_fluid
-        from iceresist.lbm.refinement import RefinedLBM
 
         self.scene = scene
         self.units = u = scene.units()
@@ -86,8 +89,7 @@ class RefinedFluidModel(Model):
         self.precision = precision or scene.numerics.precision
         self.octree = build_octree(scene)
         views = level_views(self.octree, forest_faces(scene, u))
-        itemsize = np.dtype(self.precision).itemsize
-        self.level_bytes = {v.level: 2 * Q * CELLS * itemsize * v.forest.nblocks for v in views if v is not None}
+        self.level_bytes = self._level_bytes(views)
         total = sum(self.level_bytes.values())
         for lv, nbytes in self.level_bytes.items():
             v = views[lv]
@@ -101,14 +103,26 @@ class RefinedFluidModel(Model):
         fl = scene.fluid
         self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
                                    for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
+        self._build()
+        self.cells_per_level = {lv: int(self.lbm.views[lv].nleaves) * CELLS for lv in self.lbm.levels}
+        self.cells = int(sum(self.cells_per_level.values()))
+        self.dt_s = u.dt_s
+
+    def _level_bytes(self, views) -> dict[int, int]:
+        """Bytes each level's blocks take (leaves and ghosts): both population buffers."""
+        itemsize = np.dtype(self.precision).itemsize
+        return {v.level: 2 * Q * CELLS * itemsize * v.forest.nblocks for v in views if v is not None}
+
+    def _build(self):
+        """The levels' solver (``self.lbm``), initialised from the scene."""
+        from iceresist.lbm.refinement import RefinedLBM
+
+        scene, u, fl = self.scene, self.units, self.scene.fluid
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
                               rescale=scene.refinement.scheme == "interpolate", target=self.target)
         u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
         self.lbm.initialize(1.0, u0)
-        self.cells_per_level = {lv: int(self.lbm.views[lv].nleaves) * CELLS for lv in self.lbm.levels}
-        self.cells = int(sum(self.cells_per_level.values()))
-        self.dt_s = u.dt_s
 
     # -- protocol -------------------------------------------------------------------------------------
     @property
@@ -123,26 +137,39 @@ class RefinedFluidModel(Model):
         """Cell updates in one level-0 step: level l's cells 2^l times."""
         return int(sum(n * 2 ** lv for lv, n in self.cells_per_level.items()))
 
+    def _leaf(self, lv: int):
+        """rho (nleaves, 512), u (3, nleaves, 512) in lattice units and the cell coordinates of level ``lv``'s
+        leaves; the free surface overrides it (the gas at the reference state)."""
+        return self.lbm.leaf_fields(lv)
+
+    def _leaf_extra(self, lv: int) -> list:
+        """Further per-leaf values :meth:`_level0` averages after rho and u (none here)."""
+        return []
+
     def _level0(self):
-        """Density and velocity (lattice units) on the level-0 grid: each cell the mean of the leaf cells in it."""
+        """Density and velocity (lattice units) on the level-0 grid, each cell the mean of the leaf cells in it, and
+        the means of :meth:`_leaf_extra` (a list)."""
         shape = tuple(self.shape_cells)
-        acc = np.zeros((4, *shape))
+        acc = None
         weight = np.zeros(shape)
         for lv in self.lbm.levels:
-            rho, u, (x, y, z) = self.lbm.leaf_fields(lv)
+            rho, u, (x, y, z) = self._leaf(lv)
+            values = (rho, *u, *self._leaf_extra(lv))
+            if acc is None:
+                acc = np.zeros((len(values), *shape))
             idx = (x.ravel() >> lv, y.ravel() >> lv, z.ravel() >> lv)
             w = 1.0 / 8 ** lv
             np.add.at(weight, idx, w)
-            for k, v in enumerate((rho, *u)):
-                np.add.at(acc[k], idx, w * v.ravel())
+            for k, v in enumerate(values):
+                np.add.at(acc[k], idx, w * np.asarray(v).ravel())
         acc /= np.where(weight > 0, weight, np.nan)
-        return acc[0], acc[1:]
+        return acc[0], acc[1:4], list(acc[4:])
 
     def fields(self) -> dict[str, np.ndarray]:
         """rho (kg/m^3), u (m/s), pressure (Pa, gauge) and flags on the level-0 grid."""
         from iceresist.grid import flags as FL
 
-        rho_lat, u_lat = self._level0()
+        rho_lat, u_lat, _ = self._level0()
         u = self.units
         return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
@@ -154,7 +181,7 @@ class RefinedFluidModel(Model):
         u = self.units
         out = []
         for lv in self.lbm.levels:
-            rho, vel, (x, y, z) = self.lbm.leaf_fields(lv)
+            rho, vel, (x, y, z) = self._leaf(lv)
             rho = rho.ravel()
             f = {"rho": u.density_to_physical(rho), "u": u.velocity_to_physical(vel.reshape(3, -1).T),
                  "pressure": u.pressure_to_physical((rho - 1.0) / 3.0)}
@@ -176,7 +203,7 @@ class RefinedFluidModel(Model):
         mass = ke = 0.0
         umax = 0.0
         for lv in self.lbm.levels:
-            rho, vel, _ = self.lbm.leaf_fields(lv)
+            rho, vel, _ = self._leaf(lv)
             vol = (u.dx_m / 2 ** lv) ** 3
             speed2 = (vel ** 2).sum(axis=0)
             mass += float(u.density_to_physical(rho).sum() * vol)
@@ -188,7 +215,7 @@ class RefinedFluidModel(Model):
     def watchdog_probe(self) -> dict:
         from iceresist.models.probe import fluid_probe
 
-        rho_lat, u_lat = self._level0()
+        rho_lat, u_lat, _ = self._level0()
         u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
                     0.1 * self.scene.numerics.mach)
         return fluid_probe(rho_lat, u_lat, np.isfinite(rho_lat), 0.5 * rho_lat.size * u_ref ** 2)

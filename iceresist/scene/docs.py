@@ -413,7 +413,8 @@ def scenes_markdown() -> str:
                        ("poiseuille", "Plane Poiseuille flow of water in SI units"),
                        ("still_tank", "Still water in a closed tank (free surface), lattice units"),
                        ("dam_break", "Dam break in a flume (free surface), lattice units"),
-                       ("refined_channel", "Plane Poiseuille flow on two levels of blocks (static refinement)")):
+                       ("refined_channel", "Plane Poiseuille flow on two levels of blocks (static refinement)"),
+                       ("refined_tank", "Still water with its surface on the finer of two levels (static refinement)")):
         out.append(f"### `{name}` — {what}\n\n```toml\n{preset_text(name).rstrip()}\n```\n\n")
     for title, text in BODY_EXAMPLES:
         out.append(f"### {title}\n\n```toml\n{text.rstrip()}\n```\n\n")

@@ -456,12 +456,17 @@ class RefinementBox(_Section):
 class Refinement(_Section):
     """``[refinement]`` (optional): static block refinement (paper section 2.5). Level 0 is the grid of
     ``domain.dx_m``; level l has cells dx_m / 2^l and time steps dt / 2^l (acoustic scaling, the same physical
-    viscosity). A block takes the highest level of the boxes it overlaps; 2:1 balance adds the levels between.
-    Fluid-only scenes so far, on the CPU or (the conservative interface) CUDA (iceresist.lbm.refinement)."""
+    viscosity). A block takes the highest level of the regions it overlaps (the boxes, the band around the water
+    surface); 2:1 balance adds the levels between. The fluid alone, or with a `[free_surface]` whose surface lies in
+    the finest level (the coarser levels all water; iceresist.freesurface.refined), on the CPU or (the conservative
+    interface) CUDA (iceresist.lbm.refinement)."""
 
     levels: int = Field(..., ge=1, le=6, description="The finest level (cells dx_m / 2^levels).")
-    boxes: list[RefinementBox] = Field(..., min_length=1, description="Regions and their levels, see "
-                                       "`[[refinement.boxes]]`.")
+    boxes: list[RefinementBox] = Field([], description="Regions and their levels, see `[[refinement.boxes]]`.")
+    surface_band_m: float | None = Field(
+        None, gt=0, description="With `[free_surface]`: the blocks within this distance (m; cells in a lattice "
+        "scene) above or below the still-water level take the finest level. The surface must lie in the finest "
+        "level, about 2.5 interface widths inside it.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
@@ -469,6 +474,8 @@ class Refinement(_Section):
 
     @model_validator(mode="after")
     def _levels(self):
+        if not self.boxes and self.surface_band_m is None:
+            raise ValueError("boxes: give at least one [[refinement.boxes]] or refinement.surface_band_m")
         for i, b in enumerate(self.boxes):
             if b.level > self.levels:
                 raise ValueError(f"boxes[{i}].level: {b.level} is finer than levels = {self.levels}; use a level "
@@ -531,6 +538,9 @@ class Scene(_Section):
                 if any(lo < 0 or h > L * (1 + 1e-9) for lo, h, L in zip(b.lo_m, b.hi_m, size)):
                     raise ValueError(f"refinement.boxes[{i}]: the box must lie inside the domain "
                                      f"[0, 0, 0] - {list(size)}")
+            if self.refinement.surface_band_m is not None and self.free_surface is None:
+                raise ValueError("refinement.surface_band_m: a band around the water surface needs a "
+                                 "[free_surface] section; refine with [[refinement.boxes]] instead")
         return self
 
     # -- derived values --------------------------------------------------------------------------------

@@ -1,0 +1,194 @@
+"""Water with a free surface on refined levels: a scene with ``[free_surface]`` and ``[refinement]`` (paper sections
+2.2 and 2.5).
+
+:class:`RefinedFreeSurfaceModel` is :class:`~iceresist.models.refined.RefinedFluidModel` with
+:class:`~iceresist.freesurface.refined.RefinedFreeSurface` as its solver: the surface in the finest level (the
+scene's boxes or ``refinement.surface_band_m`` must put it there; a scene whose coarser levels reach the surface is
+refused naming ``refinement.regions``), the coarser levels all water. Fields on the level-0 grid add phi, flags and
+the surface height; every level's leaves go to ParaView as for the fluid alone, with phi. The water starts still and
+hydrostatic at ``free_surface.water_depth_m``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.grid import flags as FL
+from iceresist.grid.forest import CELLS
+from iceresist.lattice import Q
+from iceresist.models.fluid import FreeSurfaceModel, check_free_surface_forces, forest_faces
+from iceresist.models.refined import RefinedFluidModel
+
+
+class RefinedFreeSurfaceModel(RefinedFluidModel):
+    """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA)."""
+
+    components = ("fluid", "free_surface", "refinement")
+
+    def _level_bytes(self, views) -> dict[int, int]:
+        """Bytes each level's blocks take: both population buffers, and on the finest level the phase field (h in
+        two buffers, phi) and the velocity, flags and work arrays of the free surface."""
+        from iceresist.freesurface.hlattice import h_lattice
+
+        item = np.dtype(self.precision).itemsize
+        finest = max(v.level for v in views if v is not None)
+        qh = h_lattice(self.scene.free_surface.h_lattice).q
+        out = {}
+        for v in views:
+            if v is None:
+                continue
+            n = v.forest.nblocks
+            out[v.level] = 2 * Q * CELLS * item * n
+            if v.level == finest:
+                out[v.level] += n * CELLS * (item * (2 * qh + 1 + 3) + 3) + n
+        return out
+
+    def _build(self):
+        from iceresist.freesurface.refined import RefinedFreeSurface
+
+        scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
+        if fs.column_length_m is not None:
+            raise InputError("free_surface.column_length_m: a dam break's dry floor lies outside the finest level; "
+                             "run it without [refinement]")
+        check_free_surface_forces(scene)
+        self.depth0 = float(u.length_to_lattice(fs.water_depth_m))
+        nz = self.shape_cells[2]
+        if not 0.0 < self.depth0 < nz:
+            raise InputError(f"free_surface.water_depth_m: {fs.water_depth_m} m is {self.depth0:g} cells, outside "
+                             f"the {nz}-cell-high domain")
+        self.gravity0 = float(u.acceleration_to_lattice(-fl.gravity_m_s2[2]))
+        self.fs = RefinedFreeSurface(self.octree, tau0=u.tau, gravity0=self.gravity0, depth0=self.depth0,
+                                     mobility=fs.mobility_lattice, width=fs.interface_width_cells,
+                                     h_lattice=fs.h_lattice, operator=fl.operator, precision=self.precision,
+                                     target=self.target, faces=forest_faces(scene, u))
+        self.lbm = self.fs.lbm
+        self.finest = self.fs.finest
+        self.fs.initialize(u=tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
+        self.volume0_cells = self.fs.volume()
+
+    # -- values per leaf ---------------------------------------------------------------------------------
+    def _phi_leaves(self) -> np.ndarray:
+        n = self.lbm.views[self.finest].nleaves
+        return np.asarray(self.target.to_host(self.fs.surface.phase.phi), dtype=np.float64)[:n]
+
+    def _leaf(self, lv: int):
+        """rho and u of the leaves with the gas at the reference state (rho0 = 1, u = 0), as
+        :meth:`FreeSurfaceModel.fields` writes it."""
+        rho, u, xyz = self.lbm.leaf_fields(lv)
+        if lv == self.finest:
+            gas = self._phi_leaves() < 0.5
+            rho = np.where(gas, 1.0, rho)
+            u = np.where(gas[None], 0.0, u)
+        return rho, u, xyz
+
+    def _leaf_extra(self, lv: int) -> list:
+        """phi of the leaves (1 on the coarser levels: all water)."""
+        if lv == self.finest:
+            return [self._phi_leaves()]
+        return [np.ones((self.lbm.views[lv].nleaves, CELLS))]
+
+    def surface_cells(self) -> np.ndarray:
+        """Height of phi = 1/2 over each level-0 column (nx, ny), level-0 cells: the mean of the finest level's
+        columns in it."""
+        h = self.fs.surface_height() / 2 ** self.finest
+        s = 2 ** self.finest
+        nx, ny = h.shape[0] // s, h.shape[1] // s
+        return np.nanmean(h.reshape(nx, s, ny, s), axis=(1, 3))
+
+    # -- protocol ------------------------------------------------------------------------------------------
+    def step(self, n: int = 1):
+        self.fs.step(n)
+
+    def fields(self) -> dict[str, np.ndarray]:
+        """rho (kg/m^3), u (m/s), pressure (Pa, gauge), flags (FLUID where phi >= 1/2, else GAS), phi and surface (m)
+        on the level-0 grid, each cell the mean of the leaf cells in it (:meth:`FreeSurfaceModel.fields`)."""
+        rho_lat, u_lat, (phi,) = self._level0()
+        u = self.units
+        surface = u.length_to_physical(self.surface_cells())
+        return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
+                "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
+                "flags": np.where(phi >= 0.5, FL.FLUID, FL.GAS).astype(np.uint8), "phi": phi,
+                "surface": np.broadcast_to(surface[:, :, None], self.shape_cells).copy()}
+
+    field_units = staticmethod(FreeSurfaceModel.field_units)
+
+    def level_fields(self, names=None) -> list[dict]:
+        out = super().level_fields(None)
+        for entry in out:
+            entry["fields"]["phi"] = self._leaf_extra(entry["level"])[0].ravel()
+            if names is not None:
+                entry["fields"] = {k: v for k, v in entry["fields"].items() if k in names}
+        return out
+
+    def is_finite(self) -> bool:
+        return math.isfinite(self.fs.volume()) and math.isfinite(self.lbm.mass())
+
+    def diagnostics(self) -> dict[str, float]:
+        """Water volume (m^3, :meth:`RefinedFreeSurface.volume`) and its drift, liquid mass (kg) and kinetic energy
+        (J) over every level's liquid leaves with their own cell volumes, the largest speed, the mean surface
+        height (m)."""
+        u = self.units
+        mass = ke = umax = 0.0
+        for lv in self.lbm.levels:
+            rho, vel, _ = self.lbm.leaf_fields(lv)
+            liquid = self._leaf_extra(lv)[0] >= 0.5
+            vol = (u.dx_m / 2 ** lv) ** 3
+            speed2 = (vel ** 2).sum(axis=0)[liquid]
+            rho_kg = u.density_to_physical(rho[liquid])
+            mass += float(rho_kg.sum() * vol)
+            ke += float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
+            if speed2.size:
+                umax = max(umax, float(np.sqrt(speed2.max())))
+        v = self.fs.volume()
+        return {"water_volume_m3": float(v * u.dx_m ** 3),
+                "water_volume_drift": float((v - self.volume0_cells) / self.volume0_cells),
+                "mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
+                "max_lattice_speed": umax,
+                "surface_mean_m": float(u.length_to_physical(np.nanmean(self.surface_cells())))}
+
+    def state(self) -> dict:
+        """Every coarser level's populations, the finest level's free surface (populations, h, phi, flags), the
+        iteration, the initial volume and the block octree: a bit-for-bit restart."""
+        coarse = {}
+        for lv in self.lbm.levels[:-1]:
+            blocks, f = self.lbm.solvers[lv].fluid.rows()
+            coarse[str(lv)] = f
+        return {"f": coarse, "surface": self.fs.surface.state(), "iteration": np.int64(self.iteration),
+                "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
+                "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}
+
+    def load_state(self, state: dict):
+        if state.get("precision", self.precision) != self.precision:
+            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
+                             f"restart with --precision {state.get('precision')}")
+        lev, coord = state.get("octree_level"), state.get("octree_coord")
+        if lev is None or coord is None or not (np.array_equal(lev, self.octree.level)
+                                                and np.array_equal(coord, self.octree.coord)):
+            raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or "
+                             "regions changed): run the scene again without --pickup")
+        if "surface" not in state:
+            raise InputError("checkpoint holds no free surface on levels: it belongs to another scene")
+        for lv in self.lbm.levels[:-1]:
+            level = self.lbm.solvers[lv]
+            f = np.asarray(state["f"].get(str(lv), np.zeros(0)))
+            n = level.forest.nblocks
+            if f.shape != (n, Q, CELLS):
+                raise InputError(f"checkpoint populations of level {lv} have shape {f.shape}, this scene needs "
+                                 f"{(n, Q, CELLS)}: it belongs to another scene or refinement")
+            level.fluid.set_rows(np.arange(n), f.astype(level.fluid.real), n)
+            level.fluid.iteration = int(state["iteration"]) * 2 ** lv
+        self.fs.surface.load_state(state["surface"])
+        self.lbm.iteration = int(state["iteration"])
+        self.volume0_cells = float(state["volume0_cells"])
+
+    def describe(self) -> dict:
+        fs = self.scene.free_surface
+        return {**super().describe(), "water_depth_cells": self.depth0, "gravity_lattice_level0": self.gravity0,
+                "h_lattice": fs.h_lattice, "interface_width_cells": fs.interface_width_cells,
+                "surface_level": self.finest}
+
+    def allocation(self) -> dict[str, int]:
+        return {f"level{lv}": int(n) for lv, n in self.level_bytes.items()}

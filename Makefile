@@ -3,7 +3,7 @@
 PY      ?= python3
 VENV    ?= .venv
 BIN     := $(VENV)/bin
-PYTEST_ARGS ?= -m "not slow and not gpu and not mpi"
+PYTEST_ARGS ?= -m "not slow and not gpu"
 
 .PHONY: demo test venv bench clean
 
@@ -12,7 +12,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install -q --upgrade pip
 
 $(VENV)/.installed: pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q -e ".[test,gpu]"
+	$(BIN)/python -m pip install -q -e ".[test,gpu,mpi]"
 	touch $@
 
 venv: $(VENV)/.installed

@@ -129,10 +129,18 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    root = True
     try:
+        from iceresist import parallel
+
+        if parallel.launched_by_mpi():       # one rank speaks: the others log warnings only and print no errors
+            root = parallel.rank() == 0
+            if not root:
+                logging.getLogger().setLevel(logging.WARNING)
         return int(args.func(args) or 0)
     except InputError as exc:
-        print(f"iceresist: error: {exc}", file=sys.stderr)
+        if root:
+            print(f"iceresist: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("iceresist: interrupted; files already written are complete", file=sys.stderr)

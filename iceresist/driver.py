@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from iceresist.io.hdf5 import RunFile
+from iceresist.io.hdf5 import NullRunFile, RunFile
 from iceresist.io.meta import leg_meta, run_meta
 from iceresist.models.base import Model
 from iceresist.simulation import (Callback, Checkpointer, FieldWriter, IterationInterval, Simulation,
@@ -108,22 +108,26 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
     path = Path(path)
     checkpoint_path = None if checkpoint_path is None else Path(checkpoint_path)
     t0 = time.perf_counter() - build_s
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if not pickup and checkpoint_path is not None:
+    root = model.comm is None or model.comm.rank == 0   # an MPI run: rank 0 writes, every rank steps
+    if root:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    if root and not pickup and checkpoint_path is not None:
         checkpoint_path.unlink(missing_ok=True)  # the checkpoint of a result this run replaces
     sim = Simulation(model, stop_iteration=stop.iteration, stop_time_s=stop.time_s,
                      wall_time_limit_s=stop.wall_s, progress=progress)
     sim.leave_progress = leave_progress
     if pickup:  # a missing or wrong checkpoint stops here, before the result file is touched
         sim.load_checkpoint(checkpoint_path if pickup is True else pickup)
-    dog_json = path.with_suffix(".watchdog.json")
-    dog_json.unlink(missing_ok=True)  # the diagnostic of an earlier leg or run
+    dog_json = path.with_suffix(".watchdog.json") if root else None
+    if root:
+        dog_json.unlink(missing_ok=True)  # the diagnostic of an earlier leg or run
     desc = model.describe()
     units = model.units.describe() if model.units is not None else None
     dx_m = model.units.dx_m if model.units is not None else 1.0  # places the fields' grid (none without a lattice)
-    with RunFile(path, "a" if pickup else "w", shape_cells=model.shape_cells, dx_m=dx_m,
-                 write_xdmf=bool(outputs.fields)) as rf:
-        if not pickup:
+    runfile = RunFile(path, "a" if pickup else "w", shape_cells=model.shape_cells, dx_m=dx_m,
+                      write_xdmf=bool(outputs.fields)) if root else NullRunFile()
+    with runfile as rf:
+        if not pickup and root:
             rf.write_meta(**run_meta(scene_text=scene.source_text, backend=desc["backend"],
                                      precision=desc["precision"], cells=model.cells),
                           scene_name=scene.scene.name, scene_source=scene.source_name,
@@ -135,7 +139,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
         earlier = rf.meta if pickup else None
         # the file notes the wall time up to its own checkpoint, not up to one named with pickup=PATH
         wall_before_s = float(earlier.get("checkpoint_wall_s", 0.0)) if pickup is True else 0.0
-        if pickup and (pickup is not True or "checkpoint_wall_s" not in earlier):
+        if root and pickup and (pickup is not True or "checkpoint_wall_s" not in earlier):
             log.warning("%s: the wall time up to the checkpoint is not known (%s): its wall_time_s will count from "
                         "the pickup", path, "another checkpoint" if pickup is not True else "an older iceresist "
                         "wrote the file")
@@ -154,7 +158,8 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
             sim.callbacks[name] = Callback(func, IterationInterval(every))
 
         def start_leg(s):  # after the pickup: the iteration this leg starts from is known
-            rf.write_meta(**leg_meta(earlier, s.start_iteration, desc["backend"]), finished=False)
+            if root:
+                rf.write_meta(**leg_meta(earlier, s.start_iteration, desc["backend"]), finished=False)
 
         sim.on_start.append(start_leg)
         log.info("running %s: %s, %d cells, %.4g s per step, %s on %s -> %s", scene.scene.name,
@@ -170,7 +175,7 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
                           stop_reason=sim.stop_reason or "interrupted", diverged=sim.diverged,
                           finished=sim.completed,
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
-        if sim.completed and on_completed is not None:
+        if sim.completed and on_completed is not None and root:
             on_completed(rf, model, sim)
     rate = f"; {sim.mlups:.2f} MLUPS after it" if model.cells else ""   # tier 1 has no lattice
     log.info("%s: %d steps in %.2f s of stepping, %.2f s of it the first step (compiling or loading the "

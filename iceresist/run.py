@@ -15,6 +15,7 @@ import argparse
 import logging
 from pathlib import Path
 
+from iceresist import parallel
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
 from iceresist.io.paths import check_output_dir
@@ -84,23 +85,31 @@ def cmd_run(args) -> int:
         if args.steps < 0:
             raise InputError(f"--steps: must be >= 0 (got {args.steps})")
         scene = _override(scene, "run", steps=args.steps, end_time_s=None)
-    check_output_dir(args.output if args.output is not None else scene.output.directory,
-                     "--output" if args.output is not None else "output.directory")
     h5_path, chk_path = result_paths(scene, args.output)
     pickup = args.pickup
-    if pickup:
-        if not h5_path.is_file():
-            raise InputError(f"{h5_path}: no result to continue (--pickup); run without --pickup first")
-        if pickup is True and not chk_path.is_file():
-            raise InputError(f"{chk_path}: no checkpoint to continue from")
-        if args.force:
-            raise InputError("--force and --pickup exclude each other: --force starts again, --pickup continues")
-    elif h5_path.exists() and not args.force:
-        raise InputError(f"{h5_path}: a result already exists; use --force to overwrite it or --pickup to continue it")
 
+    def check_files():
+        check_output_dir(args.output if args.output is not None else scene.output.directory,
+                         "--output" if args.output is not None else "output.directory")
+        if pickup:
+            if not h5_path.is_file():
+                raise InputError(f"{h5_path}: no result to continue (--pickup); run without --pickup first")
+            if pickup is True and not chk_path.is_file():
+                raise InputError(f"{chk_path}: no checkpoint to continue from")
+            if args.force:
+                raise InputError("--force and --pickup exclude each other: --force starts again, --pickup continues")
+        elif h5_path.exists() and not args.force:
+            raise InputError(f"{h5_path}: a result already exists; use --force to overwrite it or --pickup to "
+                             f"continue it")
+
+    comm = parallel.world()
+    parallel.on_rank0(check_files, comm)   # the files as rank 0 sees them, before it writes any
     check_memory(scene, args.precision)
-    model = build_model(scene, backend=args.backend, precision=args.precision)
+    model = build_model(scene, backend=args.backend, precision=args.precision,
+                        **({} if comm is None else {"comm": comm}))
+    if comm is not None:
+        log.info("MPI: %d ranks, blocks per rank %s", comm.size, model.describe()["mpi"]["blocks_per_rank"])
     stop, outputs = scene_outputs(scene)
     result = run_model(model, scene, h5_path, chk_path, stop=stop, outputs=outputs, pickup=pickup,
-                       lattice_units=scene.is_lattice, progress=not args.no_progress)
+                       lattice_units=scene.is_lattice, progress=not args.no_progress and parallel.rank() == 0)
     return 1 if result.sim.diverged else 0

@@ -144,6 +144,9 @@ class FieldWriter:
     def write(self, sim):
         model = sim.model
         data = model.fields()
+        if data is None:            # an MPI rank other than 0: the fields were gathered there
+            self.last_iteration = model.iteration
+            return
         if self.fields is not None:
             data = {k: data[k] for k in self.fields}
         if not all(np.isfinite(a).all() for a in data.values() if np.issubdtype(np.asarray(a).dtype, np.floating)):
@@ -207,9 +210,12 @@ class Checkpointer:
 
     def write(self, sim):
         m = sim.model
-        write_checkpoint(self.path, {"model": m.state(), "iteration": np.int64(m.iteration),
-                                     "time_s": np.float64(m.time_s)})
+        state = m.state()
         self.last_iteration = m.iteration
+        if state is None:           # an MPI rank other than 0: the state was gathered there
+            return
+        write_checkpoint(self.path, {"model": state, "iteration": np.int64(m.iteration),
+                                     "time_s": np.float64(m.time_s)})
         if self.runfile is not None:
             self.runfile.write_meta(checkpoint_iteration=int(m.iteration),
                                     checkpoint_wall_s=self.wall_before_s + time.perf_counter() - self.t0)
@@ -258,6 +264,10 @@ class Simulation:
         self.first_steps = 0
         self._chunk_cap = 1
         self._start_wall = time.perf_counter()
+        #: The MPI communicator of a model on several ranks (:attr:`Model.comm`): every decision that rests on a
+        #: rank's own clock (chunk length, wall-time schedules and limit) or on what only rank 0 sees (a NaN in the
+        #: gathered fields) is taken together, so all ranks step, write and stop in step.
+        self.comm = getattr(model, "comm", None)
 
     # -- control --------------------------------------------------------------------------------------
     def stop(self, reason: str):
@@ -299,6 +309,7 @@ class Simulation:
             self._reach_end(f"stop time {self.stop_time_s:g} s reached")
         if self.wall_time_limit_s is not None and time.perf_counter() - self._start_wall >= self.wall_time_limit_s:
             self.stop(f"wall time limit {self.wall_time_limit_s:g} s reached")
+        self._agree_stop()
 
     def _reach_end(self, reason: str):
         """Stop at the stop iteration or time; the run is ``completed`` unless something stopped it first."""
@@ -315,9 +326,24 @@ class Simulation:
         acts += [(k, w) for k, w in writers if isinstance(w, Checkpointer)]
         return acts
 
+    def _agreed(self, flag: bool) -> bool:
+        """``flag`` as rank 0 has it (MPI), else ``flag``."""
+        return flag if self.comm is None else bool(self.comm.bcast(bool(flag), root=0))
+
+    def _agree_stop(self):
+        """On MPI: every rank takes the stop state of the lowest rank that stopped (a wall-time limit, a divergence
+        seen in rank 0's gathered fields)."""
+        if self.comm is None:
+            return
+        states = self.comm.allgather((self.stop_reason, self.diverged, self.completed))
+        for reason, diverged, completed in states:
+            if reason is not None:
+                self.stop_reason, self.diverged, self.completed = reason, diverged, completed
+                return
+
     def _actuate(self):
         acts = self._actions()
-        due = [(name, act) for name, act in acts if act.schedule is not None and act.schedule(self)]
+        due = [(name, act) for name, act in acts if act.schedule is not None and self._agreed(act.schedule(self))]
         guard = self.callbacks.get("watchdog")
         if guard is not None and any(not isinstance(a, Callback) for _, a in due) and \
                 not any(name == "watchdog" for name, _ in due):
@@ -327,6 +353,7 @@ class Simulation:
                 act(self)
             else:
                 act.write(self)
+            self._agree_stop()
             if self.diverged:
                 return
 
@@ -344,7 +371,12 @@ class Simulation:
             k = act.schedule.steps_to_next(self)
             if k is not None:
                 n = min(n, k)
-        return max(1, n)
+        n = max(1, n)
+        if self.comm is not None:
+            from mpi4py import MPI
+
+            n = int(self.comm.allreduce(n, op=MPI.MIN))
+        return n
 
     def _checkpointer(self) -> Checkpointer | None:
         for w in self.output_writers.values():

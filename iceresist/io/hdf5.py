@@ -312,3 +312,23 @@ class RunFile:
         if self._write_xdmf:
             self.write_xdmf()
             self.write_levels_xdmf()
+
+
+class NullRunFile:
+    """What an MPI rank other than 0 holds where rank 0 holds the :class:`RunFile`: every write does nothing, the
+    metadata is empty and there are no snapshots (only rank 0 writes a result; :mod:`iceresist.parallel`)."""
+
+    meta: dict = {}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def snapshot_iterations(self) -> list[int]:
+        return []
+
+    def __getattr__(self, name):
+        return lambda *args, **kwargs: None
+

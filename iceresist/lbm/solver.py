@@ -122,6 +122,11 @@ class LBMSolver:
         shape = (forest.nblocks, Q, 512)
         self._f = [self._to_device(np.zeros(shape, dtype=real)) for _ in range(2)]
         self._scalars = (real(1.0 / self.tau), *(real(v) for v in self.force))
+        #: Blocks the step updates, the forest's first ones (a rank of an MPI run updates its own blocks, not its
+        #: halo, :mod:`iceresist.parallel.decomposition`).
+        self.active_blocks = forest.nblocks
+        #: ``after_step(state)`` after each step (the halo exchange of an MPI run), or None.
+        self.after_step = None
         log.info("LBM solver: %d cells in %d blocks, %s %s on %s", self.cells, forest.nblocks, operator,
                  precision, target.name)
 
@@ -171,12 +176,14 @@ class LBMSolver:
     def step(self, n: int = 1):
         """Advance ``n`` fused stream-collide steps; the buffers swap after each."""
         t = self._tables
-        nb = self.forest.nblocks
+        nb = self.active_blocks
         for _ in range(int(n)):
             src, dst = self._f
             self._launch(nb, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
                          t["bc_rho"], *self._scalars)
             self._f = [dst, src]
+            if self.after_step is not None:
+                self.after_step(dst)
             self.iteration += 1
 
     def synchronize(self):

@@ -31,10 +31,17 @@ __all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "Refi
            "Tier2Model", "BodiesModel", "build_model"]
 
 
-def build_model(scene, *, backend: str | None = None, precision: str | None = None) -> Model:
+def build_model(scene, *, backend: str | None = None, precision: str | None = None, comm=None) -> Model:
     """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
     alone), tier-1 and tier-2 ship scenes ([ship] + [ice]) and scenes of rigid bodies ([[bodies]], with or
-    without [free_surface] and [contact])."""
+    without [free_surface] and [contact]). ``comm``: the MPI communicator of a run on several ranks
+    (:mod:`iceresist.parallel`; the fluid alone so far)."""
+    if comm is not None and comm.size > 1:
+        extra = scene.optional_sections()
+        if extra:
+            raise InputError(f"mpirun -n {comm.size}: a scene with {', '.join('[' + s + ']' for s in extra)} runs on "
+                             f"one process so far (the fluid alone runs on several); run it without mpirun")
+        return FluidModel(scene, backend=backend, precision=precision, comm=comm)
     if scene.ship is not None and scene.ice is not None:
         if scene.bodies:
             raise InputError(f"{scene.source_name}: bodies: a ship scene takes no extra [[bodies]] yet; remove "

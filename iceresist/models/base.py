@@ -42,6 +42,10 @@ class Model(abc.ABC):
     dt_s: float
     #: Scales of the lattice (:class:`iceresist.units.Units`; its ``dt_s`` is the LBM step), or None.
     units = None
+    #: The MPI communicator of a model split over several ranks (:mod:`iceresist.parallel`), or None. Its
+    #: ``fields()`` and ``state()`` then return the whole domain on rank 0 and None on the others, and its
+    #: ``diagnostics()``, ``is_finite()`` and ``watchdog_probe()`` the same values on every rank.
+    comm = None
 
     # -- clock ------------------------------------------------------------------------------------------
     @property

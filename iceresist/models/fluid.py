@@ -85,12 +85,15 @@ def check_free_surface_forces(scene: Scene) -> None:
 class FluidModel(Model):
     """The LBM fluid alone: a uniform block forest and an :class:`~iceresist.lbm.solver.LBMSolver`.
 
-    ``backend`` and ``precision`` override the scene's ``[numerics]``.
+    ``backend`` and ``precision`` override the scene's ``[numerics]``. ``comm``: an MPI communicator of several
+    ranks; the forest is then split along the Morton curve (:class:`~iceresist.parallel.decomposition
+    .Decomposition`), each rank steps its blocks and exchanges its halo after every step, and the fields and the
+    checkpoint state are gathered on rank 0 (:attr:`Model.comm`).
     """
 
     components = ("fluid",)
 
-    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
+    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
         self.units = scene.units()
         u = self.units
@@ -105,14 +108,26 @@ class FluidModel(Model):
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
-        self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u), solid=padding_solid(scene))
+        self.global_forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u),
+                                                 solid=padding_solid(scene))
+        self.decomp = None
+        self.forest = self.global_forest
+        if comm is not None and comm.size > 1:
+            from iceresist.parallel.decomposition import Decomposition
+
+            self.comm = comm
+            self.decomp = Decomposition(self.global_forest, comm)
+            self.forest = self.decomp.local
         fl = scene.fluid
         self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
                                    for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
         self.solver = LBMSolver(self.forest, tau=u.tau, force=self.force_lattice, operator=fl.operator,
                                 precision=self.precision, target=self.target)
+        if self.decomp is not None:
+            self.solver.active_blocks = self.decomp.nowned
+            self.solver.after_step = lambda f: self.decomp.exchange(f, self.target)
         self.solver.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        self.cells = int(self.solver.cells)
+        self.cells = int(self.global_forest.cells)
         self.dt_s = u.dt_s
 
     # -- protocol -------------------------------------------------------------------------------------
@@ -129,13 +144,17 @@ class FluidModel(Model):
         a blow-up."""
         from iceresist.grid import flags as FL
 
-        rho_lat, u_lat = self.solver.macroscopic()
-        solid = ~np.isfinite(rho_lat) & np.nan_to_num(self.forest.to_dense((~self.forest.fluid).astype(np.float64)),
+        dense = self._dense_macroscopic()
+        if dense is None:
+            return None
+        rho_lat, u_lat = dense
+        fo = self.global_forest
+        solid = ~np.isfinite(rho_lat) & np.nan_to_num(fo.to_dense((~fo.fluid).astype(np.float64)),
                                                        nan=1.0).astype(bool)
         rho_lat = np.where(solid, 1.0, rho_lat)
         u_lat = np.where(solid[None], 0.0, u_lat)
         u = self.units
-        flags = self.forest.to_dense(self.forest.flags.astype(np.float64))
+        flags = fo.to_dense(fo.flags.astype(np.float64))
         return {"rho": u.density_to_physical(rho_lat),
                 "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
@@ -147,21 +166,38 @@ class FluidModel(Model):
             return {"rho": "lattice", "u": "lattice", "pressure": "lattice", "flags": "bits"}
         return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits"}
 
+    def _dense_macroscopic(self):
+        """Dense rho and u (lattice units, NaN outside the fluid) of the whole domain; on an MPI run gathered on
+        rank 0, None on the other ranks."""
+        if self.decomp is None:
+            return self.solver.macroscopic()
+        rho_b, u_b = self.solver.macroscopic_blocks()
+        rho_b, u_b = self.decomp.gather_rows(rho_b), self.decomp.gather_rows(u_b, axis=1)
+        if rho_b is None:
+            return None
+        return self.global_forest.to_dense(rho_b), self.global_forest.to_dense(u_b)
+
     def is_finite(self) -> bool:
-        return math.isfinite(self.solver.mass())
+        finite = math.isfinite(self.solver.mass())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     def diagnostics(self) -> dict[str, float]:
-        """Fluid mass (kg), kinetic energy (J), largest speed (m/s) and largest lattice speed (u dt/dx)."""
-        rho_lat, u_lat = self.solver.macroscopic()
+        """Fluid mass (kg), kinetic energy (J), largest speed (m/s) and largest lattice speed (u dt/dx); on an MPI
+        run summed over the ranks' blocks (equal to one process's to round-off)."""
+        rho_b, u_b = self.solver.macroscopic_blocks()
+        n = self.solver.active_blocks
+        rho_lat, u_lat = rho_b[:n], u_b[:, :n]
         fluid = np.isfinite(rho_lat)
         speed2 = (u_lat ** 2).sum(axis=0)[fluid]
         u = self.units
         cell_m3 = u.dx_m ** 3
         umax_lat = float(np.sqrt(speed2.max())) if speed2.size else 0.0
-        return {"mass_kg": float(u.density_to_physical(rho_lat[fluid]).sum() * cell_m3),
-                "kinetic_energy_J": float(0.5 * (u.density_to_physical(rho_lat[fluid])
-                                                 * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * cell_m3),
-                "max_speed_m_s": float(u.velocity_to_physical(umax_lat)),
+        mass = float(u.density_to_physical(rho_lat[fluid]).sum() * cell_m3)
+        ke = float(0.5 * (u.density_to_physical(rho_lat[fluid]) * u.velocity_to_physical(1.0) ** 2
+                          * speed2).sum() * cell_m3)
+        if self.decomp is not None:
+            mass, ke, umax_lat = self.decomp.sum(mass), self.decomp.sum(ke), self.decomp.max(umax_lat)
+        return {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax_lat)),
                 "max_lattice_speed": umax_lat}
 
     def watchdog_probe(self) -> dict:
@@ -169,17 +205,25 @@ class FluidModel(Model):
         is that of the whole fluid moving at the scene's largest speed (at least a tenth of numerics.mach)."""
         from iceresist.models.probe import fluid_probe
 
-        if getattr(self, "_fluid_dense", None) is None:
-            dense = self.forest.to_dense(self.forest.fluid.astype(np.float64))
-            self._fluid_dense = np.nan_to_num(dense, nan=0.0) > 0.5
-        rho_lat, u_lat = self.solver.macroscopic()
-        u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
-                    0.1 * self.scene.numerics.mach)
-        return fluid_probe(rho_lat, u_lat, self._fluid_dense, 0.5 * self.cells * u_ref ** 2)
+        dense = self._dense_macroscopic()
+        probe = None
+        if dense is not None:
+            if getattr(self, "_fluid_dense", None) is None:
+                fo = self.global_forest
+                self._fluid_dense = np.nan_to_num(fo.to_dense(fo.fluid.astype(np.float64)), nan=0.0) > 0.5
+            u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
+                        0.1 * self.scene.numerics.mach)
+            probe = fluid_probe(*dense, self._fluid_dense, 0.5 * self.cells * u_ref ** 2)
+        return probe if self.decomp is None else self.decomp.bcast(probe)
 
-    def state(self) -> dict:
-        """Populations in storage precision (bit for bit) and the iteration."""
+    def state(self) -> dict | None:
+        """Populations in storage precision (bit for bit), in global block order, and the iteration; on an MPI
+        run gathered on rank 0 (None on the other ranks), so a checkpoint restarts on any number of ranks."""
         f = self.solver.populations().astype(self.solver.real)
+        if self.decomp is not None:
+            f = self.decomp.gather_rows(f)
+            if f is None:
+                return None
         return {"f": f, "iteration": np.int64(self.iteration), "precision": self.precision}
 
     def load_state(self, state: dict):
@@ -187,19 +231,24 @@ class FluidModel(Model):
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
-        expected = (self.forest.nblocks, 27, BLOCK ** 3)
+        expected = (self.global_forest.nblocks, 27, BLOCK ** 3)
         if f.shape != expected:
             raise InputError(f"checkpoint populations have shape {f.shape}, this scene needs {expected}: "
                              f"it belongs to another scene")
+        if self.decomp is not None:
+            f = self.decomp.local_rows(f)
         _set_populations(self.solver, f.astype(self.solver.real))
         self.solver.iteration = int(state["iteration"])
 
     def describe(self) -> dict:
-        return {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
-                "blocks": int(self.forest.nblocks), "operator": self.scene.fluid.operator,
-                "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
-                "force_lattice": list(self.force_lattice), "bytes_per_cell": int(self.solver.bytes_per_cell),
-                "unit_system": self.scene.scene.units}
+        out = {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
+               "blocks": int(self.global_forest.nblocks), "operator": self.scene.fluid.operator,
+               "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
+               "force_lattice": list(self.force_lattice), "bytes_per_cell": int(self.solver.bytes_per_cell),
+               "unit_system": self.scene.scene.units}
+        if self.decomp is not None:
+            out["mpi"] = self.decomp.describe()
+        return out
 
     def allocation(self) -> dict[str, int]:
         """Bytes of the state arrays this model holds: the populations, both buffers."""

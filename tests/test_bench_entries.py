@@ -20,6 +20,8 @@ TINY = [
     pytest.param("coupling", ["--n", "16", "--bodies", "2", "--steps", "2"], id="coupling"),
     pytest.param("freesurface", ["--n", "8", "--steps", "2"], id="freesurface"),
     pytest.param("amr", ["--n", "16", "--steps", "2", "--precision", "float64"], id="amr"),
+    pytest.param("mpi", ["--n", "16", "--steps", "2", "--precision", "float64"], id="mpi", marks=pytest.mark.skipif(
+        not (Path(sys.executable).parent / "mpirun").is_file(), reason="the `mpi` extra is not installed")),
     pytest.param("ship", ["--preset", "quick", "--records", "1"], id="ship", marks=SLOW),
     pytest.param("gpu_build", [], id="gpu_build", marks=SLOW),
 ]

@@ -4,7 +4,7 @@ Every ``import`` counts, also those inside functions (a cycle hidden in a functi
 cycle). The rules:
 
 * layers (:data:`LAYER_PARTS`, from the bottom): backends and lattice < grid < kernels (lbm, freesurface, dem,
-  coupling) < models < driver (simulation, watchdog, driver, run, sweep, validate) < the command line
+  coupling, parallel) < models < driver (simulation, watchdog, driver, run, sweep, validate) < the command line
   (iceresist.cli); nothing imports a layer above its own, and post imports neither the models nor the driver;
 * data flows one way: engine -> files -> ``iceresist.post`` -> ``reports``: nothing under iceresist/ imports
   ``reports`` except the composition root ``iceresist.cli``; ``reports`` imports from iceresist only
@@ -28,7 +28,7 @@ PACKAGES = ("iceresist", "fsicr", "reports")
 LAYER_PARTS = (
     ("backends", {"backends", "lattice"}),
     ("grid", {"grid"}),
-    ("kernels", {"lbm", "freesurface", "dem", "coupling"}),
+    ("kernels", {"lbm", "freesurface", "dem", "coupling", "parallel"}),
     ("models", {"models"}),
     ("driver", {"simulation", "watchdog", "driver", "run", "sweep", "validate"}),
     ("cli", {"cli"}),

@@ -89,3 +89,17 @@ def test_bad_mpi_use_exits_2_with_one_line(tmp_path, ranks, scene, needle):
     assert len(lines) == 1 and lines[0].startswith("iceresist: error: ") and needle in lines[0], r.stderr
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_cuda_ranks_stage_the_halo_through_the_host(tmp_path):
+    """The cavity with backend = "cuda" (the CUDA simulator in CI), 2 steps: on two ranks, each exchanging its
+    device arrays through the host, the populations are those of one CUDA process, bit for bit."""
+    from iceresist.backends import jit
+
+    if not jit.cuda_available():
+        pytest.skip("no CUDA GPU and the simulator is off")
+    one = _run(1, "cavity", "--steps", 2, "--backend", "cuda", "--output", "one", cwd=tmp_path)
+    two = _run(2, "cavity", "--steps", 2, "--backend", "cuda", "--output", "two", cwd=tmp_path)
+    assert one.returncode == 0 and two.returncode == 0, (one.stderr[-2000:], two.stderr[-2000:])
+    a, b = _populations(tmp_path / "one"), _populations(tmp_path / "two")
+    assert np.abs(a).max() > 1e-3 and np.array_equal(a, b)

@@ -4,8 +4,9 @@ The forest's blocks are in Morton order; :func:`morton_partition` cuts that orde
 weight (a block weighs its cells times the sub-steps of its level, 2^level), so each rank owns a compact piece of the
 domain. A rank steps a :class:`~iceresist.grid.forest.BlockForest` of its own: its blocks first, then its **halo**,
 every block of another rank that one of its blocks pulls from (the 26 neighbours). After each step
-:meth:`Decomposition.exchange` sends every owned block a neighbour needs and receives the halo (non-blocking
-``Isend``/``Irecv`` of packed rows, one message per neighbouring rank and array; device arrays staged through the
+:meth:`Decomposition.exchange` sends the cells of its blocks that a neighbouring rank's blocks pull from (the one
+layer facing them: 64 of a block's 512 cells across a face) and receives its own halo's (non-blocking
+``Isend``/``Irecv`` of packed cells, one message per neighbouring rank and array; device arrays staged through the
 host). A rank updates only its own blocks, so its cells see exactly the values one process would give them: the
 fluid is bit-identical to a run on one process.
 
@@ -75,47 +76,87 @@ class Decomposition:
         self.local.flags[self.nowned:] = forest.flags[self.halo]
         pos = np.full(forest.nblocks, -1, dtype=np.int64)
         pos[ids] = np.arange(len(ids))
-        #: (rank, local rows to send) and (rank, local rows to receive), rows in global-id order on both sides
+        #: (rank, local rows, cells) to send and to receive: the cells of each halo block that the receiving rank's
+        #: blocks pull from (the layer facing them), in (global block, cell) order on both sides
         self.sends = []
         self.recvs = []
         for r in range(self.size):
             if r == self.rank:
                 continue
-            out = np.intersect1d(self.owned, halos[r])
-            if len(out):
-                self.sends.append((r, pos[out]))
-            inc = self.halo[self.owner[self.halo] == r]
-            if len(inc):
-                self.recvs.append((r, pos[inc]))
-        self.bytes_last_exchange = 0
+            blocks, cells = self._needed(sender=self.rank, receiver=r)
+            if len(blocks):
+                self.sends.append((r, pos[blocks], cells))
+            blocks, cells = self._needed(sender=r, receiver=self.rank)
+            if len(blocks):
+                self.recvs.append((r, pos[blocks], cells))
+        #: Totals since construction: halo exchanges, bytes this rank sent, wall seconds inside them.
+        self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
+
+    def _needed(self, sender: int, receiver: int):
+        """(global blocks, cells) of ``sender``'s blocks that ``receiver``'s blocks pull from: for a block h next to
+        a receiving block o, the cells of h on its side facing o (one layer; an edge or a corner for diagonal
+        neighbours), sorted by block then cell."""
+        from iceresist.grid.forest import LX, LY, LZ
+        from iceresist.lattice import C
+
+        nbr, owner = self.forest.nbr, self.owner
+        local = (LX, LY, LZ)
+        mine = np.flatnonzero(owner == receiver)
+        mask: dict[int, np.ndarray] = {}
+        for q in range(1, C.shape[0]):
+            h = nbr[mine, q]
+            h = np.unique(h[(h >= 0) & (owner[np.maximum(h, 0)] == sender)])
+            if not len(h):
+                continue
+            m = np.ones(512, dtype=bool)
+            for a in range(3):            # h lies at +C[q] from o: o is at -C[q] from h
+                if C[q, a] == 1:
+                    m &= local[a] == 0
+                elif C[q, a] == -1:
+                    m &= local[a] == 7
+            for b in h.tolist():
+                mask[b] = mask[b] | m if b in mask else m.copy()
+        if not mask:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        order = sorted(mask)
+        blocks = np.concatenate([np.full(int(mask[b].sum()), b, np.int64) for b in order])
+        cells = np.concatenate([np.flatnonzero(mask[b]) for b in order]).astype(np.int64)
+        return blocks, cells
 
     # -- halo exchange ------------------------------------------------------------------------------
     def exchange(self, arr, target=None) -> None:
-        """Overwrite the halo rows of ``arr`` (local forest's blocks along axis 0, any trailing shape; a host or a
-        device array of ``target``) with their owners' rows."""
+        """Overwrite the halo cells this rank's blocks pull from in ``arr`` (the local forest's blocks along axis 0,
+        the 512 cells along the last axis, ``[block, cell]`` or ``[block, k, cell]``; a host or a device array of
+        ``target``) with their owners' values."""
+        import time
+
         from mpi4py import MPI
 
+        t0 = time.perf_counter()
         on_device = target is not None and target.is_cuda
         host = target.to_host(arr) if on_device else arr
+        view = np.moveaxis(host, -1, 1)               # [block, cell, ...]: (rows, cells) pairs index it
         bufs_in = []
         reqs = []
         sent = 0
-        for r, rows in self.recvs:
-            buf = np.empty((len(rows),) + host.shape[1:], dtype=host.dtype)
-            bufs_in.append((rows, buf))
+        for r, rows, cells in self.recvs:
+            buf = np.empty((len(rows),) + view.shape[2:], dtype=host.dtype)
+            bufs_in.append((rows, cells, buf))
             reqs.append(self.comm.Irecv(buf, source=r, tag=7))
         outs = []
-        for r, rows in self.sends:
-            buf = np.ascontiguousarray(host[rows])
+        for r, rows, cells in self.sends:
+            buf = np.ascontiguousarray(view[rows, cells])
             outs.append(buf)
             sent += buf.nbytes
             reqs.append(self.comm.Isend(buf, dest=r, tag=7))
         MPI.Request.Waitall(reqs)
-        for rows, buf in bufs_in:
-            host[rows] = buf
+        for rows, cells, buf in bufs_in:
+            view[rows, cells] = buf
         if on_device:
             arr.copy_to_device(host)
-        self.bytes_last_exchange = sent
+        self.exchanges += 1
+        self.bytes_sent += sent
+        self.exchange_s += time.perf_counter() - t0
 
     # -- collectives -------------------------------------------------------------------------------------
     def gather_rows(self, local: np.ndarray, axis: int = 0):

@@ -1,0 +1,55 @@
+"""The Morton partition of a block forest over MPI ranks and the halo it implies (iceresist.parallel.decomposition),
+without MPI: the split itself, checked against what a rank must see."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from iceresist.errors import InputError
+from iceresist.grid import BlockForest
+from iceresist.grid.forest import Face
+from iceresist.parallel.decomposition import Decomposition, morton_partition
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(1.0, 8.0), min_size=1, max_size=80), st.integers(1, 8))
+def test_shares_are_contiguous_cover_every_block_and_balance_the_weight(weights, ranks):
+    w = np.array(weights)
+    if ranks > len(w):
+        with pytest.raises(InputError, match=f"mpirun -n {ranks}: the scene has {len(w)} blocks"):
+            morton_partition(w, ranks)
+        return
+    owner = morton_partition(w, ranks)
+    assert owner[0] == 0 and owner[-1] == ranks - 1
+    assert np.all(np.diff(owner) >= 0) and set(owner.tolist()) == set(range(ranks))
+    share = np.bincount(owner, weights=w, minlength=ranks)
+    if len(np.unique((np.cumsum(w) - 0.5 * w) / w.sum() * ranks // 1)) == ranks:   # the weighted cut held
+        assert share.max() - share.min() <= 2 * w.max() + 1e-9
+
+
+class _Comm:
+    def __init__(self, rank, size):
+        self.rank, self.size = rank, size
+
+
+def test_each_rank_receives_the_layer_its_blocks_pull_and_sends_what_the_others_pull():
+    """A 32 x 8 x 8 channel (4 blocks along x, periodic along x, walls elsewhere) on 2 ranks: rank 0 owns blocks
+    0-1, rank 1 blocks 2-3; each rank's halo is the two blocks beside its share (one across the periodic face), and
+    from each it receives the one layer of 64 cells facing its own block; what one rank sends is what the other
+    receives."""
+    faces = {"x-": Face("periodic"), "x+": Face("periodic"), "y-": Face("wall"), "y+": Face("wall"),
+             "z-": Face("wall"), "z+": Face("wall")}
+    fo = BlockForest.uniform((32, 8, 8), faces)
+    d0, d1 = Decomposition(fo, _Comm(0, 2)), Decomposition(fo, _Comm(1, 2))
+    assert d0.nowned == d1.nowned == 2
+    assert sorted(fo.origin[d0.halo][:, 0].tolist()) == [2, 3]
+    (r, rows, cells), = d0.recvs
+    assert r == 1 and len(cells) == 2 * 64
+    x = (cells & 7)
+    per_block = {int(b): set(x[rows == b].tolist()) for b in np.unique(rows)}
+    xs = {int(fo.origin[d0.global_ids[b], 0]): v for b, v in per_block.items()}
+    assert xs == {2: {0}, 3: {7}}          # block 2's low-x layer faces block 1, block 3's high-x layer block 0
+    (r1, srows, scells), = d1.sends
+    assert r1 == 0
+    assert np.array_equal(d1.global_ids[srows], d0.global_ids[rows]) and np.array_equal(scells, cells)

@@ -1,0 +1,117 @@
+"""MPI benchmark: strong scaling of the fused LBM step from one rank to several on one machine
+(:mod:`iceresist.parallel`), a periodic box of ``--n`` cells per side, cumulant, CPU.
+
+Each configuration runs in its own ``mpirun`` (``--ranks``, default 1 and 2 ranks of one thread each, and one rank
+of as many threads as ranks for comparison): after one untimed step (the kernels load), ``--steps`` steps are
+timed; per configuration the seconds per step, MLUPS, the speed-up over one rank of one thread, the bytes the
+ranks send per step (halo exchange, all ranks together) and the share of the step spent in the exchange
+(rank 0).
+
+    python -m validation.bench mpi [--n 64] [--steps 20] [--precision float32] [--ranks 2] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser):
+    parser.add_argument("--ranks", type=int, default=2, help="the largest rank count (default 2)")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+
+
+def worker(n: int, steps: int, precision: str) -> dict | None:
+    """One timed run in this MPI job (or one process); rank 0's figures, None on the others."""
+    import numpy as np
+
+    from iceresist import parallel
+    from iceresist.grid import BlockForest
+    from iceresist.lbm.solver import LBMSolver
+
+    comm = parallel.world()
+    forest = BlockForest.uniform((n, n, n))
+    decomp = None
+    local = forest
+    if comm is not None:
+        from iceresist.parallel.decomposition import Decomposition
+
+        decomp = Decomposition(forest, comm)
+        local = decomp.local
+    solver = LBMSolver(local, tau=0.6, precision=precision)
+    if decomp is not None:
+        solver.active_blocks = decomp.nowned
+        solver.after_step = lambda f: decomp.exchange(f)
+    solver.initialize(1.0, (0.02, 0.01, 0.0))
+    solver.step(1)
+    if comm is not None:
+        comm.Barrier()
+        decomp.exchanges, decomp.bytes_sent, decomp.exchange_s = 0, 0, 0.0
+    t0 = time.perf_counter()
+    solver.step(steps)
+    if comm is not None:
+        comm.Barrier()
+    seconds = (time.perf_counter() - t0) / steps
+    sent = 0 if decomp is None else decomp.sum(decomp.bytes_sent) / steps
+    share = 0.0 if decomp is None else decomp.exchange_s / steps / seconds
+    if comm is not None and comm.rank != 0:
+        return None
+    return {"cells": int(forest.cells), "seconds_per_step": seconds, "mlups": forest.cells / seconds / 1e6,
+            "bytes_sent_per_step": float(sent), "exchange_share": share,
+            "halo_blocks_rank0": 0 if decomp is None else int(len(decomp.halo)),
+            "blocks": int(forest.nblocks), "float": str(np.dtype(precision))}
+
+
+def _launch(ranks: int, threads: int, args, precision: str) -> dict:
+    exe = Path(sys.executable)
+    cmd = [sys.executable, "-m", "validation.bench_mpi", "--worker", "--n", str(args.n), "--steps",
+           str(args.steps), "--precision", precision]
+    if ranks > 1:
+        cmd = [str(exe.parent / "mpirun"), "-n", str(ranks)] + cmd
+    env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+    if ranks > 1 and not Path(cmd[0]).is_file():
+        raise SystemExit("mpi benchmark: no mpirun beside the Python interpreter; install the `mpi` extra")
+    res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800,
+                         cwd=Path(__file__).resolve().parents[1])
+    rows = [json.loads(line) for line in res.stdout.splitlines() if line.startswith("{")]
+    if res.returncode != 0 or not rows:
+        raise SystemExit(f"mpi benchmark: {' '.join(cmd)} failed:\n{res.stderr[-2000:]}")
+    return rows[0]
+
+
+def run(args) -> list[dict]:
+    rows = []
+    for precision in args.precision:
+        base = None
+        configs = [(1, 1)] + [(r, 1) for r in range(2, args.ranks + 1)] + [(1, args.ranks)]
+        for ranks, threads in configs:
+            r = _launch(ranks, threads, args, precision)
+            base = base or r["seconds_per_step"]
+            rows.append({"name": f"lbm n={args.n}", "ranks": ranks, "threads_per_rank": threads,
+                         "precision": precision, "cells": r["cells"], "steps": args.steps,
+                         "seconds_per_step": r["seconds_per_step"], "mlups": r["mlups"],
+                         "speedup": base / r["seconds_per_step"],
+                         "MB_sent_per_step": r["bytes_sent_per_step"] / 1e6,
+                         "exchange_share": r["exchange_share"], "halo_blocks_rank0": r["halo_blocks_rank0"]})
+    return rows
+
+
+def _main(argv=None):
+    p = argparse.ArgumentParser()
+    p.add_argument("--worker", action="store_true")
+    p.add_argument("--n", type=int, default=64)
+    p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--precision", default="float32")
+    a = p.parse_args(argv)
+    out = worker(a.n, a.steps, a.precision)
+    if out is not None:
+        print(json.dumps(out))
+
+
+if __name__ == "__main__":
+    _main()

@@ -16,6 +16,10 @@ files, so it ends with the table an uninterrupted sweep gives: bit for bit in th
 CI-sized tier 2), statistically for a long tier-2 case (docs/SHIP.md, "Reproducibility"). A finished case whose
 scene is not what the preset gives now (the preset has changed since) stops the sweep with a one-line error
 before anything runs, so one table never mixes two versions of a preset.
+
+Under ``mpirun -n N`` the sweep spreads whole cases over the ranks (each case on one process; docs/PARALLEL.md):
+rank 0 holds the folder's lock and writes ``sweep.json`` and ``sweep.csv``, every rank runs its share of the cases
+not yet finished.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from iceresist import parallel
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S
 from iceresist.errors import InputError
 from iceresist.io.paths import check_output_dir
@@ -223,6 +228,10 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     names = resolve_cases(cases)
+    comm = parallel.world()
+    if comm is not None:
+        return _run_sweep_ranks(comm, fidelity, tier, out_dir, names, backend=backend, overrides=overrides,
+                                callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
     out = check_output_dir(out_dir, "--output")
     resolve_target(backend, "--backend")
     out.mkdir(parents=True, exist_ok=True)
@@ -232,6 +241,52 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
                                  overrides=overrides, callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
     finally:
         lock.release()
+
+
+def _run_sweep_ranks(comm, fidelity: str, tier: int, out_dir, names: list, *, backend, overrides, callbacks,
+                     checkpoint_schedule) -> pd.DataFrame | None:
+    """:func:`run_sweep` under ``mpirun``: whole cases spread over the ranks (each case on one process, the cases
+    not yet finished dealt out in turn). Rank 0 checks the folder, takes its lock, writes ``sweep.json`` and, when
+    every rank is done, ``sweep.csv``; it returns the table, the other ranks None. A case that fails on bad input
+    stops the sweep with its message (after the other ranks' cases end)."""
+    out = Path(out_dir)
+    lock, error, finished = None, None, None
+    if comm.rank == 0:
+        try:
+            out = check_output_dir(out_dir, "--output")
+            resolve_target(backend, "--backend")
+            out.mkdir(parents=True, exist_ok=True)
+            lock = folder_lock(out)
+            finished = _prepare_sweep(fidelity, tier, out, names, overrides)
+        except InputError as exc:
+            error = str(exc)
+            if lock is not None:
+                lock.release()
+    error, finished = comm.bcast((error, finished), root=0)
+    if error is not None:
+        raise InputError(error)
+    todo = [c for c in names if c not in finished]
+    mine = todo[comm.rank::comm.size]
+    log.info("rank %d of %d: cases %s", comm.rank, comm.size, ", ".join(mine) or "none")
+    failed = None
+    for case in mine:
+        try:
+            run_case(case, fidelity, tier, out, backend=backend, progress=False, overrides=overrides,
+                     callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+        except InputError as exc:
+            failed = f"case {case}: {exc}"
+            break
+    failures = [f for f in comm.allgather(failed) if f is not None]
+    table = None
+    if comm.rank == 0:
+        try:
+            if not failures:
+                table = _write_table(out)
+        finally:
+            lock.release()
+    if failures:
+        raise InputError(failures[0])
+    return table
 
 
 def folder_lock(out: Path):
@@ -252,6 +307,32 @@ def folder_lock(out: Path):
 def _run_sweep_locked(fidelity: str, tier: int, out: Path, names: list, *, backend, progress, overrides, callbacks,
                       checkpoint_schedule) -> pd.DataFrame:
     """:func:`run_sweep` inside the folder's lock."""
+    finished = _prepare_sweep(fidelity, tier, out, names, overrides)
+    bar = _cases_bar(names, progress)
+    for case in names:
+        if bar is not None:
+            bar.set_description_str(f"{fidelity} tier {tier}: {case}")
+        if case in finished:
+            log.info("case %s: finished earlier, skipped", case)
+        else:
+            run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
+                     callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return _write_table(out)
+
+
+def _write_table(out: Path) -> pd.DataFrame:
+    table = sweep_table(out)
+    table.to_csv(out / TABLE_NAME, index=False, float_format="%.10g")  # the one place sweep.csv is written
+    return table
+
+
+def _prepare_sweep(fidelity: str, tier: int, out: Path, names: list, overrides) -> list:
+    """Inside the folder's lock, before any case runs: the folder's ``sweep.json`` checked against this sweep and
+    rewritten, files of other sweeps set aside, the finished cases' scenes checked; returns the finished cases."""
     info = {"preset": fidelity, "tier": tier, "cases": names, "overrides": overrides or {}}
     info_path = out / "sweep.json"
     if info_path.is_file():
@@ -266,22 +347,7 @@ def _run_sweep_locked(fidelity: str, tier: int, out: Path, names: list, *, backe
     for case in finished:  # every case the table would read, before anything runs or is written
         check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)
     info_path.write_text(json.dumps(info, indent=1))
-    bar = _cases_bar(names, progress)
-    for case in names:
-        if bar is not None:
-            bar.set_description_str(f"{fidelity} tier {tier}: {case}")
-        if case in finished:
-            log.info("case %s: finished earlier, skipped", case)
-        else:
-            run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
-                     callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    table = sweep_table(out)
-    table.to_csv(out / TABLE_NAME, index=False, float_format="%.10g")  # the one place sweep.csv is written
-    return table
+    return finished
 
 
 def _cases_bar(names, progress: bool):
@@ -357,6 +423,8 @@ def cmd_sweep(args) -> int:
     set_threads(args.threads)
     table = run_sweep(args.preset, args.tier, out, cases, backend=args.backend,
                       progress=not args.no_progress, overrides=overrides or None)
+    if table is None:       # an MPI rank other than 0
+        return 0
     cols = ["case", "mean_force_N", "ci95_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR", "wall_time_s"]
     log.info("sweep table %s/sweep.csv:\n%s", out, table[cols].to_string(index=False, float_format="%.4g"))
     return 0

@@ -103,3 +103,34 @@ def test_cuda_ranks_stage_the_halo_through_the_host(tmp_path):
     assert one.returncode == 0 and two.returncode == 0, (one.stderr[-2000:], two.stderr[-2000:])
     a, b = _populations(tmp_path / "one"), _populations(tmp_path / "two")
     assert np.abs(a).max() > 1e-3 and np.array_equal(a, b)
+
+
+SWEEP = """
+import logging
+import sys
+logging.basicConfig(level=logging.INFO)
+from iceresist.sweep import TINY_OVERRIDES, run_sweep
+run_sweep("quick", 1, sys.argv[1], ["A-c68-v1.0", "B-c68-v1.0", "A-c50-v1.0"], backend="cpu",
+          overrides=TINY_OVERRIDES)
+"""
+
+
+def test_a_sweep_on_two_ranks_spreads_its_cases_and_gives_the_one_process_table(tmp_path):
+    """Three CI-sized tier-1 cases (the sweep tests' channel) under `mpirun -n 2`: rank 0 runs two, rank 1 one, in
+    parallel; sweep.csv holds the three rows of the same sweep on one process, equal in every column but the wall
+    times."""
+    import pandas as pd
+
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    script = tmp_path / "sweep.py"
+    script.write_text(SWEEP)
+    for ranks, out in ((1, "one"), (2, "two")):
+        cmd = ([str(MPIRUN), "-n", str(ranks)] if ranks > 1 else []) + [sys.executable, str(script), out]
+        r = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-3000:]
+    assert "rank 0 of 2: cases A-c50-v1.0, B-c68-v1.0" in r.stderr and "rank 1 of 2: cases A-c68-v1.0" in r.stderr
+    a = pd.read_csv(tmp_path / "one" / "sweep.csv")
+    b = pd.read_csv(tmp_path / "two" / "sweep.csv")
+    assert len(a) == 3 and list(a["case"]) == list(b["case"])
+    cols = [c for c in a.columns if "wall" not in c and "utc" not in c and "s_per" not in c]
+    pd.testing.assert_frame_equal(a[cols], b[cols])

@@ -38,9 +38,12 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     (:mod:`iceresist.parallel`; the fluid alone so far)."""
     if comm is not None and comm.size > 1:
         extra = scene.optional_sections()
+        if extra == ["free_surface"]:
+            return FreeSurfaceModel(scene, backend=backend, precision=precision, comm=comm)
         if extra:
             raise InputError(f"mpirun -n {comm.size}: a scene with {', '.join('[' + s + ']' for s in extra)} runs on "
-                             f"one process so far (the fluid alone runs on several); run it without mpirun")
+                             f"one process so far (the fluid alone and the free surface alone run on several); run "
+                             f"it without mpirun")
         return FluidModel(scene, backend=backend, precision=precision, comm=comm)
     if scene.ship is not None and scene.ice is not None:
         if scene.bodies:

@@ -13,11 +13,16 @@ import math
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.grid.flags import FLUID as FL_FLUID
+from iceresist.lattice import C as _C
 from iceresist.models.base import Model
 from iceresist.scene.schema import Scene
 from iceresist.units import Units
 
 log = logging.getLogger(__name__)
+
+#: D3Q27 velocities as float64 (the free surface's per-block fields).
+C_F64 = _C.astype(np.float64)
 
 #: Scene face name -> block-forest face name.
 FOREST_FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
@@ -281,7 +286,7 @@ class FreeSurfaceModel(Model):
 
     components = ("fluid", "free_surface")
 
-    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
+    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         from iceresist.freesurface.fluid import FreeSurfaceFluid
         from iceresist.grid.forest import BlockForest
 
@@ -301,18 +306,59 @@ class FreeSurfaceModel(Model):
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
-        self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u))
+        self.global_forest = self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u))
         self.gravity_lattice = float(u.acceleration_to_lattice(-gz))
         margin = None if fs.f_pool_margin == "full" else float(fs.f_pool_margin)
+        self.decomp = None
+        if comm is not None and comm.size > 1:
+            from iceresist.parallel.decomposition import Decomposition
+
+            self.comm = comm
+            self.decomp = Decomposition(self.global_forest, comm)
+            self.forest = self.decomp.local
+            margin = None      # on several ranks every block holds populations (the halo blocks of the water too)
         self.fluid = FreeSurfaceFluid(self.forest, tau=u.tau, gravity_lattice=self.gravity_lattice,
                                       depth_cells=self.depth_cells, mobility=fs.mobility_lattice,
                                       width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
                                       precision=self.precision, target=self.target, f_pool_margin=margin)
         self.fluid.initialize(surface=self.initial_surface_cells(),
                               u=tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        self.volume0_cells = self.fluid.volume()
-        self.cells = int(self.forest.cells)
+        self._exchange()
+        self.volume0_cells = self.volume()
+        self.cells = int(self.global_forest.cells)
         self.dt_s = u.dt_s
+
+    # -- several ranks ----------------------------------------------------------------------------------
+    def _exchange(self):
+        """On several ranks: every halo block takes its owner's whole state (populations, h, phi, flags). The step's
+        passes reach at most 5 cells into the halo from its outer side (the fused update, the velocity extension's
+        layers, the phase field's stream and normal), so the cells next to this rank's blocks stay exact through a
+        step (:meth:`Decomposition.exchange` with ``full``)."""
+        if self.decomp is None:
+            return
+        fs, t = self.fluid, self.target
+        for arr in (fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags):
+            self.decomp.exchange(arr, t, full=True)
+
+    def _gathered(self, values, axis: int = 0):
+        """Per-block values of the local forest as the whole domain's, in global block order: as they are on one
+        process, gathered on rank 0 (None on the others) on several."""
+        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
+
+    def volume(self) -> float:
+        """Water volume sum phi (cells^3): per-block sums on the target, added up in global block order (the same
+        float64 sum on any number of ranks)."""
+        from iceresist.freesurface.phasefield import volume_launcher
+
+        ph = self.fluid.phase
+        if getattr(self, "_volume", None) is None:
+            self._volume = (volume_launcher(self.target, ph.lat.name),
+                            self.target.to_device(np.zeros(ph.nblocks, np.float64)))
+        launch, out = self._volume
+        launch(ph.nblocks, ph.h, ph.solid, out)
+        per_block = self._gathered(np.asarray(self.target.to_host(out)))
+        total = None if per_block is None else float(per_block.sum())
+        return total if self.decomp is None else self.decomp.bcast(total)
 
     def initial_surface_cells(self) -> np.ndarray:
         """Water height z_s(x, y) at t = 0 in cells, (nx, ny): the depth where there is water, 1.5 interface
@@ -326,10 +372,10 @@ class FreeSurfaceModel(Model):
             zs[dry, :] = -1.5 * fs.interface_width_cells
         return zs
 
-    def surface_cells(self) -> np.ndarray:
+    def surface_cells(self, phi=None) -> np.ndarray:
         """Height of the top-most crossing of phi = 1/2 in each column (nx, ny), cells above z = 0, by linear
-        interpolation; 0 in a dry column, the domain height in a full one."""
-        phi = self.fluid.phi()
+        interpolation; 0 in a dry column, the domain height in a full one (``phi``: dense, default the fluid's)."""
+        phi = self.fluid.phi() if phi is None else phi
         nz = phi.shape[2]
         cross = (phi[:, :, :-1] >= 0.5) & (phi[:, :, 1:] < 0.5)
         k = nz - 2 - np.argmax(cross[:, :, ::-1], axis=2)
@@ -346,11 +392,36 @@ class FreeSurfaceModel(Model):
         return int(self.fluid.iteration)
 
     def step(self, n: int = 1):
-        self.fluid.step(n)
+        if self.decomp is None:
+            self.fluid.step(n)
+            return
+        for _ in range(int(n)):
+            self.fluid.step(1)
+            self._exchange()
 
-    def _liquid(self):
+    def _dense_state(self):
+        """Dense rho and u (lattice, NaN outside the liquid), phi and flags of the whole domain (on several ranks
+        gathered on rank 0; None on the others)."""
+        fs = self.fluid
+        f = fs.fluid.populations()
+        rho = 1.0 + f.sum(axis=1)
+        u = np.einsum("qa,bqc->abc", C_F64, f) / rho
+        u[2] += 0.5 * fs.g
+        flags = np.asarray(fs._host(fs.fluid.flags))
+        liquid = (flags & FL_FLUID) != 0
+        rho[~liquid] = np.nan
+        u[:, ~liquid] = np.nan
+        phi = fs.phase.phi_host().astype(np.float64)
+        parts = [self._gathered(rho), self._gathered(u, axis=1), self._gathered(phi),
+                 self._gathered(flags.astype(np.float64))]
+        if parts[0] is None:
+            return None
+        fo = self.global_forest
+        return tuple(fo.to_dense(p) for p in parts)
+
+    def _liquid(self, dense=None):
         """Dense rho, u (lattice) with the reference state (rho0 = 1, u = 0) in the gas, and the liquid mask."""
-        rho, u = self.fluid.macroscopic()
+        rho, u = (dense or self._dense_state())[:2]
         liquid = np.isfinite(rho)
         return np.where(liquid, rho, 1.0), np.where(liquid[None], u, 0.0), liquid
 
@@ -358,15 +429,18 @@ class FreeSurfaceModel(Model):
         """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge c_s^2 (rho - rho0)), flags (uint8),
         phi (1 water, 0 gas), surface (height of phi = 1/2 above z = 0 in each column, m, on every cell of
         the column). In the gas rho = rho0, u = 0 and pressure = 0, the state eq. (11) assumes there."""
-        rho_lat, u_lat, _ = self._liquid()
+        dense = self._dense_state()
+        if dense is None:
+            return None
+        rho_lat, u_lat, _ = self._liquid(dense)
         u = self.units
-        flags = np.asarray(self.fluid._host(self.fluid.fluid.flags)).astype(np.float64)
-        surface = self.surface_cells()
+        phi, flags = dense[2], dense[3]
+        surface = self.surface_cells(phi)
         return {"rho": u.density_to_physical(rho_lat),
                 "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
-                "flags": self.forest.to_dense(flags).astype(np.uint8),
-                "phi": self.fluid.phi(),
+                "flags": flags.astype(np.uint8),
+                "phi": phi,
                 "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
 
     @staticmethod
@@ -376,7 +450,8 @@ class FreeSurfaceModel(Model):
         return units
 
     def is_finite(self) -> bool:
-        return math.isfinite(self.fluid.volume()) and bool(np.isfinite(self.fluid.fluid.rows()[1]).all())
+        finite = math.isfinite(self.fluid.volume()) and bool(np.isfinite(self.fluid.fluid.rows()[1]).all())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     def watchdog_probe(self) -> dict:
         """Finite state only (:meth:`is_finite`): the free-surface scenes run below the lattice limits by
@@ -386,15 +461,20 @@ class FreeSurfaceModel(Model):
     def diagnostics(self) -> dict[str, float]:
         """Water volume (m^3, sum phi dx^3, the quantity eqs. 4-10 conserve) and its drift from t = 0,
         liquid mass (kg), kinetic energy (J), largest speed (m/s and lattice), mean surface height (m),
-        population rows in use."""
-        rho_lat, u_lat, liquid = self._liquid()
+        population rows in use; on several ranks from the gathered fields, the same numbers on every rank."""
+        vol = self.volume()
+        dense = self._dense_state()
+        out = None if dense is None else self._diagnostics(dense, vol)
+        return out if self.decomp is None else self.decomp.bcast(out)
+
+    def _diagnostics(self, dense, vol) -> dict[str, float]:
+        rho_lat, u_lat, liquid = self._liquid(dense)
         u = self.units
         cell_m3 = u.dx_m ** 3
         speed2 = (u_lat ** 2).sum(axis=0)[liquid]
         rho_kg = u.density_to_physical(rho_lat[liquid])
         umax_lat = float(np.sqrt(speed2.max())) if speed2.size else 0.0
-        vol = self.fluid.volume()
-        surface = self.surface_cells()
+        surface = self.surface_cells(dense[2])
         return {"water_volume_m3": float(vol * cell_m3),
                 "water_volume_drift": float((vol - self.volume0_cells) / self.volume0_cells),
                 "mass_kg": float(rho_kg.sum() * cell_m3),
@@ -405,30 +485,55 @@ class FreeSurfaceModel(Model):
                 "surface_mean_m": float(u.length_to_physical(surface.mean())),
                 "f_rows_in_use": float(self.fluid.fluid.pool.rows_in_use)}
 
-    def state(self) -> dict:
+    def state(self) -> dict | None:
         """Everything a bit-for-bit restart needs, in storage precision: the population rows and their
-        blocks, h, phi, the cell flags, the iteration and the initial water volume."""
-        return {**self.fluid.state(), "volume0_cells": np.float64(self.volume0_cells),
+        blocks, h, phi, the cell flags, the iteration and the initial water volume. On several ranks the whole
+        domain in global block order, every block with its populations, on rank 0 (None on the others)."""
+        st = self.fluid.state()
+        if self.decomp is not None:
+            d = self.decomp
+            f = d.gather_rows(self.fluid.fluid.rows()[1])      # every block holds a row: block order
+            h, phi, flags = d.gather_rows(st["h"]), d.gather_rows(st["phi"]), d.gather_rows(st["flags"])
+            if f is None:
+                return None
+            n = self.global_forest.nblocks
+            st = {**st, "f_blocks": np.arange(n, dtype=np.int64), "f": f, "f_rows": np.int64(n), "h": h,
+                  "phi": phi, "flags": flags}
+        return {**st, "volume0_cells": np.float64(self.volume0_cells),
                 "iteration": np.int64(self.iteration), "precision": self.precision}
 
     def load_state(self, state: dict):
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
+        if self.decomp is not None and "f_blocks" in state and "h" in state:
+            d, n = self.decomp, self.global_forest.nblocks
+            f_blocks, f = np.asarray(state["f_blocks"]), np.asarray(state["f"])
+            if f.shape[0] != len(f_blocks) or (len(f_blocks) and f_blocks.max() >= n):
+                raise InputError("checkpoint populations do not fit this scene's blocks: it belongs to another scene")
+            whole = np.zeros((n,) + f.shape[1:], dtype=f.dtype)      # blocks without a row lie in the gas
+            whole[f_blocks] = f
+            nl = len(d.global_ids)
+            state = {**state, "f_blocks": np.arange(nl, dtype=np.int64), "f": d.local_rows(whole),
+                     "f_rows": np.int64(nl), "h": d.local_rows(np.asarray(state["h"])),
+                     "phi": d.local_rows(np.asarray(state["phi"])), "flags": d.local_rows(np.asarray(state["flags"]))}
         self.fluid.load_state(state)
         self.volume0_cells = float(state["volume0_cells"])
 
     def describe(self) -> dict:
         fs = self.scene.free_surface
         pool = self.fluid.fluid.pool
-        return {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
-                "blocks": int(self.forest.nblocks), "operator": self.scene.fluid.operator,
-                "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
-                "gravity_lattice": self.gravity_lattice, "water_depth_cells": self.depth_cells,
-                "h_lattice": fs.h_lattice, "mobility_lattice": fs.mobility_lattice,
-                "interface_width_cells": fs.interface_width_cells, "f_pool_rows": int(pool.capacity),
-                "f_pool_margin": fs.f_pool_margin, "allocated_bytes": self.fluid.allocated_bytes(),
-                "unit_system": self.scene.scene.units}
+        out = {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
+               "blocks": int(self.global_forest.nblocks), "operator": self.scene.fluid.operator,
+               "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
+               "gravity_lattice": self.gravity_lattice, "water_depth_cells": self.depth_cells,
+               "h_lattice": fs.h_lattice, "mobility_lattice": fs.mobility_lattice,
+               "interface_width_cells": fs.interface_width_cells, "f_pool_rows": int(pool.capacity),
+               "f_pool_margin": fs.f_pool_margin, "allocated_bytes": self.fluid.allocated_bytes(),
+               "unit_system": self.scene.scene.units}
+        if self.decomp is not None:
+            out["mpi"] = self.decomp.describe()
+        return out
 
     def allocation(self) -> dict[str, int]:
         """Bytes of the state arrays this model holds: the population pool, the phase field (h, phi) and the

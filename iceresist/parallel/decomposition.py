@@ -80,15 +80,20 @@ class Decomposition:
         #: blocks pull from (the layer facing them), in (global block, cell) order on both sides
         self.sends = []
         self.recvs = []
+        #: (rank, local rows) of whole blocks to send and to receive (:meth:`exchange` with ``full``)
+        self.sends_full = []
+        self.recvs_full = []
         for r in range(self.size):
             if r == self.rank:
                 continue
             blocks, cells = self._needed(sender=self.rank, receiver=r)
             if len(blocks):
                 self.sends.append((r, pos[blocks], cells))
+                self.sends_full.append((r, pos[np.intersect1d(self.owned, halos[r])]))
             blocks, cells = self._needed(sender=r, receiver=self.rank)
             if len(blocks):
                 self.recvs.append((r, pos[blocks], cells))
+                self.recvs_full.append((r, pos[self.halo[self.owner[self.halo] == r]]))
         #: Totals since construction: halo exchanges, bytes this rank sent, wall seconds inside them.
         self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
 
@@ -124,10 +129,12 @@ class Decomposition:
         return blocks, cells
 
     # -- halo exchange ------------------------------------------------------------------------------
-    def exchange(self, arr, target=None) -> None:
+    def exchange(self, arr, target=None, full: bool = False) -> None:
         """Overwrite the halo cells this rank's blocks pull from in ``arr`` (the local forest's blocks along axis 0,
         the 512 cells along the last axis, ``[block, cell]`` or ``[block, k, cell]``; a host or a device array of
-        ``target``) with their owners' values."""
+        ``target``) with their owners' values; ``full``: every cell of the halo blocks (a step of several passes
+        that each reach one cell further into the halo stays exact next to this rank's blocks for up to 7 of
+        them: the free surface)."""
         import time
 
         from mpi4py import MPI
@@ -136,15 +143,22 @@ class Decomposition:
         on_device = target is not None and target.is_cuda
         host = target.to_host(arr) if on_device else arr
         view = np.moveaxis(host, -1, 1)               # [block, cell, ...]: (rows, cells) pairs index it
+        if full:
+            view = host
+            recvs = [(r, rows, slice(None)) for r, rows in self.recvs_full]
+            sends = [(r, rows, slice(None)) for r, rows in self.sends_full]
+        else:
+            recvs, sends = self.recvs, self.sends
         bufs_in = []
         reqs = []
         sent = 0
-        for r, rows, cells in self.recvs:
-            buf = np.empty((len(rows),) + view.shape[2:], dtype=host.dtype)
+        for r, rows, cells in recvs:
+            shape = (len(rows),) + (host.shape[1:] if full else view.shape[2:])
+            buf = np.empty(shape, dtype=host.dtype)
             bufs_in.append((rows, cells, buf))
             reqs.append(self.comm.Irecv(buf, source=r, tag=7))
         outs = []
-        for r, rows, cells in self.sends:
+        for r, rows, cells in sends:
             buf = np.ascontiguousarray(view[rows, cells])
             outs.append(buf)
             sent += buf.nbytes

@@ -25,6 +25,9 @@ from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)
 
+#: Face kinds that are solid walls (their boundary layers are what ``refinement.wall_band_m`` refines).
+WALL_KINDS = ("wall", "moving_wall", "slip")
+
 #: Share of the machine's available memory a refined scene may take.
 MEMORY_SHARE = 0.8
 
@@ -39,7 +42,8 @@ def available_memory_bytes() -> int:
 
 def build_octree(scene: Scene):
     """The static octree of a scene's ``[refinement]``: level-0 blocks of ``domain.dx_m``; a block takes the highest
-    level of the boxes its box overlaps, then 2:1 balance."""
+    level of the regions its box overlaps (the boxes, the band around the still-water level, the bands along the
+    solid faces), then 2:1 balance."""
     from iceresist.grid.octree import BlockOctree
 
     ref = scene.refinement
@@ -52,6 +56,15 @@ def build_octree(scene: Scene):
         depth, band = scene.free_surface.water_depth_m / dx, ref.surface_band_m / dx
         boxes.append((np.array([-np.inf, -np.inf, depth - band]), np.array([np.inf, np.inf, depth + band]),
                       ref.levels))
+    if ref.wall_band_m is not None:
+        band = ref.wall_band_m / dx
+        for a, axis in enumerate("xyz"):
+            for side, n in (("min", 0.0), ("max", float(shape[a]))):
+                if getattr(scene.domain.faces, f"{axis}_{side}").kind not in WALL_KINDS:
+                    continue
+                lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
+                lo[a], hi[a] = (n - band, n + band)
+                boxes.append((lo, hi, ref.levels))
 
     def wanted(lo, hi):
         level = np.zeros(len(lo), dtype=np.int64)

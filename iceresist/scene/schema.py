@@ -457,7 +457,7 @@ class Refinement(_Section):
     """``[refinement]`` (optional): static block refinement (paper section 2.5). Level 0 is the grid of
     ``domain.dx_m``; level l has cells dx_m / 2^l and time steps dt / 2^l (acoustic scaling, the same physical
     viscosity). A block takes the highest level of the regions it overlaps (the boxes, the band around the water
-    surface); 2:1 balance adds the levels between. The fluid alone, or with a `[free_surface]` whose surface lies in
+    surface, the band along the walls); 2:1 balance adds the levels between. The fluid alone, or with a `[free_surface]` whose surface lies in
     the finest level (the coarser levels all water; iceresist.freesurface.refined), on the CPU or (the conservative
     interface) CUDA (iceresist.lbm.refinement)."""
 
@@ -467,6 +467,9 @@ class Refinement(_Section):
         None, gt=0, description="With `[free_surface]`: the blocks within this distance (m; cells in a lattice "
         "scene) above or below the still-water level take the finest level. The surface must lie in the finest "
         "level, about 2.5 interface widths inside it.")
+    wall_band_m: float | None = Field(
+        None, gt=0, description="The blocks within this distance (m; cells in a lattice scene) of a solid face of "
+        "the domain (wall, moving wall, free slip) take the finest level: the boundary layers.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
@@ -474,8 +477,9 @@ class Refinement(_Section):
 
     @model_validator(mode="after")
     def _levels(self):
-        if not self.boxes and self.surface_band_m is None:
-            raise ValueError("boxes: give at least one [[refinement.boxes]] or refinement.surface_band_m")
+        if not self.boxes and self.surface_band_m is None and self.wall_band_m is None:
+            raise ValueError("boxes: give at least one [[refinement.boxes]], refinement.surface_band_m or "
+                             "refinement.wall_band_m")
         for i, b in enumerate(self.boxes):
             if b.level > self.levels:
                 raise ValueError(f"boxes[{i}].level: {b.level} is finer than levels = {self.levels}; use a level "

@@ -239,9 +239,24 @@ def test_a_box_held_at_half_submergence_feels_archimedes():
     assert np.mean(fz) == pytest.approx(archimedes, rel=0.03)
 
 
-@pytest.mark.parametrize("k", [0, 1])
+@pytest.mark.parametrize("k", [0, 1, 2])
 def test_the_body_examples_of_scenes_md_parse(k):
     from iceresist.scene.docs import BODY_EXAMPLES
 
     scene = parse_scene(BODY_EXAMPLES[k][1], "example.toml")
     assert scene.bodies and scene.optional_sections()[-1] == "bodies"
+
+
+def test_the_refined_sphere_example_builds_with_the_sphere_on_level_1():
+    """The refined example of docs/SCENES.md: level 1 covers the 27 blocks around the sphere (22 % of the uniform
+    1 mm grid's cells, 10 level-1 cells per diameter), and a step runs."""
+    from iceresist.models import RefinedBodiesModel, build_model
+    from iceresist.scene.docs import BODY_EXAMPLES
+
+    model = build_model(parse_scene(BODY_EXAMPLES[2][1], "example.toml"))
+    assert isinstance(model, RefinedBodiesModel)
+    assert model.units_finest.dx_m == pytest.approx(0.001)
+    fine_equivalent = 80 * 40 * 40 * 8
+    assert model.cells == (250 - 27) * 512 + 27 * 8 * 512 and model.cells < 0.23 * fine_equivalent
+    model.step(1)
+    assert model.diagnostics()["sphere_Fx_N"] != 0.0

@@ -10,6 +10,7 @@ model                       what it holds                                       
 :class:`BodiesModel`        LBM (free surface optional) + DEM + coupling            ``[[bodies]]`` (no ship)
 :class:`RefinedFluidModel`  LBM on refined levels                                   ``[refinement]`` alone
 :class:`RefinedFreeSurfaceModel` free surface on the finest of refined levels       ``[refinement]`` + ``[free_surface]``
+:class:`RefinedBodiesModel`  bodies and their coupling on the finest level            ``[refinement]`` + ``[[bodies]]``
 ==========================  ======================================================  =============================
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
@@ -23,12 +24,13 @@ from iceresist.models.base import Model
 from iceresist.models.bodies import BodiesModel
 from iceresist.models.fluid import FluidModel, FreeSurfaceModel
 from iceresist.models.refined import RefinedFluidModel
+from iceresist.models.refined_bodies import RefinedBodiesModel
 from iceresist.models.refined_surface import RefinedFreeSurfaceModel
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "RefinedFreeSurfaceModel", "Tier1Model",
-           "Tier2Model", "BodiesModel", "build_model"]
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "RefinedFreeSurfaceModel",
+           "RefinedBodiesModel", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
 
 
 def build_model(scene, *, backend: str | None = None, precision: str | None = None, comm=None) -> Model:
@@ -55,10 +57,13 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     if "refinement" in extra:
         if extra == ["free_surface", "refinement"]:
             return RefinedFreeSurfaceModel(scene, backend=backend, precision=precision)
+        if scene.bodies and set(extra) <= {"refinement", "bodies", "contact"}:
+            return RefinedBodiesModel(scene, backend=backend, precision=precision)
         if extra != ["refinement"]:
             others = ", ".join("[" + s + "]" for s in extra if s not in ("refinement", "free_surface"))
-            raise InputError(f"{scene.source_name}: refinement: a refined scene is the fluid alone or with a "
-                             f"[free_surface] so far; remove [refinement] to run {others} on a uniform grid")
+            raise InputError(f"{scene.source_name}: refinement: a refined scene is the fluid alone, with a "
+                             f"[free_surface] or with [[bodies]] so far; remove [refinement] to run {others} on a "
+                             f"uniform grid")
         return RefinedFluidModel(scene, backend=backend, precision=precision)
     wants = [f for f in scene.output.fields if f in ("phi", "surface")]
     if wants and scene.free_surface is None:

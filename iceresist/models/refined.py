@@ -56,6 +56,14 @@ def build_octree(scene: Scene):
         depth, band = scene.free_surface.water_depth_m / dx, ref.surface_band_m / dx
         boxes.append((np.array([-np.inf, -np.inf, depth - band]), np.array([np.inf, np.inf, depth + band]),
                       ref.levels))
+    if ref.body_band_m is not None:
+        from iceresist.models.bodies import body_mesh, half_extent
+
+        band = ref.body_band_m / dx
+        for i, body in enumerate(scene.bodies):
+            mesh = body_mesh(body, i, scene.source_name) if body.shape == "mesh" else None
+            c, h = np.asarray(body.position_m, dtype=float) / dx, half_extent(body, mesh) / dx + band
+            boxes.append((c - h, c + h, ref.levels))
     if ref.wall_band_m is not None:
         band = ref.wall_band_m / dx
         for a, axis in enumerate("xyz"):

@@ -383,6 +383,46 @@ size_m = [0.04, 0.04, 0.04]
 position_m = [0.06, 0.06, 0.06]
 density_kg_m3 = 900.0
 motion = "free"
+"""), ("A fixed sphere on refined levels (bodies, refinement)", """# The fixed sphere above on two levels of blocks: 2 mm cells far from it, 1 mm cells (level 1) in the blocks within
+# 10 mm of it, where the sphere and its coupling live (10 cells per diameter) at level 1's own time step; 22 % of
+# the uniform 1 mm grid's cells. The sphere must lie in the finest level, two cells inside it.
+[scene]
+name = "sphere_in_channel_refined"
+
+[domain]
+size_m = [0.16, 0.08, 0.08]
+dx_m = 0.002
+
+[domain.faces]
+x_min = { kind = "velocity_inlet", velocity_m_s = [0.01, 0.0, 0.0] }
+x_max = "pressure_outlet"
+y_min = "periodic"
+y_max = "periodic"
+z_min = "periodic"
+z_max = "periodic"
+
+[fluid]
+nu_m2_s = 1.0e-6
+initial_velocity_m_s = [0.01, 0.0, 0.0]
+
+[run]
+end_time_s = 60.0
+
+[output]
+fields = ["u", "pressure", "flags"]
+fields_every_s = 10.0
+timeseries_every_steps = 10
+
+[[bodies]]
+name = "sphere"
+shape = "sphere"
+radius_m = 0.005
+position_m = [0.04, 0.04, 0.04]
+motion = "fixed"
+
+[refinement]
+levels = 1
+body_band_m = 0.01
 """)]
 
 

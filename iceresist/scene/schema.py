@@ -458,8 +458,9 @@ class Refinement(_Section):
     ``domain.dx_m``; level l has cells dx_m / 2^l and time steps dt / 2^l (acoustic scaling, the same physical
     viscosity). A block takes the highest level of the regions it overlaps (the boxes, the band around the water
     surface, the band along the walls); 2:1 balance adds the levels between. The fluid alone, or with a `[free_surface]` whose surface lies in
-    the finest level (the coarser levels all water; iceresist.freesurface.refined), on the CPU or (the conservative
-    interface) CUDA (iceresist.lbm.refinement)."""
+    the finest level (the coarser levels all water; iceresist.freesurface.refined), or with `[[bodies]]` on the
+    finest level (iceresist.models.refined_bodies), on the CPU or (the conservative interface) CUDA
+    (iceresist.lbm.refinement)."""
 
     levels: int = Field(..., ge=1, le=6, description="The finest level (cells dx_m / 2^levels).")
     boxes: list[RefinementBox] = Field([], description="Regions and their levels, see `[[refinement.boxes]]`.")
@@ -470,6 +471,9 @@ class Refinement(_Section):
     wall_band_m: float | None = Field(
         None, gt=0, description="The blocks within this distance (m; cells in a lattice scene) of a solid face of "
         "the domain (wall, moving wall, free slip) take the finest level: the boundary layers.")
+    body_band_m: float | None = Field(
+        None, gt=0, description="With `[[bodies]]`: the blocks within this distance (m; cells in a lattice scene) "
+        "of a body's bounding box at the start take the finest level, where the bodies and their coupling live.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
@@ -477,9 +481,9 @@ class Refinement(_Section):
 
     @model_validator(mode="after")
     def _levels(self):
-        if not self.boxes and self.surface_band_m is None and self.wall_band_m is None:
-            raise ValueError("boxes: give at least one [[refinement.boxes]], refinement.surface_band_m or "
-                             "refinement.wall_band_m")
+        if not self.boxes and self.surface_band_m is None and self.wall_band_m is None and self.body_band_m is None:
+            raise ValueError("boxes: give at least one [[refinement.boxes]], refinement.surface_band_m, "
+                             "refinement.wall_band_m or refinement.body_band_m")
         for i, b in enumerate(self.boxes):
             if b.level > self.levels:
                 raise ValueError(f"boxes[{i}].level: {b.level} is finer than levels = {self.levels}; use a level "
@@ -545,6 +549,9 @@ class Scene(_Section):
             if self.refinement.surface_band_m is not None and self.free_surface is None:
                 raise ValueError("refinement.surface_band_m: a band around the water surface needs a "
                                  "[free_surface] section; refine with [[refinement.boxes]] instead")
+            if self.refinement.body_band_m is not None and not self.bodies:
+                raise ValueError("refinement.body_band_m: a band around the bodies needs [[bodies]]; refine with "
+                                 "[[refinement.boxes]] instead")
         return self
 
     # -- derived values --------------------------------------------------------------------------------

@@ -248,17 +248,21 @@ class RefinedFluidModel(Model):
                 "iteration": np.int64(self.iteration), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}
 
-    def load_state(self, state: dict):
-        from iceresist.models.fluid import _set_populations
-
+    def check_checkpoint(self, state: dict):
+        """A checkpoint of another precision or another block octree is refused in one line."""
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
         lev, coord = state.get("octree_level"), state.get("octree_coord")
         if lev is None or coord is None or not (np.array_equal(lev, self.octree.level)
                                                 and np.array_equal(coord, self.octree.coord)):
-            raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or boxes "
-                             "changed): run the scene again without --pickup")
+            raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or "
+                             "regions changed): run the scene again without --pickup")
+
+    def load_state(self, state: dict):
+        from iceresist.models.fluid import _set_populations
+
+        self.check_checkpoint(state)
         f = state.get("f", {})
         for lv, s in self.lbm.solvers.items():
             arr = np.asarray(f.get(str(lv), np.zeros(0)))

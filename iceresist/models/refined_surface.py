@@ -161,14 +161,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}
 
     def load_state(self, state: dict):
-        if state.get("precision", self.precision) != self.precision:
-            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
-                             f"restart with --precision {state.get('precision')}")
-        lev, coord = state.get("octree_level"), state.get("octree_coord")
-        if lev is None or coord is None or not (np.array_equal(lev, self.octree.level)
-                                                and np.array_equal(coord, self.octree.coord)):
-            raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or "
-                             "regions changed): run the scene again without --pickup")
+        self.check_checkpoint(state)
         if "surface" not in state:
             raise InputError("checkpoint holds no free surface on levels: it belongs to another scene")
         for lv in self.lbm.levels[:-1]:

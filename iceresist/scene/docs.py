@@ -304,7 +304,7 @@ friction_ice_hull = 0.1
 
 
 #: Complete ``[[bodies]]`` scenes (title, TOML) for docs/SCENES.md; tests/test_bodies.py parses them.
-BODY_EXAMPLES = [("A fixed sphere in a channel (bodies, SI units)", """# A 10 mm sphere held fixed in a water channel at 10 mm/s (Re = 100): velocity inlet, pressure outlet, periodic
+SPHERE_EXAMPLE = """# A 10 mm sphere held fixed in a water channel at 10 mm/s (Re = 100): velocity inlet, pressure outlet, periodic
 # sides. Its drag is sphere_Fx_N of the time series.
 [scene]
 name = "sphere_in_channel"
@@ -339,7 +339,22 @@ shape = "sphere"
 radius_m = 0.005
 position_m = [0.04, 0.04, 0.04]
 motion = "fixed"
-"""), ("A floating box (bodies with a free surface)", """# A 40 mm ice block (900 kg/m^3) released in still water 60 mm deep, in a closed tank: it heaves and settles
+"""
+
+#: The sphere above on two levels of blocks (static refinement around it).
+REFINED_SPHERE_EXAMPLE = SPHERE_EXAMPLE.replace(
+    "# A 10 mm sphere held fixed in a water channel at 10 mm/s (Re = 100): velocity inlet, pressure outlet, periodic\n"
+    "# sides. Its drag is sphere_Fx_N of the time series.\n",
+    "# The fixed sphere above on two levels of blocks: 2 mm cells far from it, 1 mm cells (level 1) in the blocks within\n"
+    "# 10 mm of it, where the sphere and its coupling live (10 cells per diameter) at level 1's own time step; 22 % of\n"
+    "# the uniform 1 mm grid's cells. The sphere must lie in the finest level, two cells inside it.\n").replace(
+    'name = "sphere_in_channel"', 'name = "sphere_in_channel_refined"') + """
+[refinement]
+levels = 1
+body_band_m = 0.01
+"""
+
+BODY_EXAMPLES = [("A fixed sphere in a channel (bodies, SI units)", SPHERE_EXAMPLE), ("A floating box (bodies with a free surface)", """# A 40 mm ice block (900 kg/m^3) released in still water 60 mm deep, in a closed tank: it heaves and settles
 # at 90 % of its height under the level (floe_z_m, floe_Fz_N, water_level_m of the time series).
 [scene]
 name = "floating_box"
@@ -383,47 +398,7 @@ size_m = [0.04, 0.04, 0.04]
 position_m = [0.06, 0.06, 0.06]
 density_kg_m3 = 900.0
 motion = "free"
-"""), ("A fixed sphere on refined levels (bodies, refinement)", """# The fixed sphere above on two levels of blocks: 2 mm cells far from it, 1 mm cells (level 1) in the blocks within
-# 10 mm of it, where the sphere and its coupling live (10 cells per diameter) at level 1's own time step; 22 % of
-# the uniform 1 mm grid's cells. The sphere must lie in the finest level, two cells inside it.
-[scene]
-name = "sphere_in_channel_refined"
-
-[domain]
-size_m = [0.16, 0.08, 0.08]
-dx_m = 0.002
-
-[domain.faces]
-x_min = { kind = "velocity_inlet", velocity_m_s = [0.01, 0.0, 0.0] }
-x_max = "pressure_outlet"
-y_min = "periodic"
-y_max = "periodic"
-z_min = "periodic"
-z_max = "periodic"
-
-[fluid]
-nu_m2_s = 1.0e-6
-initial_velocity_m_s = [0.01, 0.0, 0.0]
-
-[run]
-end_time_s = 60.0
-
-[output]
-fields = ["u", "pressure", "flags"]
-fields_every_s = 10.0
-timeseries_every_steps = 10
-
-[[bodies]]
-name = "sphere"
-shape = "sphere"
-radius_m = 0.005
-position_m = [0.04, 0.04, 0.04]
-motion = "fixed"
-
-[refinement]
-levels = 1
-body_band_m = 0.01
-""")]
+"""), ("A fixed sphere on refined levels (bodies, refinement)", REFINED_SPHERE_EXAMPLE)]
 
 
 #: A ship scene on the user's own hull, for docs/SCENES.md; tests/test_mesh_hull.py runs it.

@@ -131,6 +131,11 @@ class FluidStructureCoupling:
 
         fo = solver.forest
         self.forest = fo
+        #: The forest's first blocks whose links count into the forces (all; an MPI rank's own blocks, its halo
+        #: after them, :mod:`iceresist.parallel`), and ``sum_over_ranks(now, links)``, which sums F_s, M_s and the
+        #: link counts of every rank in place after the links pass (None: one process).
+        self.nowned = fo.nblocks
+        self.sum_over_ranks = None
         nbx, nby, nbz = fo.shape_blocks
         block_map = np.full((nbx, nby, nbz), -1, dtype=np.int32)
         block_map[fo.origin[:, 0], fo.origin[:, 1], fo.origin[:, 2]] = np.arange(fo.nblocks, dtype=np.int32)
@@ -274,9 +279,11 @@ class FluidStructureCoupling:
         if self.debug:
             k["poison"](nb, active, d["flags0"], d["owner"], d["owner_prev"], f)
         k["links"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
-                   d["bforce"], d["btorque"], d["nlinks"], flags, d["film"])
+                   d["bforce"], d["btorque"], d["nlinks"], flags, d["film"], np.int64(self.nowned))
         s["row_sums"](self.n, d["row_ptr"], d["row_idx"], d["bforce"], d["btorque"], d["nlinks"], d["now"],
                       d["links"])
+        if self.sum_over_ranks is not None:
+            self.sum_over_ranks(d["now"], d["links"])
 
     def step(self, n: int = 1, accumulate_contacts: bool = False):
         """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21);

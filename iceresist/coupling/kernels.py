@@ -74,7 +74,7 @@ Q_MIN = 1e-3
 
 MARK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner")
 LINK_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "f", "bforce", "btorque", "nlinks",
-             "flags", "film")
+             "flags", "film", "nowned")
 REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                "block_evt", "Fx", "Fy", "Fz")
 REDIST_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
@@ -174,10 +174,12 @@ def build_visits(target, real, free_surface: bool = False):
 
     @dev
     def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks, flags,
-              film):
+              film, nowned):
         b, c = lookup(gx, gy, gz, grid, block_map)
         if b < 0:
             return
+        # forces from the forest's first ``nowned`` blocks only (an MPI rank's own; its halo's are another rank's)
+        mine = b < nowned
         if owner[b, c] != k:
             return
         yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
@@ -235,9 +237,10 @@ def build_visits(target, real, free_surface: bool = False):
             Fx = -cx * s - ux * d
             Fy = -cy * s - uy * d
             Fz = -cz * s - uz * d
-            add_load(bforce, btorque, k, Fx, Fy, Fz, rx, ry, rz)
-            accumulate(nlinks, k, 0, 1)
-        if nfilm == 0:
+            if mine:
+                add_load(bforce, btorque, k, Fx, Fy, Fz, rx, ry, rz)
+                accumulate(nlinks, k, 0, 1)
+        if nfilm == 0 or not mine:
             return
         gauge = film_density(gx, gy, gz, grid, block_map, flags0, owner, f, flags, film) - one
         if gauge == zero:

@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from iceresist.backends.launch import copy_into
 from iceresist.errors import InputError
 from iceresist.models.base import Model, array_bytes
 from iceresist.models.fluid import (BLOCK, FluidModel, check_block_shape, check_free_surface_forces, forest_faces,
@@ -154,8 +155,14 @@ class BodiesModel(Model):
     centre of mass; and the fluid's own columns.
     """
 
-    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
+    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
+        self.decomp = None
+        if comm is not None and comm.size > 1:
+            if scene.free_surface is not None:
+                raise InputError(f"mpirun -n {comm.size}: bodies with a [free_surface] run on one process so far "
+                                 f"(bodies in a fluid without one run on several); run it without mpirun")
+            self.comm = comm
         if not scene.bodies:
             raise InputError(f"{scene.source_name}: BodiesModel needs a [[bodies]] section")
         self.free_surface = scene.free_surface is not None
@@ -246,7 +253,13 @@ class BodiesModel(Model):
         check_block_shape(self.shape_cells)
         check_fluid(scene, u)
         fl = scene.fluid
-        self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u), solid=padding_solid(scene))
+        self.global_forest = self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u),
+                                                               solid=padding_solid(scene))
+        if self.comm is not None:
+            from iceresist.parallel.decomposition import Decomposition
+
+            self.decomp = Decomposition(self.global_forest, self.comm)
+            self.forest = self.decomp.local
         # gravity acts on the bodies (DEM) with the buoyancy -rho_f V g; the LBM carries the driving force alone
         self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
         self.solver = LBMSolver(self.forest, tau=u.tau, force=self.force_lattice, operator=fl.operator,
@@ -263,10 +276,13 @@ class BodiesModel(Model):
         con = scene.contact
         self.coupling = FluidStructureCoupling(self.solver, self.dem, geoms, u, buoyancy=True,
                                                contact_film=True if con is None else con.fluid_film)
+        if self.decomp is not None:
+            self.coupling.nowned = self.decomp.nowned
+            self.coupling.sum_over_ranks = self._sum_over_ranks
         volumes = np.array([g.volume_m3() for g in geoms])
         # the buoyancy the coupling adds to the DEM loads (its fluid force leaves it out)
         self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, dtype=float)[None, :]
-        self.cells = int(self.solver.cells)
+        self.cells = int(self.global_forest.cells)
         self.dt_s = u.dt_s
         self.fb = None
 
@@ -318,7 +334,36 @@ class BodiesModel(Model):
         return int(self.coupling.iteration)
 
     def step(self, n: int = 1):
-        self.coupling.step(int(n))
+        if self.decomp is None:
+            self.coupling.step(int(n))
+            return
+        for _ in range(int(n)):
+            self.coupling.step(1)
+            self._exchange()
+
+    # -- several ranks (a fluid without a free surface) ------------------------------------------------------
+    def _exchange(self):
+        """Every halo block takes its owner's populations and cell flags (the cells bodies cover). The coupling's
+        passes (refill, redistribution, the links' second neighbour) and the LBM step reach at most 6 cells into an
+        8-cell halo block from its outer side, so the cells next to this rank's blocks stay exact through a step;
+        the DEM runs on every rank alike, on the forces summed over the ranks."""
+        for arr in (self.solver.state, self.solver.flags):
+            self.decomp.exchange(arr, self.target, full=True)
+
+    def _sum_over_ranks(self, now, links):
+        """F_s, M_s (n, 6) and the link counts (n,) of this rank's blocks summed over the ranks, in place (one small
+        read and write per step)."""
+        from mpi4py import MPI
+
+        t = self.target
+        for arr in (now, links):
+            host = np.ascontiguousarray(t.to_host(arr))
+            total = np.empty_like(host)
+            self.comm.Allreduce(host, total, op=MPI.SUM)
+            copy_into(arr, total)
+
+    def _gathered(self, values, axis: int = 0):
+        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
 
     # -- bodies -----------------------------------------------------------------------------------------
     @property
@@ -359,11 +404,17 @@ class BodiesModel(Model):
 
         u = self.units
         if not self.free_surface:
-            rho_lat, u_lat = self.solver.macroscopic()
-            now = self._dense_mask(self._fluid_now())
+            rho_b, u_b = self.solver.macroscopic_blocks()
+            parts = (self._gathered(rho_b), self._gathered(u_b, axis=1), self._gathered(self._fluid_now()),
+                     self._gathered(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64)))
+            if parts[0] is None:
+                return None
+            fo = self.global_forest
+            rho_lat, u_lat = fo.to_dense(parts[0]), fo.to_dense(parts[1])
+            now = np.nan_to_num(fo.to_dense(parts[2].astype(np.float64)), nan=0.0) > 0.5
             rho_lat = np.where(now, rho_lat, 1.0)
             u_lat = np.where(now[None], u_lat, 0.0)
-            flags = self.forest.to_dense(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64))
+            flags = fo.to_dense(parts[3])
             return {"rho": u.density_to_physical(rho_lat),
                     "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                     "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
@@ -405,6 +456,9 @@ class BodiesModel(Model):
         else:
             rho_b, u_b = self.solver.macroscopic_blocks()
             now = self._fluid_now()
+            rho_b, u_b, now = self._gathered(rho_b), self._gathered(u_b, axis=1), self._gathered(now)
+            if rho_b is None:       # an MPI rank other than 0: rank 0's columns follow
+                return None
             rho_lat, u_lat = rho_b[now], u_b[:, now]
         speed2 = (u_lat ** 2).sum(axis=0)
         rho_kg = u.density_to_physical(rho_lat)
@@ -426,14 +480,19 @@ class BodiesModel(Model):
         return float(sel.mean()) * self.units.dx_m if sel.size else math.nan
 
     def diagnostics(self) -> dict[str, float]:
-        """One row: the per-body columns (:meth:`body_columns`) and the fluid's (:meth:`_fluid_columns`)."""
-        return {**self.body_columns(), **self._fluid_columns()}
+        """One row: the per-body columns (:meth:`body_columns`) and the fluid's (:meth:`_fluid_columns`); on several
+        ranks the fluid's from the gathered blocks on rank 0, the same row on every rank."""
+        fluid = self._fluid_columns()
+        if self.decomp is not None:
+            fluid = self.decomp.bcast(fluid)
+        return {**self.body_columns(), **fluid}
 
     def is_finite(self) -> bool:
         bodies = bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
         if self.free_surface:
             return bodies and math.isfinite(self.coupling.water_volume())
-        return bodies and math.isfinite(self.solver.mass())
+        finite = bodies and math.isfinite(self.solver.mass())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     #: Every this many probes (the first included) a free-surface probe reads the populations (as tier 2).
     full_probe_every = 10
@@ -453,8 +512,17 @@ class BodiesModel(Model):
             return self.fb.fluid.probe(full, ke_ref)
         from iceresist.models.probe import fluid_probe
 
-        rho_lat, u_lat = self.solver.macroscopic()
-        return fluid_probe(rho_lat, u_lat, self._dense_mask(self._fluid_now()), ke_ref)
+        if self.decomp is None:
+            rho_lat, u_lat = self.solver.macroscopic()
+            return fluid_probe(rho_lat, u_lat, self._dense_mask(self._fluid_now()), ke_ref)
+        rho_b, u_b = self.solver.macroscopic_blocks()
+        parts = (self._gathered(rho_b), self._gathered(u_b, axis=1), self._gathered(self._fluid_now()))
+        probe = None
+        if parts[0] is not None:
+            fo = self.global_forest
+            now = np.nan_to_num(fo.to_dense(parts[2].astype(np.float64)), nan=0.0) > 0.5
+            probe = fluid_probe(fo.to_dense(parts[0]), fo.to_dense(parts[1]), now, ke_ref)
+        return self.decomp.bcast(probe)
 
     # -- checkpoints ------------------------------------------------------------------------------------
     def state(self) -> dict:
@@ -471,6 +539,15 @@ class BodiesModel(Model):
                        f_back=np.array(host(self.solver._f[1]), copy=True),
                        flags=np.array(host(self.solver.flags), copy=True),
                        lbm_iteration=np.int64(self.solver.iteration))
+            if self.decomp is not None:      # the whole domain in global block order, on rank 0
+                for key in ("f", "f_back", "flags"):
+                    out[key] = self.decomp.gather_rows(out[key])
+                cp = dict(out["coupling"])
+                for key in ("owner", "owner_prev"):
+                    cp[key] = self.decomp.gather_rows(cp[key])
+                out["coupling"] = cp
+                if out["f"] is None:
+                    return None
         return out
 
     def load_state(self, state: dict):
@@ -491,10 +568,15 @@ class BodiesModel(Model):
             if "f" not in state:
                 raise InputError("the checkpoint holds no populations of a fluid-only scene: it belongs to "
                                  "another scene")
-            expected = (self.forest.nblocks, 27, BLOCK ** 3)
+            expected = (self.global_forest.nblocks, 27, BLOCK ** 3)
             if tuple(np.shape(state["f"])) != expected:
                 raise InputError(f"checkpoint populations have shape {tuple(np.shape(state['f']))}, this scene "
                                  f"needs {expected}: it belongs to another scene")
+            if self.decomp is not None:
+                d = self.decomp
+                state = {**state, **{k: d.local_rows(np.asarray(state[k])) for k in ("f", "f_back", "flags")}}
+                state["coupling"] = {**state["coupling"], **{k: d.local_rows(np.asarray(state["coupling"][k]))
+                                                             for k in ("owner", "owner_prev")}}
             copy_into(self.solver._f[0], np.asarray(state["f"]).astype(self.solver.real))
             copy_into(self.solver._f[1], np.asarray(state["f_back"]).astype(self.solver.real))
             copy_into(self.solver.flags, np.asarray(state["flags"]).astype(np.uint8))
@@ -506,7 +588,8 @@ class BodiesModel(Model):
     def describe(self) -> dict:
         u = self.units
         out = {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
-               "blocks": int(self.forest.nblocks), "operator": self.scene.fluid.operator,
+               "blocks": int(getattr(self, "global_forest", self.forest).nblocks),
+               "operator": self.scene.fluid.operator,
                "precision": self.precision, "backend": self.target.name, "units": u.describe(),
                "unit_system": self.scene.scene.units, "box_m": list(self.box_m),
                "dem_substeps": int(self.dem.substeps_for(self.dt_s)),
@@ -521,6 +604,8 @@ class BodiesModel(Model):
         else:
             out.update(force_lattice=list(self.force_lattice), bytes_per_cell=int(self.solver.bytes_per_cell),
                        pad_to_blocks=bool(self.scene.domain.pad_to_blocks))
+        if self.decomp is not None:
+            out["mpi"] = self.decomp.describe()
         return out
 
     def allocation(self) -> dict[str, int]:

@@ -105,6 +105,8 @@ def cmd_run(args) -> int:
     comm = parallel.world()
     parallel.on_rank0(check_files, comm)   # the files as rank 0 sees them, before it writes any
     check_memory(scene, args.precision)
+    if comm is not None and (args.backend or scene.numerics.backend) in ("cuda", "auto"):
+        parallel.use_local_gpu(comm)       # several GPUs on a node: one per rank
     model = build_model(scene, backend=args.backend, precision=args.precision,
                         **({} if comm is None else {"comm": comm}))
     if comm is not None:

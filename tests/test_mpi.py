@@ -31,7 +31,7 @@ def _run(ranks, *args, cwd):
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     cmd = ([str(MPIRUN), "-n", str(ranks)] if ranks > 1 else []) + [str(ICERESIST), "run", *map(str, args),
                                                                     "--no-progress"]
-    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
+    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=1200)  # cold kernel cache: compiles
 
 
 def _populations(out, name="cavity"):

@@ -53,3 +53,30 @@ def test_each_rank_receives_the_layer_its_blocks_pull_and_sends_what_the_others_
     (r1, srows, scells), = d1.sends
     assert r1 == 0
     assert np.array_equal(d1.global_ids[srows], d0.global_ids[rows]) and np.array_equal(scells, cells)
+
+
+def test_each_rank_on_a_node_takes_its_own_gpu(monkeypatch):
+    """Four GPUs visible on a node of six ranks: the ranks take GPUs 0, 1, 2, 3, 0, 1 by their rank on the node; one
+    GPU visible (a launcher gave each rank its own, or the simulator): nothing is selected."""
+    pytest.importorskip("mpi4py")
+    from iceresist import parallel
+    from iceresist.backends import jit
+
+    chosen = []
+    monkeypatch.setattr(jit, "select_device", chosen.append)
+
+    class Node:
+        def __init__(self, rank):
+            self.rank = rank
+
+        def Split_type(self, kind, key):
+            return self
+
+        def Free(self):
+            pass
+
+    monkeypatch.setattr(jit, "device_count", lambda: 4)
+    assert [parallel.use_local_gpu(Node(r)) for r in range(6)] == [0, 1, 2, 3, 0, 1]
+    assert chosen == [0, 1, 2, 3, 0, 1]
+    monkeypatch.setattr(jit, "device_count", lambda: 1)
+    assert parallel.use_local_gpu(Node(3)) is None and len(chosen) == 6

@@ -154,6 +154,19 @@ def cuda_available() -> bool:
         return False
 
 
+def device_count() -> int:
+    """GPUs numba-cuda sees (0 without CUDA; 1 in the simulator)."""
+    try:
+        return len(cuda_api().gpus) if cuda_available() else 0
+    except Exception:  # pragma: no cover - depends on the machine
+        return 0
+
+
+def select_device(index: int) -> None:
+    """Make GPU ``index`` this process's device (before any array is put on one)."""
+    cuda_api().select_device(int(index))
+
+
 def cuda() -> Target:
     """The CUDA target (the simulator when NUMBA_ENABLE_CUDASIM=1)."""
     sim = os.environ.get("NUMBA_ENABLE_CUDASIM", "0") == "1"

@@ -46,17 +46,14 @@ def share_cores(comm) -> int:
 
     if "NUMBA_NUM_THREADS" in os.environ:
         return get_threads()
-    local = comm.Split_type(_split_shared(), key=comm.rank)
+    from mpi4py import MPI
+
+    local = comm.Split_type(MPI.COMM_TYPE_SHARED, key=comm.rank)
     n = max(1, min(max_threads(), (os.cpu_count() or 1) // local.size))
     local.Free()
     set_threads(n)
     return n
 
-
-def _split_shared():
-    from mpi4py import MPI
-
-    return MPI.COMM_TYPE_SHARED
 
 
 def rank() -> int:
@@ -81,3 +78,21 @@ def on_rank0(check, comm=None) -> None:
     error = comm.bcast(error, root=0)
     if error is not None:
         raise InputError(error)
+
+
+def use_local_gpu(comm) -> int | None:
+    """On a node with several GPUs, give each of its ranks its own: local rank modulo the GPUs numba-cuda sees
+    (where a launcher already gave each rank one GPU, e.g. ``CUDA_VISIBLE_DEVICES`` per task, there is one to
+    see and nothing changes). Returns the device index taken, or None. Call it before any array is on a GPU."""
+    from iceresist.backends import jit
+
+    n = jit.device_count()
+    if n <= 1:
+        return None
+    from mpi4py import MPI
+
+    local = comm.Split_type(MPI.COMM_TYPE_SHARED, key=comm.rank)
+    index = local.rank % n
+    local.Free()
+    jit.select_device(index)
+    return index

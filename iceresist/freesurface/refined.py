@@ -14,7 +14,8 @@ cell (its populations at the coarse step's start, the half-force shift removed),
 volume of the finest level changes only by the liquid's compressibility.
 
 Where that picture does not hold the scene is refused: a coarser level (or a ghost of the finest) holding cells
-with phi < 1 - 1e-4 at the start (the tanh profile's tail 3.5 widths below the surface) (the surface or the gas outside the finest level). The water volume
+with phi < 1 - 1e-4 at the start (the surface, its tanh profile's tail about 2.3 interface widths deep, or the gas
+outside the finest level). The water volume
 (:meth:`RefinedFreeSurface.volume`) is the finest level's sum of phi plus the coarser levels' liquid cells, in
 level-0 cells.
 """

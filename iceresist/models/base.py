@@ -46,6 +46,13 @@ class Model(abc.ABC):
     #: ``fields()`` and ``state()`` then return the whole domain on rank 0 and None on the others, and its
     #: ``diagnostics()``, ``is_finite()`` and ``watchdog_probe()`` the same values on every rank.
     comm = None
+    #: The :class:`~iceresist.parallel.decomposition.Decomposition` of a model split over several ranks, or None.
+    decomp = None
+
+    def gathered(self, values, axis: int = 0):
+        """Per-block values of this rank's forest as the whole domain's in global block order: as they are on one
+        process; on several ranks gathered on rank 0 (None on the others)."""
+        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
 
     # -- clock ------------------------------------------------------------------------------------------
     @property

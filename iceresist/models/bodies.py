@@ -157,7 +157,6 @@ class BodiesModel(Model):
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
-        self.decomp = None
         if comm is not None and comm.size > 1:
             if scene.free_surface is not None:
                 raise InputError(f"mpirun -n {comm.size}: bodies with a [free_surface] run on one process so far "
@@ -362,8 +361,6 @@ class BodiesModel(Model):
             self.comm.Allreduce(host, total, op=MPI.SUM)
             copy_into(arr, total)
 
-    def _gathered(self, values, axis: int = 0):
-        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
 
     # -- bodies -----------------------------------------------------------------------------------------
     @property
@@ -405,8 +402,8 @@ class BodiesModel(Model):
         u = self.units
         if not self.free_surface:
             rho_b, u_b = self.solver.macroscopic_blocks()
-            parts = (self._gathered(rho_b), self._gathered(u_b, axis=1), self._gathered(self._fluid_now()),
-                     self._gathered(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64)))
+            parts = (self.gathered(rho_b), self.gathered(u_b, axis=1), self.gathered(self._fluid_now()),
+                     self.gathered(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64)))
             if parts[0] is None:
                 return None
             fo = self.global_forest
@@ -456,7 +453,7 @@ class BodiesModel(Model):
         else:
             rho_b, u_b = self.solver.macroscopic_blocks()
             now = self._fluid_now()
-            rho_b, u_b, now = self._gathered(rho_b), self._gathered(u_b, axis=1), self._gathered(now)
+            rho_b, u_b, now = self.gathered(rho_b), self.gathered(u_b, axis=1), self.gathered(now)
             if rho_b is None:       # an MPI rank other than 0: rank 0's columns follow
                 return None
             rho_lat, u_lat = rho_b[now], u_b[:, now]
@@ -516,7 +513,7 @@ class BodiesModel(Model):
             rho_lat, u_lat = self.solver.macroscopic()
             return fluid_probe(rho_lat, u_lat, self._dense_mask(self._fluid_now()), ke_ref)
         rho_b, u_b = self.solver.macroscopic_blocks()
-        parts = (self._gathered(rho_b), self._gathered(u_b, axis=1), self._gathered(self._fluid_now()))
+        parts = (self.gathered(rho_b), self.gathered(u_b, axis=1), self.gathered(self._fluid_now()))
         probe = None
         if parts[0] is not None:
             fo = self.global_forest

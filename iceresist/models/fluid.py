@@ -115,7 +115,6 @@ class FluidModel(Model):
         self.target = resolve_target(self.backend)
         self.global_forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u),
                                                  solid=padding_solid(scene))
-        self.decomp = None
         self.forest = self.global_forest
         if comm is not None and comm.size > 1:
             from iceresist.parallel.decomposition import Decomposition
@@ -177,7 +176,7 @@ class FluidModel(Model):
         if self.decomp is None:
             return self.solver.macroscopic()
         rho_b, u_b = self.solver.macroscopic_blocks()
-        rho_b, u_b = self.decomp.gather_rows(rho_b), self.decomp.gather_rows(u_b, axis=1)
+        rho_b, u_b = self.gathered(rho_b), self.gathered(u_b, axis=1)
         if rho_b is None:
             return None
         return self.global_forest.to_dense(rho_b), self.global_forest.to_dense(u_b)
@@ -309,7 +308,6 @@ class FreeSurfaceModel(Model):
         self.global_forest = self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u))
         self.gravity_lattice = float(u.acceleration_to_lattice(-gz))
         margin = None if fs.f_pool_margin == "full" else float(fs.f_pool_margin)
-        self.decomp = None
         if comm is not None and comm.size > 1:
             from iceresist.parallel.decomposition import Decomposition
 
@@ -340,11 +338,6 @@ class FreeSurfaceModel(Model):
         for arr in (fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags):
             self.decomp.exchange(arr, t, full=True)
 
-    def _gathered(self, values, axis: int = 0):
-        """Per-block values of the local forest as the whole domain's, in global block order: as they are on one
-        process, gathered on rank 0 (None on the others) on several."""
-        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
-
     def volume(self) -> float:
         """Water volume sum phi (cells^3): per-block sums on the target, added up in global block order (the same
         float64 sum on any number of ranks)."""
@@ -356,7 +349,7 @@ class FreeSurfaceModel(Model):
                             self.target.to_device(np.zeros(ph.nblocks, np.float64)))
         launch, out = self._volume
         launch(ph.nblocks, ph.h, ph.solid, out)
-        per_block = self._gathered(np.asarray(self.target.to_host(out)))
+        per_block = self.gathered(np.asarray(self.target.to_host(out)))
         total = None if per_block is None else float(per_block.sum())
         return total if self.decomp is None else self.decomp.bcast(total)
 
@@ -412,8 +405,8 @@ class FreeSurfaceModel(Model):
         rho[~liquid] = np.nan
         u[:, ~liquid] = np.nan
         phi = fs.phase.phi_host().astype(np.float64)
-        parts = [self._gathered(rho), self._gathered(u, axis=1), self._gathered(phi),
-                 self._gathered(flags.astype(np.float64))]
+        parts = [self.gathered(rho), self.gathered(u, axis=1), self.gathered(phi),
+                 self.gathered(flags.astype(np.float64))]
         if parts[0] is None:
             return None
         fo = self.global_forest

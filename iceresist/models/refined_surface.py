@@ -152,10 +152,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
     def state(self) -> dict:
         """Every coarser level's populations, the finest level's free surface (populations, h, phi, flags), the
         iteration, the initial volume and the block octree: a bit-for-bit restart."""
-        coarse = {}
-        for lv in self.lbm.levels[:-1]:
-            blocks, f = self.lbm.solvers[lv].fluid.rows()
-            coarse[str(lv)] = f
+        coarse = {str(lv): self.lbm.solvers[lv].fluid.rows()[1] for lv in self.lbm.levels[:-1]}
         return {"f": coarse, "surface": self.fs.surface.state(), "iteration": np.int64(self.iteration),
                 "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}

@@ -1,13 +1,22 @@
 #!/bin/bash
 # The GPU checks of docs/PERFORMANCE.md on a machine with an NVIDIA GPU, in the order that matters most when time is
-# short: the test suite on the device, the fused LBM at 256^3 against the device's copy bandwidth, the coupled
-# quick tier-2 step launcher by launcher. Each writes into OUT (default gpu-check/); PYTHON picks the interpreter
-# (default python3), PYTEST_WORKERS the pytest-xdist workers (default: 8 where pytest-xdist is installed).
+# short. Each section writes into OUT (default gpu-check/); name sections to run only those (default: all, in order):
+#   cuda   the tests that launch CUDA kernels, on the device
+#   mpi    `mpirun -n 2` with backend = "cuda" (needs mpirun beside the interpreter: the `mpi` extra)
+#   ship   the coupled quick tier-2 step launcher by launcher, beside the pure fused LBM step
+#   amr    the block-refined LBM on two and three levels, per level, beside the uniform finest grid
+#   lbm    the fused LBM at 256^3 against the device's copy bandwidth
+#   rest   the other tests of the CI selection
+# PYTHON picks the interpreter (default python3), PYTEST_WORKERS the pytest-xdist workers (default 8 where
+# pytest-xdist is installed), SECTION_TIMEOUT the seconds each section may run (default: no limit).
 #
-#   bash validation/gpu_check.sh [OUT]
+#   bash validation/gpu_check.sh [OUT [SECTION ...]]
 set -u
 OUT=${1:-gpu-check}
+shift || true
+SECTIONS=${*:-cuda mpi ship amr lbm rest}
 PYTHON=${PYTHON:-python3}
+LIMIT=${SECTION_TIMEOUT:+timeout $SECTION_TIMEOUT}
 mkdir -p "$OUT"
 export NUMBA_ENABLE_CUDASIM=0 PYTHONUNBUFFERED=1
 { nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv
@@ -16,14 +25,26 @@ export NUMBA_ENABLE_CUDASIM=0 PYTHONUNBUFFERED=1
 cat "$OUT/env.txt"
 XDIST=""
 if "$PYTHON" -c "import xdist" 2>/dev/null; then XDIST="-n ${PYTEST_WORKERS:-8}"; fi
-echo "== tests on the device (the CUDA ones first)"
-"$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" -k "cuda or gpu or transfer" -rfE \
-    > "$OUT/pytest_cuda.log" 2>&1; echo "exit $?"; tail -3 "$OUT/pytest_cuda.log"
-"$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" -k "not (cuda or gpu or transfer)" -rfE \
-    > "$OUT/pytest_rest.log" 2>&1; echo "exit $?"; tail -3 "$OUT/pytest_rest.log"
-echo "== fused LBM, 256^3"
-"$PYTHON" -m validation.bench lbm --backend cuda --precision float32 --precision float64 --n 256 --steps 50 --json \
-    > "$OUT/lbm.json" 2> "$OUT/lbm.err"; echo "exit $?"; cat "$OUT/lbm.json"
-echo "== coupled quick tier-2 step"
-"$PYTHON" -m validation.bench ship --preset quick --backend cuda --precision float32 --compare-pure --by-label --records 3 --json \
-    > "$OUT/ship.json" 2> "$OUT/ship.err"; echo "exit $?"; cat "$OUT/ship.json"
+for section in $SECTIONS; do
+  echo "== $section ($(date -u +%H:%M:%S))"
+  case $section in
+    cuda) $LIMIT "$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" \
+            -k "cuda or gpu or transfer" -rfE > "$OUT/pytest_cuda.log" 2>&1
+          echo "exit $?"; tail -4 "$OUT/pytest_cuda.log" ;;
+    mpi)  $LIMIT "$PYTHON" -m pytest -q -p no:cacheprovider -m mpi -k cuda -rfE > "$OUT/pytest_mpi.log" 2>&1
+          echo "exit $?"; tail -4 "$OUT/pytest_mpi.log" ;;
+    ship) $LIMIT "$PYTHON" -m validation.bench ship --preset quick --backend cuda --precision float32 --compare-pure \
+            --by-label --records 3 --json > "$OUT/ship.json" 2> "$OUT/ship.err"
+          echo "exit $?"; cat "$OUT/ship.json"; tail -3 "$OUT/ship.err" ;;
+    amr)  $LIMIT "$PYTHON" -m validation.bench amr --backend cuda --precision float32 --n 64 --steps 20 --levels 1 --levels 2 --json \
+            > "$OUT/amr.json" 2> "$OUT/amr.err"
+          echo "exit $?"; cat "$OUT/amr.json"; tail -3 "$OUT/amr.err" ;;
+    lbm)  $LIMIT "$PYTHON" -m validation.bench lbm --backend cuda --precision float32 --precision float64 --n 256 \
+            --steps 50 --json > "$OUT/lbm.json" 2> "$OUT/lbm.err"
+          echo "exit $?"; cat "$OUT/lbm.json"; tail -3 "$OUT/lbm.err" ;;
+    rest) $LIMIT "$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" \
+            -k "not (cuda or gpu or transfer)" -rfE > "$OUT/pytest_rest.log" 2>&1
+          echo "exit $?"; tail -4 "$OUT/pytest_rest.log" ;;
+    *)    echo "unknown section '$section': use cuda, mpi, ship, amr, lbm or rest"; exit 2 ;;
+  esac
+done

@@ -205,3 +205,79 @@ def test_a_settling_sphere_on_two_ranks_is_the_one_process_run(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     c = read_checkpoint(tmp_path / "cut" / "settling_sphere.checkpoint.h5")["model"]
     assert np.array_equal(c["f"], a["f"])
+
+
+def _close(a, b, rtol=1e-12):
+    """Every array of two checkpoint dicts equal to ``rtol`` of each array's largest magnitude (forces summed over
+    the ranks in another order: a few ulp in float64), or to 1e-15 where that is round-off itself (the torque on a
+    cube that symmetry keeps at 1e-18 N m)."""
+    for k in a:
+        if isinstance(a[k], dict):
+            _close(a[k], b[k], rtol)
+            continue
+        x, y = np.asarray(a[k]), np.asarray(b[k])
+        if x.dtype.kind not in "fc":
+            assert np.array_equal(x, y), k
+            continue
+        scale = float(np.nanmax(np.abs(x))) if x.size else 0.0
+        assert np.allclose(x, y, rtol=0, atol=max(rtol * scale, 1e-15), equal_nan=True), \
+            (k, float(np.nanmax(np.abs(x - y))))
+
+
+def test_a_floating_cube_on_two_ranks_is_the_one_process_run(tmp_path):
+    """The floating-cube scene (a 41 mm cube released at 80 % draft in a 24 x 24 x 32 tank, 36 blocks, the cube
+    across the cut between the two shares), float64, 60 steps: on two ranks (the halo's whole state exchanged after
+    the coupling's boundary passes and after the free-surface step, F_s, M_s summed over the ranks, the DEM alike
+    on both) populations, h, phi, cell owners and the cube's motion equal one process's to 1e-12 of their largest
+    value (measured 1e-15: the forces are summed in another order), the cell flags bit for bit; a checkpoint of two
+    ranks continues on one to the same. Planted: no halo exchange (the cube's force off by 0.04 N); the links counted
+    on the halo too (0.15 N). With one exchange per step instead of two the result is the same here (the second
+    covers the worst-case reach, FloatingBodies._exchange)."""
+    from iceresist.validate.scenes import scene_path
+
+    scene = scene_path("floating_cube")
+    runs = {}
+    for ranks, out in ((1, "one"), (2, "two")):
+        r = _run(ranks, scene, "--steps", 60, "--precision", "float64", "--output", out, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-2000:]
+        runs[out] = read_checkpoint(tmp_path / out / "floating_cube.checkpoint.h5")["model"]
+    a, b = runs["one"], runs["two"]
+    assert np.abs(a["dem"]["vel"]).max() > 1e-3         # the cube moves
+    _close(a, b)
+    with h5py.File(tmp_path / "one" / "floating_cube.h5") as fa, h5py.File(tmp_path / "two" / "floating_cube.h5") as fb:
+        for k in ("cube_z_m", "cube_Fz_N", "water_volume_m3", "water_level_m", "kinetic_energy_J"):
+            x, y = fa["timeseries"][k][...], fb["timeseries"][k][...]
+            assert np.allclose(x, y, rtol=1e-12, atol=0), k
+    r = _run(2, scene, "--steps", 30, "--precision", "float64", "--output", "cut", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _run(1, scene, "--steps", 60, "--precision", "float64", "--output", "cut", "--pickup", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    _close(read_checkpoint(tmp_path / "cut" / "floating_cube.checkpoint.h5")["model"], a)
+
+
+def test_a_tier2_ship_on_two_ranks_is_the_one_process_run(tmp_path):
+    """The CI-sized tier-2 case (quick A-c68, 64 x 16 x 16 cells, the hull and the ice cubes in water with a free
+    surface), float64, 6 records: on two ranks the records (ice and fluid forces on the hull, water volume, the
+    tank's levels), the populations, the phase field and every body equal one process's to 1e-12 of their largest
+    value; a checkpoint of two ranks continues on one to the same. Planted: the links counted on the halo too (the
+    hull's fluid force off by 2.1 N); no halo exchange (0.31 N)."""
+    from iceresist.sweep import TINY_TIER2_OVERRIDES
+    from tests.test_tier1_pickup import scene_file
+
+    path, name = scene_file(tmp_path, 2, TINY_TIER2_OVERRIDES, checkpoint_every=3)
+    runs = {}
+    for ranks, out in ((1, "one"), (2, "two")):
+        r = _run(ranks, path, "--steps", 6, "--precision", "float64", "--output", out, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-2000:]
+        runs[out] = read_checkpoint(tmp_path / out / f"{name}.checkpoint.h5")["model"]
+    _close(runs["one"], runs["two"])
+    with h5py.File(tmp_path / "one" / f"{name}.h5") as fa, h5py.File(tmp_path / "two" / f"{name}.h5") as fb:
+        for k in ("Fx_N", "Fx_fluid_N", "Fz_fluid_N", "water_volume_m3", "ice_kinetic_energy_J", "level_ahead_m"):
+            x, y = fa["timeseries"][k][...], fb["timeseries"][k][...]
+            assert np.allclose(x, y, rtol=0, atol=1e-12 * np.abs(x).max(), equal_nan=True), k
+        assert np.abs(fa["timeseries"]["Fx_fluid_N"][...]).max() > 1.0      # the hull pushes the water
+    r = _run(2, path, "--steps", 3, "--precision", "float64", "--output", "cut", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _run(1, path, "--steps", 6, "--precision", "float64", "--output", "cut", "--pickup", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    _close(read_checkpoint(tmp_path / "cut" / f"{name}.checkpoint.h5")["model"], runs["one"])

@@ -1,5 +1,7 @@
 """MPI benchmark: strong scaling of the fused LBM step from one rank to several on one machine
-(:mod:`iceresist.parallel`), a periodic box of ``--n`` cells per side, cumulant, CPU.
+(:mod:`iceresist.parallel`), a periodic box of ``--n`` cells per side, cumulant, CPU; with ``--case ship`` the
+coupled tier-2 step of the quick A-c68-v1.0 case instead (3.19e6 cells, the hull, 785 ice cubes, the free
+surface; ``--n`` ignored).
 
 Each configuration runs in its own ``mpirun`` (``--ranks``, default 1 and 2 ranks of one thread each, and one rank
 of as many threads as ranks for comparison): after one untimed step (the kernels load), ``--steps`` steps are
@@ -7,7 +9,7 @@ timed; per configuration the seconds per step, MLUPS, the speed-up over one rank
 ranks send per step (halo exchange, all ranks together) and the share of the step spent in the exchange
 (rank 0).
 
-    python -m validation.bench mpi [--n 64] [--steps 20] [--precision float32] [--ranks 2] [--json]
+    python -m validation.bench mpi [--case ship] [--n 64] [--steps 20] [--precision float32] [--ranks 2] [--json]
 """
 
 from __future__ import annotations
@@ -23,13 +25,13 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser):
     parser.add_argument("--ranks", type=int, default=2, help="the largest rank count (default 2)")
+    parser.add_argument("--case", choices=("lbm", "ship"), default="lbm",
+                        help="the fused LBM in a periodic box (default) or the coupled quick tier-2 step")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
 
 
 def worker(n: int, steps: int, precision: str) -> dict | None:
     """One timed run in this MPI job (or one process); rank 0's figures, None on the others."""
-    import numpy as np
-
     from iceresist import parallel
     from iceresist.grid import BlockForest
     from iceresist.lbm.solver import LBMSolver
@@ -49,11 +51,19 @@ def worker(n: int, steps: int, precision: str) -> dict | None:
         solver.after_step = lambda f: decomp.exchange(f)
     solver.initialize(1.0, (0.02, 0.01, 0.0))
     solver.step(1)
+    return _timed(solver.step, comm, decomp, forest, steps, precision)
+
+
+def _timed(step, comm, decomp, forest, steps: int, precision: str) -> dict | None:
+    """``step(steps)`` timed between barriers after the first (untimed) step: rank 0's figures, None on the
+    others."""
+    import numpy as np
+
     if comm is not None:
         comm.Barrier()
         decomp.exchanges, decomp.bytes_sent, decomp.exchange_s = 0, 0, 0.0
     t0 = time.perf_counter()
-    solver.step(steps)
+    step(steps)
     if comm is not None:
         comm.Barrier()
     seconds = (time.perf_counter() - t0) / steps
@@ -67,10 +77,25 @@ def worker(n: int, steps: int, precision: str) -> dict | None:
             "blocks": int(forest.nblocks), "float": str(np.dtype(precision))}
 
 
+def ship_worker(steps: int, precision: str) -> dict | None:
+    """The coupled tier-2 step of the quick A-c68-v1.0 case in this MPI job (or one process), after one untimed
+    LBM step; rank 0's figures, None on the others."""
+    from iceresist import parallel
+    from iceresist.models import Tier2Model
+    from iceresist.ship.presets import case_scene
+
+    comm = parallel.world()
+    model = Tier2Model(case_scene("A-c68-v1.0", "quick", 2), backend="cpu", precision=precision, comm=comm)
+    fb = model.fb
+    fb.step(1, accumulate_contacts=True)
+    return _timed(lambda n: fb.step(n, accumulate_contacts=True), comm, model.decomp, fb.global_forest, steps,
+                  precision)
+
+
 def _launch(ranks: int, threads: int, args, precision: str) -> dict:
     exe = Path(sys.executable)
-    cmd = [sys.executable, "-m", "validation.bench_mpi", "--worker", "--n", str(args.n), "--steps",
-           str(args.steps), "--precision", precision]
+    cmd = [sys.executable, "-m", "validation.bench_mpi", "--worker", "--case", args.case, "--n", str(args.n),
+           "--steps", str(args.steps), "--precision", precision]
     if ranks > 1:
         cmd = [str(exe.parent / "mpirun"), "-n", str(ranks)] + cmd
     env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
@@ -92,7 +117,8 @@ def run(args) -> list[dict]:
         for ranks, threads in configs:
             r = _launch(ranks, threads, args, precision)
             base = base or r["seconds_per_step"]
-            rows.append({"name": f"lbm n={args.n}", "ranks": ranks, "threads_per_rank": threads,
+            name = "quick tier-2 step (A-c68-v1.0)" if args.case == "ship" else f"lbm n={args.n}"
+            rows.append({"name": name, "ranks": ranks, "threads_per_rank": threads,
                          "precision": precision, "cells": r["cells"], "steps": args.steps,
                          "seconds_per_step": r["seconds_per_step"], "mlups": r["mlups"],
                          "speedup": base / r["seconds_per_step"],
@@ -107,8 +133,9 @@ def _main(argv=None):
     p.add_argument("--n", type=int, default=64)
     p.add_argument("--steps", type=int, default=20)
     p.add_argument("--precision", default="float32")
+    p.add_argument("--case", default="lbm")
     a = p.parse_args(argv)
-    out = worker(a.n, a.steps, a.precision)
+    out = ship_worker(a.steps, a.precision) if a.case == "ship" else worker(a.n, a.steps, a.precision)
     if out is not None:
         print(json.dumps(out))
 

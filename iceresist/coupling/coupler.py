@@ -132,10 +132,12 @@ class FluidStructureCoupling:
         fo = solver.forest
         self.forest = fo
         #: The forest's first blocks whose links count into the forces (all; an MPI rank's own blocks, its halo
-        #: after them, :mod:`iceresist.parallel`), and ``sum_over_ranks(now, links)``, which sums F_s, M_s and the
-        #: link counts of every rank in place after the links pass (None: one process).
+        #: after them: :meth:`distribute`), the decomposition (None: one process) and ``after_boundaries()``, called
+        #: between the boundary passes and the LBM step (None: nothing; on several ranks with a free surface the
+        #: halo exchange).
         self.nowned = fo.nblocks
-        self.sum_over_ranks = None
+        self.decomp = None
+        self.after_boundaries = None
         nbx, nby, nbz = fo.shape_blocks
         block_map = np.full((nbx, nby, nbz), -1, dtype=np.int32)
         block_map[fo.origin[:, 0], fo.origin[:, 1], fo.origin[:, 2]] = np.arange(fo.nblocks, dtype=np.int32)
@@ -192,6 +194,25 @@ class FluidStructureCoupling:
         self._tile_cells = int(value)
         self._slabs = None
         self._rows = None
+
+    def distribute(self, decomp):
+        """Run on the rank-local forest of ``decomp`` (a :class:`~iceresist.parallel.decomposition.Decomposition`,
+        the forest this coupling was built on being its ``local``): the links count into the forces on the rank's
+        own blocks only, F_s, M_s and the link counts are summed over the ranks after the links pass (one small
+        Allreduce per step), and :meth:`state` gathers the cell owners on rank 0."""
+        self.decomp = decomp
+        self.nowned = int(decomp.nowned)
+
+    def _sum_over_ranks(self):
+        """F_s, M_s (n, 6) and the link counts (n,) of this rank's blocks summed over the ranks, in place (one small
+        read and write per step; every rank gets the same sums, so the replicated DEM stays one)."""
+        from mpi4py import MPI
+
+        for name in ("now", "links"):
+            host = np.ascontiguousarray(self.target.to_host(self._d[name]))
+            total = np.empty_like(host)
+            self.decomp.comm.Allreduce(host, total, op=MPI.SUM)
+            copy_into(self._d[name], total)
 
     # ------------------------------------------------------------------ device helpers
     def _dev(self, a):
@@ -282,8 +303,8 @@ class FluidStructureCoupling:
                    d["bforce"], d["btorque"], d["nlinks"], flags, d["film"], np.int64(self.nowned))
         s["row_sums"](self.n, d["row_ptr"], d["row_idx"], d["bforce"], d["btorque"], d["nlinks"], d["now"],
                       d["links"])
-        if self.sum_over_ranks is not None:
-            self.sum_over_ranks(d["now"], d["links"])
+        if self.decomp is not None:
+            self._sum_over_ranks()
 
     def step(self, n: int = 1, accumulate_contacts: bool = False):
         """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21);
@@ -294,6 +315,8 @@ class FluidStructureCoupling:
         d, dem = self._d, self.dem
         for _ in range(int(n)):
             self.update_boundaries()
+            if self.after_boundaries is not None:
+                self.after_boundaries()
             (self.solver if self.surface is None else self.surface).step(1)
             self._s["fluid_loads"](self.n, d["now"], np.int64(self._fprev_valid), d["fprev"], d["load_scale"],
                                    d["buoy"], dem.device("ext"), d["fluid"], d["fluid_sum"])
@@ -357,10 +380,16 @@ class FluidStructureCoupling:
     def state(self) -> dict:
         """What a bit-for-bit restart of the coupling needs between two steps: the covering rows of every cell
         now and a step earlier, the slabs per body (so the rows mean the same bodies), the cell boxes of the last
-        step (the active blocks), F_s and M_s of the last step (eqs. 20-21) and the step count."""
+        step (the active blocks), F_s and M_s of the last step (eqs. 20-21) and the step count. On several ranks
+        the cell owners of the whole domain in global block order, on rank 0 (None on the other ranks)."""
         d, n = self._d, self.n
         now, fluid = self._read("now"), self._read("fluid")
-        return {"owner": self._host(d["owner"]).copy(), "owner_prev": self._host(d["owner_prev"]).copy(),
+        owner, owner_prev = self._host(d["owner"]).copy(), self._host(d["owner_prev"]).copy()
+        if self.decomp is not None:
+            owner, owner_prev = self.decomp.gather_rows(owner), self.decomp.gather_rows(owner_prev)
+            if owner is None:
+                return None
+        return {"owner": owner, "owner_prev": owner_prev,
                 "slabs": np.zeros(0, np.int64) if self._slabs is None else np.asarray(self._slabs, np.int64),
                 "prev_boxes": (np.array(self._host(d["box"]), np.int64) if self._boxes_valid
                                else np.zeros((0, 6), np.int64)),
@@ -376,8 +405,11 @@ class FluidStructureCoupling:
             raise InputError(f"coupling state lacks {', '.join(missing)}: it was not written by "
                              "FluidStructureCoupling.state()")
         d = self._d
-        copy_into(d["owner"], np.asarray(state["owner"], dtype=np.int32))
-        copy_into(d["owner_prev"], np.asarray(state["owner_prev"], dtype=np.int32))
+        owner, owner_prev = np.asarray(state["owner"]), np.asarray(state["owner_prev"])
+        if self.decomp is not None:     # the whole domain's (any number of ranks wrote it): this rank's rows
+            owner, owner_prev = self.decomp.local_rows(owner), self.decomp.local_rows(owner_prev)
+        copy_into(d["owner"], owner.astype(np.int32))
+        copy_into(d["owner_prev"], owner_prev.astype(np.int32))
         slabs = np.asarray(state["slabs"], dtype=np.int64)
         if slabs.size not in (0, self.n):
             raise InputError(f"coupling state has slabs for {slabs.size} bodies, this scene has {self.n}: "
@@ -421,7 +453,7 @@ class FluidStructureCoupling:
         phase field and the coupling conserve."""
         if self.surface is None:
             raise InputError("water_volume needs a free surface (a FreeSurfaceFluid)")
-        return self.surface.phase.volume()
+        return self.surface.volume()
 
     def fluid_mass(self) -> tuple[float, int]:
         """Sum of rho over the fluid cells now (lattice units) and the number of those cells."""

@@ -57,13 +57,17 @@ class FloatingBodies:
     must be (0, 0, -``g_m_s2``)), default one with the tank floor as a wall; ``contact_film``: the fluid pressure
     on faces in contact (:class:`~iceresist.coupling.FluidStructureCoupling`); ``h_lattice``: the velocity set of
     the phase-field populations; ``g_m_s2``: gravity (m/s^2; with ``g_lattice`` it sets dt, so that a scene in
-    lattice units, g = g_lattice and dx = 1, gets dt = 1).
+    lattice units, g = g_lattice and dx = 1, gets dt = 1); ``comm``: the MPI communicator of a run on several
+    ranks (:mod:`iceresist.parallel`): the tank's blocks are split along the Morton curve, each rank steps its own
+    and exchanges the whole state of its halo blocks twice per step (after the coupling's boundary passes and after
+    the free-surface step), every rank runs the same DEM on the fluid loads summed over the ranks, and the dense
+    views, the water volume, the probe and :meth:`state` are the whole tank's (the dense ones on rank 0).
     """
 
     def __init__(self, shape_cells, *, depth_m: float, dx_m: float, tau: float = 0.55, g_lattice: float = 1e-3,
                  rho_kg_m3: float = 1000.0, operator: str = "bgk", precision: str = "float64", target=jit.cpu,
                  mobility: float = 0.05, width: float = 3.0, dem: DEMSystem | None = None,
-                 contact_film: bool = True, h_lattice: str = "D3Q15", g_m_s2: float = GRAVITY_M_S2):
+                 contact_film: bool = True, h_lattice: str = "D3Q15", g_m_s2: float = GRAVITY_M_S2, comm=None):
         shape = tuple(int(v) for v in shape_cells)
         if len(shape) != 3 or any(v <= 0 or v % 8 for v in shape):
             raise InputError(f"shape_cells must be three positive multiples of 8, got {shape_cells!r}")
@@ -73,10 +77,18 @@ class FloatingBodies:
         self.dt_s = math.sqrt(g_lattice * self.dx_m / float(g_m_s2))
         self.units = Units.from_lattice(self.dx_m, self.dt_s, float(rho_kg_m3), tau)
         self.depth_cells = float(depth_m) / self.dx_m
-        self.forest = BlockForest.uniform(shape, {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+        self.global_forest = self.forest = BlockForest.uniform(
+            shape, {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+        self.decomp = None
+        if comm is not None and comm.size > 1:
+            from iceresist.parallel.decomposition import Decomposition
+
+            self.decomp = Decomposition(self.global_forest, comm)
+            self.forest = self.decomp.local
         self.fluid = FreeSurfaceFluid(self.forest, tau=tau, gravity_lattice=g_lattice, depth_cells=self.depth_cells,
                                       mobility=mobility, width=width, h_lattice=h_lattice, operator=operator,
                                       precision=precision, target=target, f_pool_margin=None)
+        self.fluid.decomp = self.decomp
         if dem is None:     # on the fluid's target, so that the coupling reads and writes the bodies there
             dem = DEMSystem(backend="cuda" if target.is_cuda else "cpu", gravity_m_s2=(0.0, 0.0, -float(g_m_s2)))
             dem.add_wall((0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
@@ -110,7 +122,11 @@ class FloatingBodies:
         self.fluid.initialize()
         self.coupling = FluidStructureCoupling(self.fluid, self.dem, self.geometries, self.units,
                                                contact_film=self.contact_film)
+        if self.decomp is not None:
+            self.coupling.distribute(self.decomp)
+            self.coupling.after_boundaries = self._exchange
         self.coupling.update_boundaries()
+        self._exchange()
         log.info("floating bodies: %d bodies, %d cells, dx %.4g m, dt %.4g s, nu %.3g m^2/s", len(self.geometries),
                  self.forest.cells, self.dx_m, self.dt_s, self.viscosity_m2_s)
 
@@ -120,7 +136,24 @@ class FloatingBodies:
         ``accumulate_contacts``: the DEM adds the contact loads to its sums (:meth:`DEMSystem.contact_sum_on`)."""
         if self.coupling is None:
             self.start()
-        self.coupling.step(n, accumulate_contacts=accumulate_contacts)
+        if self.decomp is None:
+            self.coupling.step(n, accumulate_contacts=accumulate_contacts)
+            return
+        for _ in range(int(n)):
+            self.coupling.step(1, accumulate_contacts=accumulate_contacts)
+            self._exchange()
+
+    def _exchange(self):
+        """On several ranks: every halo block takes its owner's whole state (populations, h, phi, flags). The
+        coupling's boundary passes (refill, redistribution, mirror, links) reach up to 5 cells and the free-surface
+        step up to 5 cells into an 8-cell halo block from its outer side, together more than a block: so the halo is
+        exchanged after each (in the CI scenes one exchange per step gave the same result, tests/test_mpi.py); the
+        cell owners follow from the bodies, the same on every rank."""
+        if self.decomp is None:
+            return
+        fl, t = self.fluid, self.fluid.target
+        for arr in (fl.fluid.state, fl.phase.h, fl.phase.phi, fl.fluid.flags):
+            self.decomp.exchange(arr, t, full=True)
 
     @property
     def time_s(self) -> float:
@@ -143,17 +176,49 @@ class FloatingBodies:
         return self.coupling.water_volume() * self.dx_m ** 3
 
     def water_level_m(self) -> float:
-        """Mean height of the free surface (phi = 1/2) over the columns no body reaches, metres."""
-        owners = self.forest.to_dense(self.coupling.owners())
-        free = (owners < 0).all(axis=2)
+        """Mean height of the free surface (phi = 1/2) over the columns no body reaches, metres (the same on every
+        rank)."""
+        owners = self.dense_owners()
         h = self.fluid.surface_height()
-        return float(h[free].mean()) * self.dx_m
+        level = None if h is None else float(h[(owners < 0).all(axis=2)].mean()) * self.dx_m
+        return level if self.decomp is None else self.decomp.bcast(level)
+
+    def dense_owners(self) -> np.ndarray | None:
+        """The body covering each cell (nx, ny, nz), -1 for none, NaN outside the blocks (on several ranks the whole
+        tank on rank 0, None on the others)."""
+        owners = self.coupling.owners().astype(np.float64)
+        if self.decomp is None:
+            return self.forest.to_dense(owners)
+        whole = self.decomp.gather_rows(owners)
+        return None if whole is None else self.global_forest.to_dense(whole)
+
+    def dense_flags(self) -> np.ndarray | None:
+        """The cell flags (nx, ny, nz) as float64, NaN outside the blocks (on several ranks the whole tank on rank 0,
+        None on the others)."""
+        flags = np.asarray(self.fluid._host(self.fluid.fluid.flags)).astype(np.float64)
+        if self.decomp is None:
+            return self.forest.to_dense(flags)
+        whole = self.decomp.gather_rows(flags)
+        return None if whole is None else self.global_forest.to_dense(whole)
 
     def fields(self):
         """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it and in
-        the cells a body covers, which the coupling flags GHOST and the free surface keeps so)."""
+        the cells a body covers, which the coupling flags GHOST and the free surface keeps so); on several ranks the
+        whole tank on rank 0, None on the others."""
         rho, u = self.fluid.macroscopic()
-        return self.fluid.phi(), rho, u
+        phi = self.fluid.phi()
+        return (None, None, None) if phi is None else (phi, rho, u)
+
+    def state(self) -> dict | None:
+        """The fluid's and the coupling's restart state (:meth:`FreeSurfaceFluid.state`,
+        :meth:`FluidStructureCoupling.state`); on several ranks the whole tank on rank 0, None on the others."""
+        fluid, coupling = self.fluid.state(), self.coupling.state()
+        return None if fluid is None else {"fluid": fluid, "coupling": coupling}
+
+    def load_state(self, fluid: dict, coupling: dict):
+        """Continue from :meth:`state` (written on any number of ranks)."""
+        self.fluid.load_state(fluid)
+        self.coupling.load_state(coupling)
 
     def record(self) -> dict:
         """One row of a time series: time, body positions and velocities, fluid forces, water volume."""

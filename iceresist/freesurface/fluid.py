@@ -290,6 +290,11 @@ class FreeSurfaceFluid:
         self._phases = self._to_target(np.zeros(self.nblocks, np.int8))
         self._near = self._to_target(np.zeros(self.nblocks, np.int8))
         self._probe = None  # the watchdog's FluidProbe, made at the first probe()
+        #: The :class:`~iceresist.parallel.decomposition.Decomposition` of a fluid split over MPI ranks (set by its
+        #: owner), or None. On several ranks the dense views (:meth:`phi`, :meth:`macroscopic`, :meth:`velocity`,
+        #: :meth:`liquid`, :meth:`surface_height`) are the whole domain's on rank 0 and None on the other ranks
+        #: (every rank must call them), and :meth:`volume` and :meth:`probe` are the whole domain's on every rank.
+        self.decomp = None
         self.iteration = 0
 
     def _to_target(self, a):
@@ -297,6 +302,14 @@ class FreeSurfaceFluid:
 
     def _host(self, a) -> np.ndarray:
         return self.target.to_host(a)
+
+    def _dense(self, per_block: np.ndarray, axis: int = 0):
+        """Dense array of a per-block array (blocks along ``axis``): the whole domain gathered on rank 0 where the
+        fluid is split over ranks (None on the others)."""
+        if self.decomp is None:
+            return self.forest.to_dense(per_block)
+        whole = self.decomp.gather_rows(per_block, axis=axis)
+        return None if whole is None else self.decomp.forest.to_dense(whole)
 
     # ------------------------------------------------------------------ state
     def initialize(self, surface=None, u=(0.0, 0.0, 0.0)):
@@ -371,20 +384,40 @@ class FreeSurfaceFluid:
 
     def phi(self) -> np.ndarray:
         """Dense phi (nx, ny, nz), float64."""
-        return self.forest.to_dense(self.phase.phi_host().astype(np.float64))
+        return self._dense(self.phase.phi_host().astype(np.float64))
 
     def state(self) -> dict:
         """Everything a bit-for-bit restart of the fluid needs, in storage precision: the population rows and
-        their blocks, h, phi, the cell flags (GHOST marks of bodies included) and the iteration."""
+        their blocks, h, phi, the cell flags (GHOST marks of bodies included) and the iteration. On several ranks
+        the whole domain in global block order, every block with its populations, on rank 0 (None on the others),
+        so that a checkpoint restarts on any number of ranks."""
         blocks, f = self.fluid.rows()
-        return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(self.fluid.pool.capacity),
-                "h": self._host(self.phase.h), "phi": self._host(self.phase.phi),
-                "flags": np.asarray(self._host(self.fluid.flags)), "iteration": np.int64(self.iteration)}
+        h, phi, flags = self._host(self.phase.h), self._host(self.phase.phi), np.asarray(self._host(self.fluid.flags))
+        if self.decomp is None:
+            return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(self.fluid.pool.capacity),
+                    "h": h, "phi": phi, "flags": flags, "iteration": np.int64(self.iteration)}
+        d = self.decomp
+        f, h, phi, flags = (d.gather_rows(a) for a in (f, h, phi, flags))   # every block holds a row: block order
+        if f is None:
+            return None
+        n = d.forest.nblocks
+        return {"f_blocks": np.arange(n, dtype=np.int64), "f": f, "f_rows": np.int64(n), "h": h, "phi": phi,
+                "flags": flags, "iteration": np.int64(self.iteration)}
 
     def load_state(self, state: dict):
         """Continue from :meth:`state` of a fluid built the same way (same forest, h lattice, precision)."""
         if "h" not in state or "f_blocks" not in state:
             raise InputError("checkpoint holds no free-surface state: it belongs to another scene")
+        if self.decomp is not None:     # the whole domain's (written on any number of ranks): this rank's blocks
+            d, n = self.decomp, self.decomp.forest.nblocks
+            f_blocks, f = np.asarray(state["f_blocks"]), np.asarray(state["f"])
+            if f.shape[0] != len(f_blocks) or (len(f_blocks) and f_blocks.max() >= n):
+                raise InputError("checkpoint populations do not fit this scene's blocks: it belongs to another scene")
+            whole = np.zeros((n,) + f.shape[1:], dtype=f.dtype)      # blocks without a row lie in the gas
+            whole[f_blocks] = f
+            nl = len(d.global_ids)
+            state = {**state, "f_blocks": np.arange(nl, dtype=np.int64), "f": d.local_rows(whole),
+                     "f_rows": np.int64(nl), **{k: d.local_rows(np.asarray(state[k])) for k in ("h", "phi", "flags")}}
         h = np.asarray(state["h"])
         if h.shape != tuple(self.phase.h.shape):
             raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs "
@@ -398,8 +431,13 @@ class FreeSurfaceFluid:
         self.iteration = self.fluid.iteration = int(state["iteration"])
 
     def volume(self) -> float:
-        """Water volume sum phi (cells^3, the quantity eqs. 4-10 conserve), float64."""
-        return self.phase.volume()
+        """Water volume sum phi (cells^3, the quantity eqs. 4-10 conserve), float64: per-block sums on the target,
+        added up in global block order (the same sum on any number of ranks)."""
+        per_block = self.phase.volume_per_block()
+        if self.decomp is None:
+            return float(per_block.sum())
+        whole = self.decomp.gather_rows(per_block)
+        return self.decomp.bcast(None if whole is None else float(whole.sum()))
 
     def macroscopic(self):
         """Density (nx, ny, nz) and velocity (3, nx, ny, nz) of the liquid, lattice units, float64, NaN in gas
@@ -412,7 +450,8 @@ class FreeSurfaceFluid:
         liquid = (self._host(self.fluid.flags) & FL.FLUID) != 0
         rho[~liquid] = np.nan
         u[:, ~liquid] = np.nan
-        return self.forest.to_dense(rho), self.forest.to_dense(u)
+        rho, u = self._dense(rho), self._dense(u, axis=1)
+        return (None, None) if rho is None else (rho, u)
 
     def probe(self, full: bool, kinetic_energy_ref: float = 0.0) -> dict:
         """The watchdog's quantities (:mod:`iceresist.freesurface.probe`), reduced per block on the target: phi
@@ -423,7 +462,7 @@ class FreeSurfaceFluid:
         if self._probe is None:
             from iceresist.freesurface.probe import FluidProbe
 
-            self._probe = FluidProbe(self.forest, self.target)
+            self._probe = FluidProbe(self.forest, self.target, self.decomp)
         return self._probe.probe(self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, self.phase.phi,
                                  full, 0.5 * self.g, kinetic_energy_ref)
 
@@ -432,12 +471,12 @@ class FreeSurfaceFluid:
         step computed for the phase field (j / rho + g / 2, as :meth:`macroscopic`), read without the populations."""
         u = self._host(self._u).astype(np.float64).transpose(1, 0, 2)
         u[:, (self._host(self.fluid.flags) & FL.FLUID) == 0] = np.nan
-        return self.forest.to_dense(u)
+        return self._dense(u, axis=1)
 
     def liquid(self) -> np.ndarray:
         """Dense mask (nx, ny, nz) of the liquid cells (flag FLUID; a cell a body covers is GHOST, not liquid)."""
-        mask = ((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64)
-        return np.nan_to_num(self.forest.to_dense(mask), nan=0.0) > 0.5
+        mask = self._dense(((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64))
+        return None if mask is None else np.nan_to_num(mask, nan=0.0) > 0.5
 
     def surface_height(self, covered_as_water: bool = False) -> np.ndarray:
         """Height z where phi crosses 1/2 in each column (nx, ny), cells, by linear interpolation (the
@@ -447,8 +486,11 @@ class FreeSurfaceFluid:
         stands out of the water then reads the body's top."""
         phi = self.phi()
         if covered_as_water:
-            covered = self.forest.to_dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))
-            phi[np.nan_to_num(covered, nan=0.0) > 0.5] = 1.0
+            covered = self._dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))
+            if phi is not None:
+                phi[np.nan_to_num(covered, nan=0.0) > 0.5] = 1.0
+        if phi is None:         # an MPI rank other than 0
+            return None
         nz = phi.shape[2]
         z = np.arange(nz) + 0.5
         below = phi[:, :, :-1] >= 0.5

@@ -582,9 +582,13 @@ class PhaseField:
     def volume(self) -> float:
         """sum_k h_k over the cells not covered by a solid (the conserved phase volume, cells^3), in float64,
         summed per block on the target (no host copy of h)."""
+        return float(self.volume_per_block().sum())
+
+    def volume_per_block(self) -> np.ndarray:
+        """The phase volume of each block (nblocks,), float64, on the host (:meth:`volume` before its sum)."""
         if self._volume is None:
             self._volume = (volume_launcher(self.target, self.lat.name),
                             self._to_target(np.zeros(self.nblocks, np.float64)))
         launch, out = self._volume
         launch(self.nblocks, self.h, self.solid, out)
-        return float(self._host(out).sum())
+        return np.asarray(self._host(out))

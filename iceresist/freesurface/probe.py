@@ -129,15 +129,18 @@ def probe_launcher(target) -> BlockLauncher:
 class FluidProbe:
     """The probe of one free-surface fluid: ``probe(f, fslot, flags, u, phi, full, half_g, kinetic_energy_ref)``
     returns the dict of :func:`iceresist.models.probe.fluid_probe` (``full``) or
-    :func:`iceresist.models.probe.fluid_speed_probe`, cells as [i, j, k] of the dense grid."""
+    :func:`iceresist.models.probe.fluid_speed_probe`, cells as [i, j, k] of the dense grid. ``decomp``: the
+    :class:`~iceresist.parallel.decomposition.Decomposition` of a fluid split over MPI ranks: the rows of every
+    rank's own blocks are reduced on rank 0 and the result is the same dict on every rank."""
 
-    def __init__(self, forest, target):
+    def __init__(self, forest, target, decomp=None):
         self.forest = forest
         self.target = target
+        self.decomp = decomp
         self._launch = probe_launcher(target)
         rows = np.zeros((forest.nblocks, len(COLUMNS)), np.float64)
         self._out = target.to_device(rows)
-        self._origin = forest.origin * BLOCK
+        self._origin = (forest if decomp is None else decomp.forest).origin * BLOCK
 
     def rows(self, f, fslot, flags, u, phi, full: bool, half_g: float) -> np.ndarray:
         """The (nblocks, 12) rows of :data:`COLUMNS`, on the host."""
@@ -173,6 +176,13 @@ class FluidProbe:
 
     def probe(self, f, fslot, flags, u, phi, full: bool, half_g: float, kinetic_energy_ref: float) -> dict:
         rows = self.rows(f, fslot, flags, u, phi, full, half_g)
+        if self.decomp is None:
+            return self.reduce(rows, full, kinetic_energy_ref)
+        whole = self.decomp.gather_rows(rows)       # the ranks' own blocks in global order, on rank 0
+        return self.decomp.bcast(None if whole is None else self.reduce(whole, full, kinetic_energy_ref))
+
+    def reduce(self, rows, full: bool, kinetic_energy_ref: float) -> dict:
+        """The probe's dict from the block rows (of the whole forest on several ranks)."""
         if rows[:, _COL["n_bad_phi"]].sum() > 0:
             return {"finite": (False, self._first(rows, _COL["n_bad_phi"], _COL["bad_phi_cell"]))}
         if rows[:, _COL["n_bad"]].sum() > 0:

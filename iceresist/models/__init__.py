@@ -37,17 +37,19 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
     alone), tier-1 and tier-2 ship scenes ([ship] + [ice]) and scenes of rigid bodies ([[bodies]], with or
     without [free_surface] and [contact]). ``comm``: the MPI communicator of a run on several ranks
-    (:mod:`iceresist.parallel`: the fluid alone, the free surface alone and bodies in a fluid so far)."""
+    (:mod:`iceresist.parallel`: every scene but a refined one and a tier-1 ship)."""
     if comm is not None and comm.size > 1:
         extra = scene.optional_sections()
+        if scene.ship is not None and scene.ice is not None and scene.ship.tier == 2 and not scene.bodies:
+            return Tier2Model(scene, backend=backend, precision=precision, comm=comm)
         if extra == ["free_surface"]:
             return FreeSurfaceModel(scene, backend=backend, precision=precision, comm=comm)
-        if scene.bodies and set(extra) <= {"contact", "bodies"}:
+        if scene.bodies and set(extra) <= {"contact", "bodies", "free_surface"}:
             return BodiesModel(scene, backend=backend, precision=precision, comm=comm)
         if extra:
             raise InputError(f"mpirun -n {comm.size}: a scene with {', '.join('[' + s + ']' for s in extra)} runs on "
-                             f"one process so far (the fluid alone, the free surface alone and bodies in a fluid "
-                             f"run on several); run it without mpirun")
+                             f"one process so far (the fluid, the free surface, bodies and a tier-2 ship run on "
+                             f"several); run it without mpirun")
         return FluidModel(scene, backend=backend, precision=precision, comm=comm)
     if scene.ship is not None and scene.ice is not None:
         if scene.bodies:

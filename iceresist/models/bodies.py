@@ -158,9 +158,6 @@ class BodiesModel(Model):
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
         if comm is not None and comm.size > 1:
-            if scene.free_surface is not None:
-                raise InputError(f"mpirun -n {comm.size}: bodies with a [free_surface] run on one process so far "
-                                 f"(bodies in a fluid without one run on several); run it without mpirun")
             self.comm = comm
         if not scene.bodies:
             raise InputError(f"{scene.source_name}: BodiesModel needs a [[bodies]] section")
@@ -276,8 +273,7 @@ class BodiesModel(Model):
         self.coupling = FluidStructureCoupling(self.solver, self.dem, geoms, u, buoyancy=True,
                                                contact_film=True if con is None else con.fluid_film)
         if self.decomp is not None:
-            self.coupling.nowned = self.decomp.nowned
-            self.coupling.sum_over_ranks = self._sum_over_ranks
+            self.coupling.distribute(self.decomp)
         volumes = np.array([g.volume_m3() for g in geoms])
         # the buoyancy the coupling adds to the DEM loads (its fluid force leaves it out)
         self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, dtype=float)[None, :]
@@ -312,19 +308,19 @@ class BodiesModel(Model):
                                  precision=self.precision, target=self.target, mobility=fs.mobility_lattice,
                                  width=fs.interface_width_cells, dem=self.dem,
                                  contact_film=True if con is None else con.fluid_film, h_lattice=fs.h_lattice,
-                                 g_m_s2=g)
+                                 g_m_s2=g, comm=self.comm)
         for (geom, shape, kinematic, velocity, material), body in zip(self._shapes(), scene.bodies):
             self.fb.add_body(geom, shape, position_m=tuple(float(v) for v in body.position_m),
                              velocity_m_s=velocity, kinematic=kinematic, material=material)
         self.fb.start()
         self.units = self.fb.units
-        self.forest = self.fb.forest
+        self.global_forest, self.forest, self.decomp = self.fb.global_forest, self.fb.forest, self.fb.decomp
         self.coupling = self.fb.coupling
         self.solver = None
         self.g_lattice = g_lattice
         self._buoyancy_N = np.zeros((len(scene.bodies), 3))
         self.volume0_cells = self.coupling.water_volume()
-        self.cells = int(self.forest.cells)
+        self.cells = int(self.global_forest.cells)
         self.dt_s = self.fb.dt_s
 
     # -- clock ------------------------------------------------------------------------------------------
@@ -333,6 +329,9 @@ class BodiesModel(Model):
         return int(self.coupling.iteration)
 
     def step(self, n: int = 1):
+        if self.fb is not None:         # free surface: FloatingBodies exchanges the halo on several ranks
+            self.fb.step(int(n))
+            return
         if self.decomp is None:
             self.coupling.step(int(n))
             return
@@ -348,19 +347,6 @@ class BodiesModel(Model):
         the DEM runs on every rank alike, on the forces summed over the ranks."""
         for arr in (self.solver.state, self.solver.flags):
             self.decomp.exchange(arr, self.target, full=True)
-
-    def _sum_over_ranks(self, now, links):
-        """F_s, M_s (n, 6) and the link counts (n,) of this rank's blocks summed over the ranks, in place (one small
-        read and write per step)."""
-        from mpi4py import MPI
-
-        t = self.target
-        for arr in (now, links):
-            host = np.ascontiguousarray(t.to_host(arr))
-            total = np.empty_like(host)
-            self.comm.Allreduce(host, total, op=MPI.SUM)
-            copy_into(arr, total)
-
 
     # -- bodies -----------------------------------------------------------------------------------------
     @property
@@ -417,16 +403,17 @@ class BodiesModel(Model):
                     "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
                     "flags": np.nan_to_num(flags, nan=FL.SOLID).astype(np.uint8)}
         phi, rho_lat, u_lat = self.fb.fields()
+        flags, surface = self.fb.dense_flags(), self.fb.fluid.surface_height()
+        if phi is None:         # an MPI rank other than 0
+            return None
         liquid = np.isfinite(rho_lat)
         rho_lat = np.where(liquid, rho_lat, 1.0)
         u_lat = np.where(liquid[None], u_lat, 0.0)
-        fl = self.fb.fluid
-        flags = np.asarray(fl._host(fl.fluid.flags)).astype(np.float64)
-        surface = np.nan_to_num(fl.surface_height(), nan=0.0)
+        surface = np.nan_to_num(surface, nan=0.0)
         return {"rho": u.density_to_physical(rho_lat),
                 "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
-                "flags": np.nan_to_num(self.forest.to_dense(flags), nan=FL.SOLID).astype(np.uint8),
+                "flags": np.nan_to_num(flags, nan=FL.SOLID).astype(np.uint8),
                 "phi": np.nan_to_num(phi, nan=0.0),
                 "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
 
@@ -444,12 +431,14 @@ class BodiesModel(Model):
         out = {}
         if self.free_surface:
             rho_d, u_d = self.fb.fluid.macroscopic()
+            vol, level = self.coupling.water_volume(), self.water_level_m()
+            if rho_d is None:       # an MPI rank other than 0: rank 0's columns follow
+                return None
             now = np.isfinite(rho_d)
             rho_lat, u_lat = rho_d[now], u_d[:, now]
-            vol = self.coupling.water_volume()
             out.update(water_volume_m3=float(vol * cell_m3),
                        water_volume_drift=float((vol - self.volume0_cells) / self.volume0_cells),
-                       water_level_m=self.water_level_m())
+                       water_level_m=level)
         else:
             rho_b, u_b = self.solver.macroscopic_blocks()
             now = self._fluid_now()
@@ -468,10 +457,12 @@ class BodiesModel(Model):
 
     def water_level_m(self) -> float:
         """Free surface: the mean height of phi = 1/2 over the columns no body reaches (all columns where the
-        bodies reach every one), m above z = 0."""
-        owners = self.forest.to_dense(self.coupling.owners())
-        free = (np.nan_to_num(owners, nan=-1) < 0).all(axis=2)
+        bodies reach every one), m above z = 0; on several ranks on rank 0 (None on the others)."""
+        owners = self.fb.dense_owners()
         h = self.fb.fluid.surface_height()
+        if h is None:
+            return None
+        free = (np.nan_to_num(owners, nan=-1) < 0).all(axis=2)
         sel = h[free] if free.any() else h.ravel()
         sel = sel[np.isfinite(sel)]
         return float(sel.mean()) * self.units.dx_m if sel.size else math.nan
@@ -526,30 +517,22 @@ class BodiesModel(Model):
         """Everything a bit-for-bit restart needs: the fluid (fluid only: both population buffers in storage
         precision and the cell flags; free surface: population rows, h, phi, flags), the coupling (cell owners,
         the forces of the last step), the DEM with its contact history, and the step count."""
-        out = {"iteration": np.int64(self.iteration), "precision": self.precision,
-               "coupling": self.coupling.state(), "dem": self.dem.state()}
         if self.free_surface:
-            out.update(fluid=self.fb.fluid.state(), volume0_cells=np.float64(self.volume0_cells))
-        else:
-            host = self.target.to_host
-            out.update(f=np.array(host(self.solver._f[0]), copy=True),
-                       f_back=np.array(host(self.solver._f[1]), copy=True),
-                       flags=np.array(host(self.solver.flags), copy=True),
-                       lbm_iteration=np.int64(self.solver.iteration))
-            if self.decomp is not None:      # the whole domain in global block order, on rank 0
-                for key in ("f", "f_back", "flags"):
-                    out[key] = self.decomp.gather_rows(out[key])
-                cp = dict(out["coupling"])
-                for key in ("owner", "owner_prev"):
-                    cp[key] = self.decomp.gather_rows(cp[key])
-                out["coupling"] = cp
-                if out["f"] is None:
-                    return None
-        return out
+            st = self.fb.state()
+            return None if st is None else {"iteration": np.int64(self.iteration), "precision": self.precision,
+                                            "dem": self.dem.state(), **st,
+                                            "volume0_cells": np.float64(self.volume0_cells)}
+        host = self.target.to_host
+        out = {"iteration": np.int64(self.iteration), "precision": self.precision,
+               "coupling": self.coupling.state(), "dem": self.dem.state(),
+               "f": np.array(host(self.solver._f[0]), copy=True), "f_back": np.array(host(self.solver._f[1]), copy=True),
+               "flags": np.array(host(self.solver.flags), copy=True), "lbm_iteration": np.int64(self.solver.iteration)}
+        if self.decomp is not None:      # the whole domain in global block order, on rank 0
+            for key in ("f", "f_back", "flags"):
+                out[key] = self.decomp.gather_rows(out[key])
+        return None if out["coupling"] is None else out
 
     def load_state(self, state: dict):
-        from iceresist.backends.launch import copy_into
-
         if "coupling" not in state or "dem" not in state:
             raise InputError("the checkpoint holds no bodies (no coupling or DEM state): it belongs to another "
                              "scene; run again without --pickup")
@@ -572,8 +555,6 @@ class BodiesModel(Model):
             if self.decomp is not None:
                 d = self.decomp
                 state = {**state, **{k: d.local_rows(np.asarray(state[k])) for k in ("f", "f_back", "flags")}}
-                state["coupling"] = {**state["coupling"], **{k: d.local_rows(np.asarray(state["coupling"][k]))
-                                                             for k in ("owner", "owner_prev")}}
             copy_into(self.solver._f[0], np.asarray(state["f"]).astype(self.solver.real))
             copy_into(self.solver._f[1], np.asarray(state["f_back"]).astype(self.solver.real))
             copy_into(self.solver.flags, np.asarray(state["flags"]).astype(np.uint8))

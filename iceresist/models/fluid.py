@@ -319,6 +319,7 @@ class FreeSurfaceModel(Model):
                                       depth_cells=self.depth_cells, mobility=fs.mobility_lattice,
                                       width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
                                       precision=self.precision, target=self.target, f_pool_margin=margin)
+        self.fluid.decomp = self.decomp
         self.fluid.initialize(surface=self.initial_surface_cells(),
                               u=tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
         self._exchange()
@@ -340,18 +341,8 @@ class FreeSurfaceModel(Model):
 
     def volume(self) -> float:
         """Water volume sum phi (cells^3): per-block sums on the target, added up in global block order (the same
-        float64 sum on any number of ranks)."""
-        from iceresist.freesurface.phasefield import volume_launcher
-
-        ph = self.fluid.phase
-        if getattr(self, "_volume", None) is None:
-            self._volume = (volume_launcher(self.target, ph.lat.name),
-                            self.target.to_device(np.zeros(ph.nblocks, np.float64)))
-        launch, out = self._volume
-        launch(ph.nblocks, ph.h, ph.solid, out)
-        per_block = self.gathered(np.asarray(self.target.to_host(out)))
-        total = None if per_block is None else float(per_block.sum())
-        return total if self.decomp is None else self.decomp.bcast(total)
+        float64 sum on any number of ranks; :meth:`FreeSurfaceFluid.volume`)."""
+        return self.fluid.volume()
 
     def initial_surface_cells(self) -> np.ndarray:
         """Water height z_s(x, y) at t = 0 in cells, (nx, ny): the depth where there is water, 1.5 interface
@@ -483,15 +474,8 @@ class FreeSurfaceModel(Model):
         blocks, h, phi, the cell flags, the iteration and the initial water volume. On several ranks the whole
         domain in global block order, every block with its populations, on rank 0 (None on the others)."""
         st = self.fluid.state()
-        if self.decomp is not None:
-            d = self.decomp
-            f = d.gather_rows(self.fluid.fluid.rows()[1])      # every block holds a row: block order
-            h, phi, flags = d.gather_rows(st["h"]), d.gather_rows(st["phi"]), d.gather_rows(st["flags"])
-            if f is None:
-                return None
-            n = self.global_forest.nblocks
-            st = {**st, "f_blocks": np.arange(n, dtype=np.int64), "f": f, "f_rows": np.int64(n), "h": h,
-                  "phi": phi, "flags": flags}
+        if st is None:          # an MPI rank other than 0
+            return None
         return {**st, "volume0_cells": np.float64(self.volume0_cells),
                 "iteration": np.int64(self.iteration), "precision": self.precision}
 
@@ -499,17 +483,6 @@ class FreeSurfaceModel(Model):
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
-        if self.decomp is not None and "f_blocks" in state and "h" in state:
-            d, n = self.decomp, self.global_forest.nblocks
-            f_blocks, f = np.asarray(state["f_blocks"]), np.asarray(state["f"])
-            if f.shape[0] != len(f_blocks) or (len(f_blocks) and f_blocks.max() >= n):
-                raise InputError("checkpoint populations do not fit this scene's blocks: it belongs to another scene")
-            whole = np.zeros((n,) + f.shape[1:], dtype=f.dtype)      # blocks without a row lie in the gas
-            whole[f_blocks] = f
-            nl = len(d.global_ids)
-            state = {**state, "f_blocks": np.arange(nl, dtype=np.int64), "f": d.local_rows(whole),
-                     "f_rows": np.int64(nl), "h": d.local_rows(np.asarray(state["h"])),
-                     "phi": d.local_rows(np.asarray(state["phi"])), "flags": d.local_rows(np.asarray(state["flags"]))}
         self.fluid.load_state(state)
         self.volume0_cells = float(state["volume0_cells"])
 

@@ -61,13 +61,14 @@ class Tier2Model(ShipModel):
     """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
 
     ``backend``, ``precision`` override the scene's ``[numerics]``; ``tau_floor`` raises tau to at least this
-    value (module docstring)."""
+    value (module docstring); ``comm``: the MPI communicator of a run on several ranks (the tank split over them,
+    :class:`~iceresist.coupling.floating.FloatingBodies`; records, fields and checkpoints the whole tank's)."""
 
     components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice")
     tier = 2
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
-                 tau_floor: float | None = None):
+                 tau_floor: float | None = None, comm=None):
         from iceresist.coupling.floating import FloatingBodies
         from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
 
@@ -112,7 +113,9 @@ class Tier2Model(ShipModel):
                                  rho_kg_m3=self.rho_w, operator=scene.fluid.operator, precision=self.precision,
                                  target=self.target, mobility=scene.free_surface.mobility_lattice,
                                  width=scene.free_surface.interface_width_cells, dem=dem,
-                                 contact_film=con.fluid_film)
+                                 contact_film=con.fluid_film, comm=comm)
+        self.decomp = self.fb.decomp
+        self.comm = None if self.decomp is None else comm
         self.dem = dem
         if pieces is not None and len(pieces[0]) > 1:
             log.info("tier 2: the hull %r is not convex: %d convex slabs for the fluid, %.2f %% more volume than "
@@ -135,7 +138,7 @@ class Tier2Model(ShipModel):
         #: the lattice's scales: dt is the LBM step (a model step, one record, is ``dt_s``)
         self.units = Units(dx_m=dx, dt_s=self.lbm_dt_s, rho0_kg_m3=self.rho_w, nu_m2_s=nu, tau=tau)
         self.g_lattice = g_lat
-        self.cells = int(self.fb.forest.cells)
+        self.cells = int(self.fb.global_forest.cells)
         self._iteration = 0
         self.lbm_steps = 0
         self._probes = 0
@@ -185,6 +188,8 @@ class Tier2Model(ShipModel):
         field, 1 water, 0 air). rho, u and pressure are 0 outside the liquid (where flags = 0), so that the NaN
         check of the field writer sees only real blow-ups."""
         phi, rho, u = self.fb.fields()
+        if phi is None:         # an MPI rank other than 0
+            return None
         c = self.units.dx_m / self.units.dt_s
         liquid = np.isfinite(rho)
         return {"rho": np.where(liquid, rho * self.rho_w, 0.0),
@@ -196,8 +201,10 @@ class Tier2Model(ShipModel):
         return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits", "phi": "1"}
 
     def surface_height_m(self) -> np.ndarray:
-        """Height of the free surface (phi = 1/2) in each column (nx, ny), metres from the tank bottom."""
-        return self.fb.fluid.surface_height() * self.units.dx_m
+        """Height of the free surface (phi = 1/2) in each column (nx, ny), metres from the tank bottom (on several
+        ranks on rank 0, None on the others)."""
+        h = self.fb.fluid.surface_height()
+        return None if h is None else h * self.units.dx_m
 
     def is_finite(self) -> bool:
         return bool(np.isfinite(self._force_mean).all() and np.isfinite(self._fluid_mean).all()
@@ -254,9 +261,21 @@ class Tier2Model(ShipModel):
         (:meth:`FreeSurfaceFluid.surface_height`); and the mean x-velocity (m/s) of the cubes whose centres
         lie ahead of the stem (``ice_drift_ahead_m_s``; positive: moving away from the bow). NaN where a band
         lies outside the tank or no cube is ahead."""
+        h = self.fb.fluid.surface_height(covered_as_water=True)
+        ice = self.ice_state()
+        ahead = ice["positions_m"][:, 0] > self.x_bow_m
+        drift = float(ice["velocities_m_s"][ahead, 0].mean()) if ahead.any() else math.nan
+        levels = None
+        if h is not None:
+            levels = self._levels(h * self.units.dx_m - self.level_m)
+        if self.decomp is not None:
+            levels = self.decomp.bcast(levels)
+        return {**levels, "ice_drift_ahead_m_s": drift}
+
+    def _levels(self, h) -> dict:
+        """The bands of :meth:`tank_motion` on the surface heights ``h`` (nx, ny; m above the still level)."""
         dx = self.units.dx_m
         nx, ny = self.shape_cells[:2]
-        h = self.fb.fluid.surface_height(covered_as_water=True) * dx - self.level_m
         x = (np.arange(nx) + 0.5) * dx
         y = (np.arange(ny) + 0.5) * dx
         side = np.abs(y - self.centre_y_m) > 0.5 * self.geometry.beam_m
@@ -266,21 +285,21 @@ class Tier2Model(ShipModel):
             vals = vals[np.isfinite(vals)]  # a column with no surface (all water or all gas) is left out
             return float(np.median(vals)) if vals.size else math.nan
 
-        ice = self.ice_state()
-        ahead = ice["positions_m"][:, 0] > self.x_bow_m
-        drift = float(ice["velocities_m_s"][ahead, 0].mean()) if ahead.any() else math.nan
         return {"level_fore_wall_m": band(self.domain_m[0] - self.level_band_m),
-                "level_ahead_m": band(self.x_bow_m + 0.05), "ice_drift_ahead_m_s": drift}
+                "level_ahead_m": band(self.x_bow_m + 0.05)}
 
     def state(self) -> dict:
         """Everything a bit-for-bit restart needs: the record count and the last forces, the fluid (population
         rows, h, phi, flags), the coupling (cell owners, previous forces), the DEM with its contact history, and
-        the ice bodies alone under ``positions_m`` etc. (for readers of the checkpoint)."""
+        the ice bodies alone under ``positions_m`` etc. (for readers of the checkpoint). On several ranks the whole
+        tank on rank 0 (None on the others), so that a checkpoint restarts on any number of ranks."""
+        flow = self.fb.state()
+        if flow is None:        # an MPI rank other than 0
+            return None
         return {"iteration": np.int64(self.iteration), "lbm_steps": np.int64(self.lbm_steps),
                 "force_mean_N": self._force_mean.copy(), "force_last_N": self._force_last.copy(),
                 "fluid_force_mean_N": self._fluid_mean.copy(), "precision": self.precision,
-                "fluid": self.fb.fluid.state(), "coupling": self.fb.coupling.state(), "dem": self.dem.state(),
-                **self.ice_state()}
+                **flow, "dem": self.dem.state(), **self.ice_state()}
 
     def load_state(self, state: dict):
         """Continue from :meth:`state` of a model built from the same scene (same backend precision)."""
@@ -290,8 +309,7 @@ class Tier2Model(ShipModel):
         if str(state.get("precision", self.precision)) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
-        self.fb.fluid.load_state(state["fluid"])
-        self.fb.coupling.load_state(state["coupling"])
+        self.fb.load_state(state["fluid"], state["coupling"])
         self.dem.load_state(state["dem"])
         self._iteration = int(state["iteration"])
         self.lbm_steps = int(state["lbm_steps"])
@@ -317,4 +335,5 @@ class Tier2Model(ShipModel):
                 "ship_lattice_speed": self.speed_m_s * u.dt_s / u.dx_m, "tank": self.tank.describe(),
                 "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
-                "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation()}
+                "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
+                **({} if self.decomp is None else {"mpi": self.decomp.describe()})}

@@ -2,7 +2,8 @@
 # The GPU checks of docs/PERFORMANCE.md on a machine with an NVIDIA GPU, in the order that matters most when time is
 # short. Each section writes into OUT (default gpu-check/); name sections to run only those (default: all, in order):
 #   cuda   the tests that launch CUDA kernels, on the device
-#   mpi    `mpirun -n 2` with backend = "cuda" (needs mpirun beside the interpreter: the `mpi` extra)
+#   mpi    `mpirun -n 2` with backend = "cuda": the cavity and the floating cube (needs mpirun and the iceresist
+#          script beside the interpreter: the `mpi` extra and `pip install -e .`)
 #   ship   the coupled quick tier-2 step launcher by launcher, beside the pure fused LBM step
 #   amr    the block-refined LBM on two and three levels, per level, beside the uniform finest grid
 #   lbm    the fused LBM at 256^3 against the device's copy bandwidth
@@ -31,7 +32,11 @@ for section in $SECTIONS; do
     cuda) $LIMIT "$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" \
             -k "cuda or gpu or transfer" -rfE > "$OUT/pytest_cuda.log" 2>&1
           echo "exit $?"; tail -4 "$OUT/pytest_cuda.log" ;;
-    mpi)  $LIMIT "$PYTHON" -m pytest -q -p no:cacheprovider -m mpi -k cuda -rfE > "$OUT/pytest_mpi.log" 2>&1
+    mpi)  bin=$("$PYTHON" -c "import sys, pathlib; print(pathlib.Path(sys.executable).parent)")
+          if [ ! -x "$bin/mpirun" ] || [ ! -x "$bin/iceresist" ]; then
+            echo "skipped: no mpirun or iceresist in $bin (pip install mpich mpi4py, then pip install -e .)"; continue
+          fi
+          $LIMIT "$PYTHON" -m pytest -q -p no:cacheprovider -m mpi -k cuda -rfE > "$OUT/pytest_mpi.log" 2>&1
           echo "exit $?"; tail -4 "$OUT/pytest_mpi.log" ;;
     ship) $LIMIT "$PYTHON" -m validation.bench ship --preset quick --backend cuda --precision float32 --compare-pure \
             --by-label --records 3 --json > "$OUT/ship.json" 2> "$OUT/ship.err"

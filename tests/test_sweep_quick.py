@@ -2,6 +2,9 @@
 2-core CPU: marked slow); two quick tier-1 cases (about 16 s each on a 2-core x86 VM) run in CI against their
 measured mean forces, the bow trend and the FSICR order."""
 
+import math
+
+import numpy as np
 import pytest
 
 from iceresist.post.trends import fsicr_order, paper_trends
@@ -38,11 +41,13 @@ def test_quick_tier2_sweep_trends(tmp_path):
 
 
 #: Quick preset, tier 1: mean ice force [N] and the half width of its own 95 % batch-means interval [N] as
-#: measured on a 2-core x86 VM (A: 10.027 +- 1.512 N, batch means; B: 13.712 +- 2.781 N, 5 batches). The run is
-#: deterministic, but a harmless change of the floating-point order gives another sample of the same chaotic
-#: run, so each case is held to its pinned mean within that half width: a change the interval cannot tell from
-#: noise passes, a change of the physics beyond it fails. Planted: the tier-1 water drag x4 (iceresist.dem.hydro)
-#: gives A 24.4 +- 7.0 N (fails) and stops B with the watchdog (a runaway cube: fails).
+#: measured on a 2-core x86 VM (AMD EPYC; A: 10.027 +- 1.512 N, batch means; B: 13.712 +- 2.781 N, 5 batches). The
+#: run is deterministic on one machine, but another floating-point order (another CPU: an Intel Xeon with AVX-512
+#: gives A 9.737 +- 1.121 N) is another sample of the same chaotic run, so each case is held to its pinned mean
+#: within the two intervals added in quadrature (two independent samples of one mean), and its interval's width to
+#: the 99 % range of the ratio of two independent batch-means widths, sqrt(F(B - 1, B - 1)): a change the intervals
+#: cannot tell from noise passes, a change of the physics beyond them fails. Planted: the tier-1 water drag x4
+#: (iceresist.dem.hydro) gives A 24.4 +- 7.0 N (fails) and stops B with the watchdog (a runaway cube: fails).
 QUICK_PINS = {"A-c68-v1.0": (10.027, 1.512), "B-c68-v1.0": (13.712, 2.781)}
 
 
@@ -62,11 +67,17 @@ def quick_case(tmp_path_factory):
 
 @pytest.mark.parametrize("case", list(QUICK_PINS))
 def test_quick_case_mean_force_within_its_own_interval_of_the_pinned_value(quick_case, case):
+    from scipy import stats
+
     row = quick_case(case)
     mean, half = QUICK_PINS[case]
-    assert abs(row.mean_force_N - mean) <= half, f"{case}: {row.mean_force_N:.3f} N, pinned {mean} +- {half} N"
-    # the interval itself: same window and batch count give the same width to a few per cent
-    assert row.ci95_N == pytest.approx(half, rel=0.25)
+    both = math.hypot(half, row.ci95_N)
+    assert abs(row.mean_force_N - mean) <= both, \
+        f"{case}: {row.mean_force_N:.3f} +- {row.ci95_N:.3f} N, pinned {mean} +- {half} N"
+    # the interval itself: its width a sample of the same spread as the pinned one (module comment above)
+    dof = int(row.n_batches) - 1
+    lo, hi = np.sqrt(stats.f.ppf([0.005, 0.995], dof, dof))
+    assert lo <= row.ci95_N / half <= hi, f"{case}: half width {row.ci95_N:.3f} N against {half} N ({lo:.2f}-{hi:.2f})"
     # the full-scale resistance against FSICR R_CH within 3 x either way (measured 0.54 and 0.60)
     assert 1 / 3 <= row.ratio_sim_FSICR <= 3
 

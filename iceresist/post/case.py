@@ -136,7 +136,7 @@ def analyse_case(path) -> dict:
         "fidelity": meta["fidelity"], "cubes": int(model["ice_cubes"]),
         "mean_force_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "std_N": sm.std_N,
         "window_x0_m": model["steady_window_m"][0], "window_x1_m": model["steady_window_m"][1],
-        "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note,
+        "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note, "n_batches": int(sm.n_batches),
         # second-half over first-half mean of the window, and whether they agree (iceresist.post.window_halves)
         "half_ratio": half_ratio, "window_steady": steady,
         "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, SCALE)) / 1e3,

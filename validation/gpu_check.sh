@@ -29,7 +29,7 @@ if "$PYTHON" -c "import xdist" 2>/dev/null; then XDIST="-n ${PYTEST_WORKERS:-8}"
 for section in $SECTIONS; do
   echo "== $section ($(date -u +%H:%M:%S))"
   case $section in
-    cuda) $LIMIT "$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" \
+    cuda) $LIMIT "$PYTHON" -m pytest -v $XDIST -p no:cacheprovider -m "not slow and not mpi" \
             -k "cuda or gpu or transfer" -rfE > "$OUT/pytest_cuda.log" 2>&1
           echo "exit $?"; tail -4 "$OUT/pytest_cuda.log" ;;
     mpi)  bin=$("$PYTHON" -c "import sys, pathlib; print(pathlib.Path(sys.executable).parent)")

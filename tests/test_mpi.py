@@ -283,17 +283,20 @@ def test_a_tier2_ship_on_two_ranks_is_the_one_process_run(tmp_path):
     _close(read_checkpoint(tmp_path / "cut" / f"{name}.checkpoint.h5")["model"], runs["one"])
 
 
-@pytest.mark.gpu
-def test_a_floating_cube_on_two_cuda_ranks_is_the_one_cuda_process_run(tmp_path):
-    """The floating cube of the test above with backend = "cuda" on a real GPU (the simulator would take hours),
-    float64, 20 steps: two ranks staging their halo through the host give one CUDA process's state to 1e-12 of each
-    quantity's largest value."""
+def _real_gpu() -> bool:
     from iceresist.backends import jit
-    from iceresist.validate.scenes import scene_path
     from tests.conftest import SIMULATED
 
-    if SIMULATED or not jit.cuda_available():
-        pytest.skip("needs a CUDA GPU")
+    return not SIMULATED and jit.cuda_available()
+
+
+@pytest.mark.gpu
+@pytest.mark.skipif(not _real_gpu(), reason="needs a CUDA GPU (the simulator would take hours)")
+def test_a_floating_cube_on_two_cuda_ranks_is_the_one_cuda_process_run(tmp_path):
+    """The floating cube of the test above with backend = "cuda" on a real GPU, float64, 20 steps: two ranks
+    staging their halo through the host give one CUDA process's state to 1e-12 of each quantity's largest value."""
+    from iceresist.validate.scenes import scene_path
+
     scene = scene_path("floating_cube")
     runs = {}
     for ranks, out in ((1, "one"), (2, "two")):

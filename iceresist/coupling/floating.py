@@ -186,20 +186,12 @@ class FloatingBodies:
     def dense_owners(self) -> np.ndarray | None:
         """The body covering each cell (nx, ny, nz), -1 for none, NaN outside the blocks (on several ranks the whole
         tank on rank 0, None on the others)."""
-        owners = self.coupling.owners().astype(np.float64)
-        if self.decomp is None:
-            return self.forest.to_dense(owners)
-        whole = self.decomp.gather_rows(owners)
-        return None if whole is None else self.global_forest.to_dense(whole)
+        return self.fluid.dense(self.coupling.owners().astype(np.float64))
 
     def dense_flags(self) -> np.ndarray | None:
         """The cell flags (nx, ny, nz) as float64, NaN outside the blocks (on several ranks the whole tank on rank 0,
         None on the others)."""
-        flags = np.asarray(self.fluid._host(self.fluid.fluid.flags)).astype(np.float64)
-        if self.decomp is None:
-            return self.forest.to_dense(flags)
-        whole = self.decomp.gather_rows(flags)
-        return None if whole is None else self.global_forest.to_dense(whole)
+        return self.fluid.dense(np.asarray(self.fluid._host(self.fluid.fluid.flags)).astype(np.float64))
 
     def fields(self):
         """Dense phi (nx, ny, nz), rho and u (3, nx, ny, nz) of the liquid (lattice units, NaN outside it and in

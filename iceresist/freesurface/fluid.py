@@ -303,7 +303,7 @@ class FreeSurfaceFluid:
     def _host(self, a) -> np.ndarray:
         return self.target.to_host(a)
 
-    def _dense(self, per_block: np.ndarray, axis: int = 0):
+    def dense(self, per_block: np.ndarray, axis: int = 0):
         """Dense array of a per-block array (blocks along ``axis``): the whole domain gathered on rank 0 where the
         fluid is split over ranks (None on the others)."""
         if self.decomp is None:
@@ -384,7 +384,7 @@ class FreeSurfaceFluid:
 
     def phi(self) -> np.ndarray:
         """Dense phi (nx, ny, nz), float64."""
-        return self._dense(self.phase.phi_host().astype(np.float64))
+        return self.dense(self.phase.phi_host().astype(np.float64))
 
     def state(self) -> dict:
         """Everything a bit-for-bit restart of the fluid needs, in storage precision: the population rows and
@@ -450,7 +450,7 @@ class FreeSurfaceFluid:
         liquid = (self._host(self.fluid.flags) & FL.FLUID) != 0
         rho[~liquid] = np.nan
         u[:, ~liquid] = np.nan
-        rho, u = self._dense(rho), self._dense(u, axis=1)
+        rho, u = self.dense(rho), self.dense(u, axis=1)
         return (None, None) if rho is None else (rho, u)
 
     def probe(self, full: bool, kinetic_energy_ref: float = 0.0) -> dict:
@@ -471,11 +471,11 @@ class FreeSurfaceFluid:
         step computed for the phase field (j / rho + g / 2, as :meth:`macroscopic`), read without the populations."""
         u = self._host(self._u).astype(np.float64).transpose(1, 0, 2)
         u[:, (self._host(self.fluid.flags) & FL.FLUID) == 0] = np.nan
-        return self._dense(u, axis=1)
+        return self.dense(u, axis=1)
 
     def liquid(self) -> np.ndarray:
         """Dense mask (nx, ny, nz) of the liquid cells (flag FLUID; a cell a body covers is GHOST, not liquid)."""
-        mask = self._dense(((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64))
+        mask = self.dense(((self._host(self.fluid.flags) & FL.FLUID) != 0).astype(np.float64))
         return None if mask is None else np.nan_to_num(mask, nan=0.0) > 0.5
 
     def surface_height(self, covered_as_water: bool = False) -> np.ndarray:
@@ -486,7 +486,7 @@ class FreeSurfaceFluid:
         stands out of the water then reads the body's top."""
         phi = self.phi()
         if covered_as_water:
-            covered = self._dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))
+            covered = self.dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))
             if phi is not None:
                 phi[np.nan_to_num(covered, nan=0.0) > 0.5] = 1.0
         if phi is None:         # an MPI rank other than 0

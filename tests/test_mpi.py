@@ -92,13 +92,16 @@ def test_bad_mpi_use_exits_2_with_one_line(tmp_path, ranks, scene, needle):
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
 
 
+def _cuda_target() -> bool:
+    from iceresist.backends import jit
+
+    return jit.cuda_available()
+
+
+@pytest.mark.skipif(not _cuda_target(), reason="no CUDA GPU and the simulator is off")
 def test_cuda_ranks_stage_the_halo_through_the_host(tmp_path):
     """The cavity with backend = "cuda" (the CUDA simulator in CI), 2 steps: on two ranks, each exchanging its
     device arrays through the host, the populations are those of one CUDA process, bit for bit."""
-    from iceresist.backends import jit
-
-    if not jit.cuda_available():
-        pytest.skip("no CUDA GPU and the simulator is off")
     one = _run(1, "cavity", "--steps", 2, "--backend", "cuda", "--output", "one", cwd=tmp_path)
     two = _run(2, "cavity", "--steps", 2, "--backend", "cuda", "--output", "two", cwd=tmp_path)
     assert one.returncode == 0 and two.returncode == 0, (one.stderr[-2000:], two.stderr[-2000:])
@@ -284,10 +287,9 @@ def test_a_tier2_ship_on_two_ranks_is_the_one_process_run(tmp_path):
 
 
 def _real_gpu() -> bool:
-    from iceresist.backends import jit
     from tests.conftest import SIMULATED
 
-    return not SIMULATED and jit.cuda_available()
+    return not SIMULATED and _cuda_target()
 
 
 @pytest.mark.gpu

@@ -203,15 +203,16 @@ def build_phase_blocks(real, lat: HLattice):
     * pull: h_k of the 512 cells into a block scratch line by line (8 cells from the source line, the one
       cell that crosses the block's x face from the neighbour), then one select per cell between the pulled
       value and the half-way bounce-back (a source outside the domain or solid);
-    * normal: from phi of the block and its halo in a 10^3 scratch (the stencil at constant offsets; along a
-      wall face the halo repeats the boundary cell, the cell form's clamp); the per-cell clamped stencil only
-      in a block next to a hole in the forest;
-    * collide: eq. (6) over the 512 cells for each k; solid cells keep phi and h (a select).
+    * normal: from phi of the block and its halo in a 10^3 scratch (along a wall face the halo repeats the
+      boundary cell, the cell form's clamp), the D3Q27 stencil applied as a product of three 1-D stencils (its
+      weights factorise), in float64; the per-cell clamped stencil only in a block next to a hole in the forest;
+    * collide: eq. (6) over the 512 cells for each k in the working precision (theta n per cell first); solid
+      cells keep phi and h (a select).
     """
     neighbour, _ = build_neighbour(jit.cpu)
     normal, unit = build_normal(jit.cpu, real)
-    nq, hcx, hcy, hcz, hw, hopp, gcx, gcy, gcz, gw = _stencils(real, lat)
-    goff = np.array([gcx[q] + 10 * (gcy[q] + 10 * gcz[q]) for q in range(27)], dtype=np.int64)
+    nq, hcx, hcy, hcz, hw, hopp, *_ = _stencils(real, lat)
+    hex_, hey, hez = (a.astype(real) for a in (hcx, hcy, hcz))  # c_k in the arithmetic precision
     fxm, fxp = L.index_of(-1, 0, 0), L.index_of(1, 0, 0)
     fym, fyp = L.index_of(0, -1, 0), L.index_of(0, 1, 0)
     fzm, fzp = L.index_of(0, 0, -1), L.index_of(0, 0, 1)
@@ -219,6 +220,7 @@ def build_phase_blocks(real, lat: HLattice):
     cs2, ics2, half_ics4 = real(lat.cs2), real(1.0 / lat.cs2), real(0.5 / lat.cs2 ** 2)
     dev = jit.cpu.device
     rdtype = real
+    sixth = 1.0 / 6.0
 
     @dev
     def clamp(v, low_open, high_open):
@@ -337,7 +339,7 @@ def build_phase_blocks(real, lat: HLattice):
             phi[b, c] = acc[c] if solid[b, c] < 0 else phi[b, c]
 
     @dev
-    def normals(b, phi, nbr, nx_, ny_, nz_, pad):
+    def normals(b, phi, nbr, nx_, ny_, nz_, pad, sx, dx, t1, t2, t3):
         """The interface normal of every cell of block b (as ``normal`` of :func:`build_phase_cells`)."""
         # phi of the block and its halo; along an axis whose face is a wall the halo repeats the boundary cell
         # (the clamp of the cell form). A halo cell in a missing block after clamping (a hole in the forest)
@@ -363,25 +365,41 @@ def build_phase_blocks(real, lat: HLattice):
             if not padded:
                 break
         if padded:
-            for c in range(512):  # the gradient first, normalised in place below
-                nx_[c] = 0.0
-                ny_[c] = 0.0
-                nz_[c] = 0.0
-            for q in range(1, 27):
-                wq = gw[q]
-                o = goff[q]
-                cxq = gcx[q]
-                cyq = gcy[q]
-                czq = gcz[q]
-                for z in range(8):
-                    for y in range(8):
-                        i0 = 1 + 10 * ((y + 1) + 10 * (z + 1)) + o
-                        c0 = 8 * (y + 8 * z)
-                        for x in range(8):
-                            pn = wq * pad[i0 + x]
-                            nx_[c0 + x] += cxq * pn
-                            ny_[c0 + x] += cyq * pn
-                            nz_[c0 + x] += czq * pn
+            # The D3Q27 weights factorise, w_q = w1(c_x) w1(c_y) w1(c_z) with w1 = (1/6, 2/3, 1/6), so the stencil
+            # (1/c_s^2) sum_q w_q c_q phi(x + c_q) is separable: grad_x = (1/2) S_y S_z D_x phi with the difference
+            # D phi = phi(+1) - phi(-1) and the smoothing S phi = (phi(-1) + 4 phi + phi(+1)) / 6 along the axis
+            # named; likewise y and z. The same sums as the 26-point stencil in another order (about 30 operations
+            # per cell instead of 160).
+            for pz in range(10):
+                for py in range(10):
+                    r = 10 * (py + 10 * pz)
+                    o = 8 * (py + 10 * pz)
+                    for x in range(8):
+                        a = np.float64(pad[r + x])
+                        m = np.float64(pad[r + x + 1])
+                        p = np.float64(pad[r + x + 2])
+                        sx[o + x] = (a + 4.0 * m + p) * sixth
+                        dx[o + x] = p - a
+            for pz in range(10):
+                for y in range(8):
+                    o = 8 * (y + 8 * pz)
+                    lo = 8 * (y + 10 * pz)
+                    mi = lo + 8
+                    hi = lo + 16
+                    for x in range(8):
+                        t1[o + x] = (dx[lo + x] + 4.0 * dx[mi + x] + dx[hi + x]) * sixth
+                        t2[o + x] = sx[hi + x] - sx[lo + x]
+                        t3[o + x] = (sx[lo + x] + 4.0 * sx[mi + x] + sx[hi + x]) * sixth
+            for z in range(8):
+                for y in range(8):
+                    lo = 8 * (y + 8 * z)
+                    mi = lo + 64
+                    hi = lo + 128
+                    c0 = 8 * (y + 8 * z)
+                    for x in range(8):
+                        nx_[c0 + x] = 0.5 * (t1[lo + x] + 4.0 * t1[mi + x] + t1[hi + x]) * sixth
+                        ny_[c0 + x] = 0.5 * (t2[lo + x] + 4.0 * t2[mi + x] + t2[hi + x]) * sixth
+                        nz_[c0 + x] = 0.5 * (t3[hi + x] - t3[lo + x])
             for c in range(512):
                 nx_[c], ny_[c], nz_[c] = unit(nx_[c], ny_[c], nz_[c])
         else:
@@ -393,29 +411,40 @@ def build_phase_blocks(real, lat: HLattice):
         """Pass 2 for block b: collide the streamed h in place towards h^eq(phi, u, n) (eqs. 6-9); a solid cell
         keeps its h."""
         b = np.int64(b)
-        nx_ = np.empty(512, np.float64)  # the stencil sums in float64 (integer c_q times phi), as the cell form
+        nx_ = np.empty(512, np.float64)  # the stencil sums in float64
         ny_ = np.empty(512, np.float64)
         nz_ = np.empty(512, np.float64)
-        th_ = np.empty(512, rdtype)
+        tx_ = np.empty(512, rdtype)
+        ty_ = np.empty(512, rdtype)
+        tz_ = np.empty(512, rdtype)
         uu_ = np.empty(512, rdtype)
         pad = np.empty(1000, rdtype)
-        normals(b, phi, nbr, nx_, ny_, nz_, pad)
-        for c in range(512):
+        sx = np.empty(800, np.float64)
+        dx = np.empty(800, np.float64)
+        t1 = np.empty(640, np.float64)
+        t2 = np.empty(640, np.float64)
+        t3 = np.empty(640, np.float64)
+        normals(b, phi, nbr, nx_, ny_, nz_, pad, sx, dx, t1, t2, t3)
+        for c in range(512):  # theta n (eq. 9) and u . u in the working precision
             dp = phi[b, c] - half
-            th_[c] = kappa * (one - four * dp * dp)
+            th = kappa * (one - four * dp * dp)
+            tx_[c] = rdtype(th * nx_[c])
+            ty_[c] = rdtype(th * ny_[c])
+            tz_[c] = rdtype(th * nz_[c])
             ux = u[b, 0, c]
             uy = u[b, 1, c]
             uz = u[b, 2, c]
             uu_[c] = ux * ux + uy * uy + uz * uz
         for k in range(nq):
+            cx = hex_[k]
+            cy = hey[k]
+            cz = hez[k]
+            wk = hw[k]
             for c in range(512):
                 hk = h_out[b, k, c]
-                ux = u[b, 0, c]
-                uy = u[b, 1, c]
-                uz = u[b, 2, c]
-                cu = hcx[k] * ux + hcy[k] * uy + hcz[k] * uz
-                cn = hcx[k] * nx_[c] + hcy[k] * ny_[c] + hcz[k] * nz_[c]
-                heq = hw[k] * (phi[b, c] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu_[c])) + th_[c] * cn)
+                cu = cx * u[b, 0, c] + cy * u[b, 1, c] + cz * u[b, 2, c]
+                cn = cx * tx_[c] + cy * ty_[c] + cz * tz_[c]
+                heq = wk * (phi[b, c] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu_[c])) + cn)
                 new = hk + omega * (heq - hk)
                 h_out[b, k, c] = new if solid[b, c] < 0 else h_out[b, k, c]
 

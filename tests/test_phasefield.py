@@ -138,7 +138,7 @@ def test_cpu_block_form_matches_the_cell_form(rng, precision, tol):
     """The vectorised CPU block form of passes 1 and 2 gives the per-cell form's phi and h after 3 steps on a
     forest with walls (x, z), periodic y, interior blocks, a drop crossing block faces and a solid body
     (cells keep phi and h, their neighbours bounce back); a one-cell shift of the stencil would fail it, in the
-    general pull as in the plain one of the blocks with no wall or solid in reach."""
+    general pull as in the line-by-line one of the blocks with no solid in reach (walls included)."""
     fo = BlockForest.uniform((40, 24, 40), {f: Face("wall") for f in ("x-", "x+", "z-", "z+")})
     X, Y, Z = (a + 0.5 for a in fo.cell_coordinates())
     r = np.sqrt((X - 15.0) ** 2 + (Y - 8.0) ** 2 + (Z - 23.0) ** 2)

@@ -47,7 +47,7 @@ from iceresist.freesurface import kernel_key
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
 from iceresist.backends.launch import BlockLauncher, CellLauncher
-from iceresist.freesurface.layout import build_neighbour
+from iceresist.freesurface.layout import DIR_OF_OFFSET, build_neighbour
 from iceresist.grid.forest import CELLS
 
 PHI_AVE = 0.5
@@ -210,6 +210,7 @@ def build_phase_blocks(real, lat: HLattice):
       cells keep phi and h (a select).
     """
     neighbour, _ = build_neighbour(jit.cpu)
+    dir_of = DIR_OF_OFFSET
     normal, unit = build_normal(jit.cpu, real)
     nq, hcx, hcy, hcz, hw, hopp, *_ = _stencils(real, lat)
     hex_, hey, hez = (a.astype(real) for a in (hcx, hcy, hcz))  # c_k in the arithmetic precision
@@ -272,47 +273,73 @@ def build_phase_blocks(real, lat: HLattice):
 
     @dev
     def stream_clear(b, h_in, h_out, phi, nbr, acc):
-        """Pass 1 for a block whose 26 neighbours exist and which, like them, holds no solid cell: every source is a
-        plain pull, so the lines go straight into ``h_out`` (no scratch, no bounce-back select). The same values
-        and the same sums as the general form."""
+        """Pass 1 for a block in which no source is solid (b and its neighbour blocks hold no solid cell): each
+        line of 8 cells pulls from one source line, the cell that crosses the x face from the neighbour line; a
+        source in no block (a wall, a hole in the forest) bounces back half-way, a whole line at once. The same
+        values and the same sums as the general form."""
         for k in range(nq):
             cx = hcx[k]
             cy = hcy[k]
             cz = hcz[k]
+            ko = hopp[k]
             for z in range(8):
+                zs = z - cz
+                bz = 0
+                if zs < 0:
+                    zs += 8
+                    bz = -1
+                elif zs > 7:
+                    zs -= 8
+                    bz = 1
                 for y in range(8):
-                    bm, sbase = neighbour(nbr, b, 0, y, z, 0, -cy, -cz)
+                    ys = y - cy
+                    by = 0
+                    if ys < 0:
+                        ys += 8
+                        by = -1
+                    elif ys > 7:
+                        ys -= 8
+                        by = 1
+                    d = 13 + 3 * by + 9 * bz        # dir_of index of the offset (0, by, bz)
+                    bm = b if d == 13 else nbr[b, dir_of[d]]
+                    sbase = 8 * (ys + 8 * zs)
                     c0 = 8 * (y + 8 * z)
                     if cx == 0:
-                        for x in range(8):
-                            v = h_in[bm, k, sbase + x]
+                        if bm >= 0:
+                            for x in range(8):
+                                v = h_in[bm, k, sbase + x]
+                                h_out[b, k, c0 + x] = v
+                                acc[c0 + x] += v
+                        else:
+                            for x in range(8):
+                                v = h_in[b, ko, c0 + x]
+                                h_out[b, k, c0 + x] = v
+                                acc[c0 + x] += v
+                        continue
+                    # the cell at the x face pulls from the neighbour line (x = 0 from the -x side if cx = 1)
+                    xe = 0 if cx == 1 else 7
+                    be = nbr[b, dir_of[d - cx]]
+                    v = h_in[be, k, sbase + 7 - xe] if be >= 0 else h_in[b, ko, c0 + xe]
+                    h_out[b, k, c0 + xe] = v
+                    acc[c0 + xe] += v
+                    x0 = 1 - xe // 7            # the other 7 cells: x = 1..7 (cx = 1) or 0..6 (cx = -1)
+                    if bm >= 0:
+                        for x in range(x0, x0 + 7):
+                            v = h_in[bm, k, sbase + x - cx]
                             h_out[b, k, c0 + x] = v
                             acc[c0 + x] += v
-                    elif cx == 1:   # cell x pulls from x - 1; cell 0 from the -x block
-                        be, ce = neighbour(nbr, b, 0, y, z, -1, -cy, -cz)
-                        v = h_in[be, k, ce]
-                        h_out[b, k, c0] = v
-                        acc[c0] += v
-                        for x in range(1, 8):
-                            v = h_in[bm, k, sbase + x - 1]
+                    else:
+                        for x in range(x0, x0 + 7):
+                            v = h_in[b, ko, c0 + x]
                             h_out[b, k, c0 + x] = v
                             acc[c0 + x] += v
-                    else:           # cell x pulls from x + 1; cell 7 from the +x block
-                        for x in range(7):
-                            v = h_in[bm, k, sbase + x + 1]
-                            h_out[b, k, c0 + x] = v
-                            acc[c0 + x] += v
-                        be, ce = neighbour(nbr, b, 7, y, z, 1, -cy, -cz)
-                        v = h_in[be, k, ce]
-                        h_out[b, k, c0 + 7] = v
-                        acc[c0 + 7] += v
         for c in range(512):
             phi[b, c] = acc[c]
 
     @dev
     def stream_block(b, h_in, h_out, phi, nbr, solid, clear):
         """Pass 1 for block b: h_out = pulled h, phi = sum_k of them; a solid cell keeps its h and phi.
-        ``clear[b]`` (:func:`build_clear_blocks`): b and its 26 neighbours exist and hold no solid cell."""
+        ``clear[b]`` (:func:`build_clear_blocks`): neither b nor its neighbours hold a solid cell."""
         b = np.int64(b)
         acc = np.zeros(512, rdtype)
         if clear[b]:
@@ -455,8 +482,9 @@ def build_clear_blocks():
     """Compile ``(solid_block, clear_block)``, the CPU passes that find the blocks where pass 1 is a plain pull:
 
     * ``solid_block(b, solid, has)``: ``has[b]`` = 1 where a cell of b is covered by a solid (``solid >= 0``);
-    * ``clear_block(b, has, nbr, clear)``: ``clear[b]`` = 1 where b and its 26 neighbour blocks exist and none
-      holds a solid cell (no source of b is a wall or a solid: no bounce-back)."""
+    * ``clear_block(b, has, nbr, clear)``: ``clear[b]`` = 1 where neither b nor any of its neighbour blocks
+      holds a solid cell (no source of b is solid: each line of b pulls from one line, or bounces back whole
+      where its source lies in no block)."""
     int8, int64 = np.int8, np.int64
 
     def solid_block(b, solid, has):
@@ -472,10 +500,9 @@ def build_clear_blocks():
         m = int8(1) if has[b] == 0 else int8(0)
         for q in range(1, 27):
             bn = nbr[b, q]
-            if bn < 0:
-                m = int8(0)
-            elif has[bn] != 0:
-                m = int8(0)
+            if bn >= 0:
+                if has[bn] != 0:
+                    m = int8(0)
         clear[b] = m
 
     return jit.cpu.device(solid_block), jit.cpu.device(clear_block)

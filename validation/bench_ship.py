@@ -105,15 +105,15 @@ def measure(scene, backend: str, records: int) -> dict:
 
 #: The parts of a coupled step in the words of docs/PERFORMANCE.md, by launcher label.
 PARTS = {
-    "links": "link pass (q, eq. 16, eq. 17)",
+    "links": "link pass (q, eq. 16, eq. 17; the phi mirror with a free surface)",
     "f_update": "free-surface fused f update",
     "h_stream": "phase field h stream and phi (eq. 5)",
     "h_collide": "phase field h collision (eqs. 6-9)",
     "reflag": "reflag",
     "extension": "velocity extension",
     "velocity": "velocity",
-    "mark": "redistribute / mirror / refill / mark", "mirror": "redistribute / mirror / refill / mark",
-    "refill_fs": "redistribute / mirror / refill / mark", "redistribute_fs": "redistribute / mirror / refill / mark",
+    "mark": "redistribute / refill / mark", "refill_fs": "redistribute / refill / mark",
+    "redistribute_fs": "redistribute / refill / mark",
 }
 
 

@@ -295,12 +295,12 @@ class FluidStructureCoupling:
         else:
             k["redistribute"](nb, d["near"], d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"], flags,
                               d["owner"], d["owner_prev"], f, phase.phi, phase.h)
-            k["mirror"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"],
-                        phase.phi)
         if self.debug:
             k["poison"](nb, active, d["flags0"], d["owner"], d["owner_prev"], f)
+        # with a free surface the same walk mirrors phi into the covered cells near the surface
+        mirror = () if self.surface is None else (self.surface.phase.phi,)
         k["links"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
-                   d["bforce"], d["btorque"], d["nlinks"], flags, d["film"], np.int64(self.nowned))
+                   d["bforce"], d["btorque"], d["nlinks"], flags, d["film"], np.int64(self.nowned), *mirror)
         s["row_sums"](self.n, d["row_ptr"], d["row_idx"], d["bforce"], d["btorque"], d["nlinks"], d["now"],
                       d["links"])
         if self.decomp is not None:

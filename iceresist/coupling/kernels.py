@@ -33,7 +33,9 @@ Passes of one coupling step, each a launch:
    boxes, convex polyhedra and their unions, :func:`iceresist.coupling.cellfunctions.build_link_root`), the
    interpolated bounce-back population of eq. (16) with the wall velocity
    v + omega x r at the wall point, written into slot q of y (the fused kernel pulls it from there), and the
-   momentum exchange of eq. (17), summed into force and torque (eqs. 18-19) about the centre of mass.
+   momentum exchange of eq. (17), summed into force and torque (eqs. 18-19) about the centre of mass. With a
+   free surface the same visit of a covered cell near the surface mirrors phi into it
+   (:func:`iceresist.coupling.surface_kernels.build_mirror`).
 
 Populations are f - w (rho0 = 1). Eq. (16) keeps its form for f - w (its coefficients sum to one and
 w_q = w_opp). In eq. (17) written for f - w the link gains the constant 2 w_q c_opp, the force of the
@@ -60,8 +62,9 @@ import numpy as np
 from iceresist.backends import cache
 from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumulate
 from iceresist.coupling.bodystate import build_reach_mask
-from iceresist.coupling.cellfunctions import build_geometry_functions, build_link_root, build_refill_functions
-from iceresist.coupling.surface_kernels import build_surface_visits
+from iceresist.coupling.cellfunctions import (MIRROR_DEPTH, build_geometry_functions, build_link_root,
+                                              build_refill_functions)
+from iceresist.coupling.surface_kernels import build_mirror, build_surface_visits
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
@@ -82,7 +85,7 @@ POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
 REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
 REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                   "phi", "h")
-MIRROR_ARGS = ("bint", "body", "planes", "grid", "block_map", "flags0", "owner", "phi")
+LINK_FS_ARGS = LINK_ARGS + ("phi",)
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
 FILM_DEPTH = 2.0
@@ -98,6 +101,8 @@ def build_visits(target, real, free_surface: bool = False):
     stable, add_nonequilibrium = build_refill_functions(target, real)
     zero, half, one, two, three, six = (real(v) for v in (0.0, 0.5, 1.0, 2.0, 3.0, 6.0))
     c45, c15, qmin, nan, fdepth = real(4.5), real(1.5), real(Q_MIN), real(np.nan), real(FILM_DEPTH)
+    mdepth = real(MIRROR_DEPTH)
+    mirror = build_mirror(target, real)
     fluid, ghost, niter, nq = FL.FLUID, GHOST, ROOT_ITERATIONS, Q
     CXI, CYI, CZI = (np.ascontiguousarray(C[:, a]).astype(np.int64) for a in range(3))
     CXR, CYR, CZR = (np.ascontiguousarray(C[:, a]).astype(real) for a in range(3))
@@ -178,8 +183,6 @@ def build_visits(target, real, free_surface: bool = False):
         b, c = lookup(gx, gy, gz, grid, block_map)
         if b < 0:
             return
-        # forces from the forest's first ``nowned`` blocks only (an MPI rank's own; its halo's are another rank's)
-        mine = b < nowned
         if owner[b, c] != k:
             return
         yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
@@ -188,6 +191,34 @@ def build_visits(target, real, free_surface: bool = False):
         # inside it too (the signed distance changes by at most the link length): no link and no film there
         if s_in <= -fdepth:
             return
+        link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
+                  bforce, btorque, nlinks, flags, film, nowned)
+
+    @dev
+    def links_fs(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks,
+                 flags, film, nowned, phi):
+        """``links`` with the phase field's mirror (:func:`iceresist.coupling.surface_kernels.build_mirror`) in the
+        same visit of each covered cell: one walk over the body's cell box instead of two."""
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        if b < 0:
+            return
+        if owner[b, c] != k:
+            return
+        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
+        s_in = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+        if s_in >= -mdepth:
+            mirror(k, b, c, yx, yy, yz, s_in, body, bint, planes, grid, block_map, flags0, owner, phi)
+        if s_in <= -fdepth:
+            return
+        link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
+                  bforce, btorque, nlinks, flags, film, nowned)
+
+    @dev
+    def link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
+                  bforce, btorque, nlinks, flags, film, nowned):
+        """The links of covered cell (b, c) of row k at (gx, gy, gz), centre (yx, yy, yz), signed distance s_in."""
+        # forces from the forest's first ``nowned`` blocks only (an MPI rank's own; its halo's are another rank's)
+        mine = b < nowned
         near = film[0] != zero
         nfilm = 0
         for q in range(1, nq):
@@ -344,7 +375,7 @@ def build_visits(target, real, free_surface: bool = False):
             for p in range(nq):
                 f[b, p, c] = nan
 
-    return mark, links, classify_refill, redistribute, poison
+    return mark, (links_fs if fs else links), classify_refill, redistribute, poison
 
 
 #: Modules whose source decides the compiled coupling code (visits, geometry, lattice constants, flags); the key
@@ -365,7 +396,7 @@ _CACHE: dict = {}
 def coupling_launchers(target, real, h_lattice=None):
     """Compiled launchers ``mark, links, refill, redistribute, poison`` (cached per target and precision); with
     the h lattice of a free surface (``h_lattice``, an :class:`~iceresist.freesurface.hlattice.HLattice`) the
-    free-surface variants ``links, refill, redistribute`` and the ``mirror`` pass
+    free-surface variants ``links`` (which also mirrors phi, taking it last), ``refill`` and ``redistribute``
     (:mod:`iceresist.coupling.surface_kernels`)."""
     key = (target.name, target.simulator, np.dtype(real).name, None if h_lattice is None else h_lattice.name)
     if key not in _CACHE:
@@ -374,7 +405,7 @@ def coupling_launchers(target, real, h_lattice=None):
         mark, links, refill, redist, poison = build_visits(target, real, free_surface=fs)
         launchers = {
             "mark": BodyLauncher(target, mark, MARK_ARGS, label="mark", cache_key=k),
-            "links": BodyLauncher(target, links, LINK_ARGS, label="links", cache_key=k),
+            "links": BodyLauncher(target, links, LINK_FS_ARGS if fs else LINK_ARGS, label="links", cache_key=k),
             "poison": ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k),
         }
         if not fs:
@@ -382,10 +413,9 @@ def coupling_launchers(target, real, h_lattice=None):
             launchers["redistribute"] = ActiveLauncher(target, redist, REDIST_ARGS, label="redistribute",
                                                        cache_key=k)
         else:
-            refill_fs, redist_fs, mirror = build_surface_visits(target, real, h_lattice)
+            refill_fs, redist_fs = build_surface_visits(target, real, h_lattice)
             launchers["refill"] = ActiveLauncher(target, refill_fs, REFILL_FS_ARGS, label="refill_fs", cache_key=k)
             launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS, label="redistribute_fs",
                                                        cache_key=k)
-            launchers["mirror"] = BodyLauncher(target, mirror, MIRROR_ARGS, label="mirror", cache_key=k)
         _CACHE[key] = launchers
     return _CACHE[key]

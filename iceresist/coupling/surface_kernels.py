@@ -15,7 +15,7 @@ the phase field (``phi[block, cell]``, ``h[block, k, cell]`` on the h lattice):
    cell not covered takes its share w_q / sum w of the phi of a newly covered cell (and gives back that of a
    refilled one), added to its rest population h_0: sum phi over the cells outside the bodies, the water
    volume, is unchanged by the motion of the bodies;
-3. ``mirror`` (per body over its cell box): a covered cell within ``MIRROR_DEPTH`` of the surface gets the
+3. ``mirror`` (in the link pass, :func:`build_mirror`): a covered cell within ``MIRROR_DEPTH`` of the surface gets the
    phi at its mirror point across the surface, p = y - 2 s(y) grad s (s the signed distance), interpolated
    trilinearly from the cells outside the bodies. The gradient stencil of the phase field reads it: the
    normal derivative of phi at the surface vanishes (neutral wetting, a 90 degree contact angle, as at the
@@ -34,19 +34,19 @@ import math
 import numpy as np
 
 from iceresist.coupling.bodystate import build_reach_mask
-from iceresist.coupling.cellfunctions import MIRROR_DEPTH, build_geometry_functions, build_refill_functions
+from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
 from iceresist.lbm.boundary import GHOST
 
 
 def build_surface_visits(target, real, hlat):
-    """``classify_refill_fs, redistribute_fs, mirror`` (module docstring) for the h lattice ``hlat``."""
+    """``classify_refill_fs, redistribute_fs`` (module docstring) for the h lattice ``hlat``."""
     lookup, sdf_at, wall_velocity = build_geometry_functions(target, real)
     stable, add_nonequilibrium = build_refill_functions(target, real)
     reach_mask = build_reach_mask(target)
     zero, half, one, three = real(0.0), real(0.5), real(1.0), real(3.0)
-    c45, c15, eps, depth = real(4.5), real(1.5), real(1e-12), real(MIRROR_DEPTH)
+    c45, c15 = real(4.5), real(1.5)
     fluid, ghost, gas, near_surface = FL.FLUID, GHOST, FL.GAS, FL.NEAR_SURFACE
     nq = Q
     CXI, CYI, CZI = (np.ascontiguousarray(C[:, a]).astype(np.int64) for a in range(3))
@@ -185,17 +185,21 @@ def build_surface_visits(target, real, hlat):
         if liquid:
             f[b, 0, c] += accf
 
-    @dev
-    def mirror(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, phi):
-        b, c = lookup(gx, gy, gz, grid, block_map)
-        if b < 0:
-            return
-        if owner[b, c] != k:
-            return
-        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
-        s = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
-        if s < -depth:
-            return
+    return classify_refill_fs, redistribute_fs
+
+
+def build_mirror(target, real):
+    """``mirror(k, b, c, yx, yy, yz, s, body, bint, planes, grid, block_map, flags0, owner, phi)``: step 3 of the
+    module docstring for the covered cell (b, c) of row k, centre (yx, yy, yz), signed distance s (within
+    ``MIRROR_DEPTH`` of the surface; the caller checks). The link pass calls it for each covered cell it visits
+    (:func:`iceresist.coupling.kernels.build_visits`): it reads phi only outside the bodies and writes it only
+    inside, and the links read no phi, so one visit does both."""
+    lookup, sdf_at, _ = build_geometry_functions(target, real)
+    zero, half, one, eps = real(0.0), real(0.5), real(1.0), real(1e-12)
+    fluid = FL.FLUID
+
+    @target.device
+    def mirror(k, b, c, yx, yy, yz, s, body, bint, planes, grid, block_map, flags0, owner, phi):
         nx = sdf_at(k, yx + half, yy, yz, body, bint, planes, grid) - sdf_at(k, yx - half, yy, yz, body, bint,
                                                                              planes, grid)
         ny = sdf_at(k, yx, yy + half, yz, body, bint, planes, grid) - sdf_at(k, yx, yy - half, yz, body, bint,
@@ -226,4 +230,4 @@ def build_surface_visits(target, real, hlat):
         if wsum > real(1e-3):
             phi[b, c] = acc / wsum
 
-    return classify_refill_fs, redistribute_fs, mirror
+    return mirror

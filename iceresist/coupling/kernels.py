@@ -221,9 +221,15 @@ def build_visits(target, real, free_surface: bool = False):
         mine = b < nowned
         near = film[0] != zero
         nfilm = 0
+        kb = bint[k, 9]
         for q in range(1, nq):
             hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
             xb, xc = lookup(hx, hy, hz, grid, block_map)
+            if xb >= 0:
+                o = owner[xb, xc]
+                if o >= 0:
+                    if bint[o, 9] == kb:
+                        continue    # the same body (any of its rows): no link and no film (the common case)
             if not liquid(xb, xc, flags0, owner, flags):
                 if near:
                     if touches(k, hx, hy, hz, xb, xc, bint, grid, flags0, owner):

@@ -31,7 +31,7 @@ from iceresist import lattice as L
 from iceresist.backends import jit
 from iceresist.backends.launch import CellLauncher
 from iceresist.freesurface import kernel_key
-from iceresist.freesurface.layout import build_neighbour
+from iceresist.freesurface.layout import HAS_LIQUID, build_neighbour
 
 UNFILLED = 127
 
@@ -103,13 +103,15 @@ def build_extension_block(real):
     of the block and a halo (two cells deep in pass 1, which extrapolates along the link, one after) are copied
     into a scratch (a cell outside the domain counts as unfilled), then each direction q adds its neighbour's
     weighted velocity to the sums of every cell at one constant offset, q in the order of the cell form: the same
-    sums, cell by cell."""
+    sums, cell by cell. Layer 0 in a block with no gas in reach (``near[b]`` = :data:`HAS_LIQUID`) only marks its
+    cells liquid: phi >= 1/2 in all of them."""
     neighbour, _ = build_neighbour(jit.cpu)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))
     w = L.W.astype(real)
     zero, two = real(0.0), real(2.0)
     int64, int8 = np.int64, np.int8
     unfilled = UNFILLED
+    liquid_only = np.int8(HAS_LIQUID)   # no gas in reach
     side = 12                                    # 8 cells and a halo of 2 either side
     off = np.array([cx[q] + side * (cy[q] + side * cz[q]) for q in range(27)], dtype=np.int64)
     extend_cell = build_extension_cell(jit.cpu, real)
@@ -119,6 +121,10 @@ def build_extension_block(real):
     def extend_block(b, phi, u, dist, nbr, layer, near):
         b = int64(b)
         if layer == 0:
+            if near[b] == liquid_only:  # no gas in b (nor around it): every cell is liquid, u stays
+                for c in range(512):
+                    dist[b, c] = int8(0)
+                return
             for c in range(512):
                 extend_cell(b, c, phi, u, dist, nbr, layer, near)
             return

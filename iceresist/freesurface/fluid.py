@@ -36,7 +36,7 @@ from iceresist.backends.launch import BlockLauncher, CellLauncher, copy_into
 from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
-from iceresist.freesurface.layout import build_neighbour
+from iceresist.freesurface.layout import HAS_GAS, HAS_LIQUID, build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
 from iceresist.grid import flags as FL
@@ -136,8 +136,6 @@ def build_surface_cells(target, real):
     return velocity_cell, reflag_cell
 
 
-#: Bits of a block's phase summary (:func:`build_block_phases`).
-HAS_GAS, HAS_LIQUID = 1, 2
 
 
 def build_block_phases(target, real):

@@ -20,6 +20,10 @@ from iceresist import lattice as L
 from iceresist.grid.forest import CELLS  # noqa: F401  (re-exported for the kernels)
 
 
+#: Bits of a block's phase summary (:func:`iceresist.freesurface.fluid.build_block_phases`): a cell with gas (phi < 1/2
+#: or the GAS flag), a cell with liquid (phi >= 1/2).
+HAS_GAS, HAS_LIQUID = 1, 2
+
 #: D3Q27 index of the offset (dx, dy, dz), stored at (dx+1) + 3 (dy+1) + 9 (dz+1).
 DIR_OF_OFFSET = np.array([L.index_of(dx, dy, dz) for dz in (-1, 0, 1) for dy in (-1, 0, 1) for dx in (-1, 0, 1)],
                          dtype=np.int64)

@@ -208,6 +208,29 @@ def build_event_mask(target):
     return target.device(near_mask)
 
 
+def build_changed_blocks(target):
+    """Compile ``changed_block(b, active, owner, owner_prev, full, changed)``: ``changed[b]`` = 1 where block b is
+    active and one of its cells changed cover since the last step (covered now and not then, or the reverse), or
+    where ``full`` asks for every active block (the first step, which sets the GHOST flags of the cells the bodies
+    cover at the start). The refill and its flags change nothing in the other blocks: a cell that keeps its cover
+    keeps its flags."""
+    int8, int64 = np.int8, np.int64
+
+    def changed_block(b, active, owner, owner_prev, full, changed):
+        b = int64(b)
+        m = int8(0)
+        if active[b] != 0:
+            if full != 0:
+                m = int8(1)
+            else:
+                for c in range(512):
+                    if (owner[b, c] >= 0) != (owner_prev[b, c] >= 0):
+                        m = int8(1)
+        changed[b] = m
+
+    return target.device(changed_block)
+
+
 def build_reach_mask(target):
     """Compile ``reach_mask(c) -> int32``: the bits (as :func:`build_event_mask`) of the blocks the 26 neighbours
     of cell c of a block lie in: its own block, and across each face, edge or corner the cell touches."""
@@ -236,10 +259,11 @@ KEY_MODULES = ("iceresist.coupling.bodystate", "iceresist.freesurface.layout")
 
 
 def body_state_launchers(target, real) -> dict:
-    """``{"body_rows", "active_rows", "row_sums", "fluid_loads", "near_events"}``: launchers over launch rows,
-    launch rows, bodies, bodies and forest blocks, cached per target and precision. ``near_events`` gathers
-    the event flags of each block and its 26 neighbours into a bit mask (:func:`build_event_mask`; the blocks a
-    redistribution reaches)."""
+    """``{"body_rows", "active_rows", "row_sums", "fluid_loads", "near_events", "changed_blocks"}``: launchers
+    over launch rows, launch rows, bodies, bodies and forest blocks (the last two), cached per target and
+    precision. ``near_events`` gathers the event flags of each block and its 26 neighbours into a bit mask
+    (:func:`build_event_mask`; the blocks a redistribution reaches); ``changed_blocks`` flags the active blocks
+    where a cell changed cover (:func:`build_changed_blocks`)."""
     key = (target.name, target.simulator, np.dtype(real).name)
     if key not in _LAUNCHERS:
         from iceresist.backends import cache
@@ -247,6 +271,7 @@ def body_state_launchers(target, real) -> dict:
 
         body_row, active_row, row_sums, fluid_loads = build_body_state(target, real)
         near = build_event_mask(target)
+        changed = build_changed_blocks(target)
         k = None if target.is_cuda else cache.fingerprint(f"body_state|{np.dtype(real).name}", KEY_MODULES)
         _LAUNCHERS[key] = {
             "body_rows": BlockLauncher(target, body_row, BODY_ROW_ARGS, label="body_rows", cache_key=k),
@@ -254,5 +279,7 @@ def body_state_launchers(target, real) -> dict:
             "row_sums": BlockLauncher(target, row_sums, ROW_SUMS_ARGS, label="row_sums", cache_key=k),
             "fluid_loads": BlockLauncher(target, fluid_loads, FLUID_LOADS_ARGS, label="fluid_loads", cache_key=k),
             "near_events": BlockLauncher(target, near, ("evt", "nbr", "near"), label="near_events", cache_key=k),
+            "changed_blocks": BlockLauncher(target, changed, ("active", "owner", "owner_prev", "full", "changed"),
+                                            label="changed_blocks", cache_key=k),
         }
     return _LAUNCHERS[key]

@@ -166,7 +166,8 @@ class FluidStructureCoupling:
                    "box": dev(np.zeros((n, 6), np.int64)), "box_prev": dev(np.zeros((n, 6), np.int64)),
                    "now": dev(np.zeros((n, 6))), "fprev": dev(np.zeros((n, 6))), "fluid": dev(np.zeros((n, 6))),
                    "fluid_sum": dev(np.zeros((n, 6))), "links": dev(np.zeros(n, np.int64)),
-                   "active": dev(np.zeros(nb, np.int8)), "evt": dev(np.zeros(nb, np.int32)),
+                   "active": dev(np.zeros(nb, np.int8)), "changed": dev(np.zeros(nb, np.int8)),
+                   "evt": dev(np.zeros(nb, np.int32)),
                    "near": dev(np.zeros(nb, np.int32))}
         self._k = coupling_launchers(self.target, self.real,
                                      None if self.surface is None else self.surface.phase.lat)
@@ -180,6 +181,7 @@ class FluidStructureCoupling:
         self._placed = self.surface is None
         self._boxes_valid = False   # box holds the cell boxes of a step taken (the active blocks of the next)
         self._fprev_valid = False   # fprev holds F_s, M_s of a step taken (eqs. 20-21)
+        self._classified = False    # the refill has set the flags of every active block once (then: changed ones)
         self.iteration = 0
         log.info("coupling: %d bodies on %d blocks, buoyancy %s", self.n, fo.nblocks, self.buoyancy)
 
@@ -280,13 +282,22 @@ class FluidStructureCoupling:
         Fx, Fy, Fz = (real(v) for v in self.solver.force)
         evt = d["evt"]
         t.fill(evt, 0)
+        # On the CPU the refill visits only the active blocks where a cell changed cover (a body's box holds many
+        # blocks where none did: the quick hull's 1 600); on CUDA, where the step is bound by its launches, the
+        # refill's threads of the other blocks return at once instead.
+        visit = active
+        if not t.is_cuda:
+            s["changed_blocks"](nb, active, d["owner"], d["owner_prev"], np.int64(not self._classified),
+                                d["changed"])
+            visit = d["changed"]
+        self._classified = True
         if self.surface is None:
-            k["refill"](nb, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+            k["refill"](nb, visit, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
                         d["owner_prev"], f, evt, Fx, Fy, Fz)
         else:
             phase = self.surface.phase
             phase.solid = d["owner"]
-            k["refill"](nb, active, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
+            k["refill"](nb, visit, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
                         d["owner_prev"], f, evt, Fx, Fy, Fz, phase.phi, phase.h)
         s["near_events"](nb, evt, d["nbr"], d["near"])
         if self.surface is None:

@@ -178,18 +178,23 @@ def build_visits(target, real, free_surface: bool = False):
         return math.exp(three * film[1] * depth)
 
     @dev
+    def covered(k, gx, gy, gz, bint, body, planes, grid, block_map, owner):
+        """(b, c, centre x, y, z, signed distance) of cell (gx, gy, gz) where row k covers it; b = -1 where not."""
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
+        if b < 0:
+            return -1, c, yx, yy, yz, zero
+        if owner[b, c] != k:
+            return -1, c, yx, yy, yz, zero
+        return b, c, yx, yy, yz, sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+
+    @dev
     def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks, flags,
               film, nowned):
-        b, c = lookup(gx, gy, gz, grid, block_map)
-        if b < 0:
-            return
-        if owner[b, c] != k:
-            return
-        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
-        s_in = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+        b, c, yx, yy, yz, s_in = covered(k, gx, gy, gz, bint, body, planes, grid, block_map, owner)
         # a cell deeper than FILM_DEPTH (> sqrt(3), the longest link) inside its convex body has every neighbour
         # inside it too (the signed distance changes by at most the link length): no link and no film there
-        if s_in <= -fdepth:
+        if b < 0 or s_in <= -fdepth:
             return
         link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
                   bforce, btorque, nlinks, flags, film, nowned)
@@ -199,13 +204,9 @@ def build_visits(target, real, free_surface: bool = False):
                  flags, film, nowned, phi):
         """``links`` with the phase field's mirror (:func:`iceresist.coupling.surface_kernels.build_mirror`) in the
         same visit of each covered cell: one walk over the body's cell box instead of two."""
-        b, c = lookup(gx, gy, gz, grid, block_map)
+        b, c, yx, yy, yz, s_in = covered(k, gx, gy, gz, bint, body, planes, grid, block_map, owner)
         if b < 0:
             return
-        if owner[b, c] != k:
-            return
-        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
-        s_in = sdf_at(k, yx, yy, yz, body, bint, planes, grid)
         if s_in >= -mdepth:
             mirror(k, b, c, yx, yy, yz, s_in, body, bint, planes, grid, block_map, flags0, owner, phi)
         if s_in <= -fdepth:

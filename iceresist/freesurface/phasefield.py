@@ -272,6 +272,15 @@ def build_phase_blocks(real, lat: HLattice):
                     tmp[c0 + x] = ln[x + o] if sl[x + o] < 0 else own
 
     @dev
+    def wrap(v):
+        """(v within its block, the step -1, 0 or 1 to that block) of a cell coordinate v in -1..8."""
+        if v < 0:
+            return v + 8, -1
+        if v > 7:
+            return v - 8, 1
+        return v, 0
+
+    @dev
     def stream_clear(b, h_in, h_out, phi, nbr, acc):
         """Pass 1 for a block in which no source is solid (b and its neighbour blocks hold no solid cell): each
         line of 8 cells pulls from one source line, the cell that crosses the x face from the neighbour line; a
@@ -283,23 +292,9 @@ def build_phase_blocks(real, lat: HLattice):
             cz = hcz[k]
             ko = hopp[k]
             for z in range(8):
-                zs = z - cz
-                bz = 0
-                if zs < 0:
-                    zs += 8
-                    bz = -1
-                elif zs > 7:
-                    zs -= 8
-                    bz = 1
+                zs, bz = wrap(z - cz)
                 for y in range(8):
-                    ys = y - cy
-                    by = 0
-                    if ys < 0:
-                        ys += 8
-                        by = -1
-                    elif ys > 7:
-                        ys -= 8
-                        by = 1
+                    ys, by = wrap(y - cy)
                     d = 13 + 3 * by + 9 * bz        # dir_of index of the offset (0, by, bz)
                     bm = b if d == 13 else nbr[b, dir_of[d]]
                     sbase = 8 * (ys + 8 * zs)

@@ -101,7 +101,8 @@ def build_extension_block(real):
     """The CPU block form of :func:`build_extension_cell`, ``extend_block(b, phi, u, dist, nbr, layer, near)``: the
     same update of the 512 cells of block b, arranged so that LLVM vectorises it across the cells. ``dist`` and u
     of the block and a halo (two cells deep in pass 1, which extrapolates along the link, one after) are copied
-    into a scratch (a cell outside the domain counts as unfilled), then each direction q adds its neighbour's
+    into a scratch row by row (three runs of cells per row, one block look-up each; a cell outside the domain
+    counts as unfilled), then each direction q adds its neighbour's
     weighted velocity to the sums of every cell at one constant offset, q in the order of the cell form: the same
     sums, cell by cell. Layer 0 in a block with no gas in reach (``near[b]`` = :data:`HAS_LIQUID`) only marks its
     cells liquid: phi >= 1/2 in all of them."""
@@ -143,29 +144,70 @@ def build_extension_block(real):
         puz = np.empty(side ** 3, real)
         for pz in range(2 - halo, 10 + halo):
             for py in range(2 - halo, 10 + halo):
-                for px in range(2 - halo, 10 + halo):
-                    i = px + side * (py + side * pz)
-                    bn, cn = neighbour(nbr, b, px - 2, py - 2, pz - 2, 0, 0, 0)
-                    if bn >= 0:
-                        pd[i] = dist[bn, cn]
-                        pux[i] = u[bn, 0, cn]
-                        puy[i] = u[bn, 1, cn]
-                        puz[i] = u[bn, 2, cn]
+                row = 2 + side * (py + side * pz)       # scratch index of the row's cell x = 0
+                # a row of the scratch in three runs: x = -halo..-1 (the -x block), 0..7, 8..7 + halo (the +x
+                # block), one block look-up per run
+                for run in range(3):
+                    if run == 0:
+                        bn, cn = neighbour(nbr, b, 0, py - 2, pz - 2, -halo, 0, 0)
+                        x0 = -halo
+                        n = halo
+                    elif run == 1:
+                        bn, cn = neighbour(nbr, b, 0, py - 2, pz - 2, 0, 0, 0)
+                        x0 = 0
+                        n = 8
                     else:
-                        pd[i] = int8(unfilled)
-                        pux[i] = zero
-                        puy[i] = zero
-                        puz[i] = zero
+                        bn, cn = neighbour(nbr, b, 8, py - 2, pz - 2, 0, 0, 0)
+                        x0 = 8
+                        n = halo
+                    if bn >= 0:
+                        for x in range(n):
+                            pd[row + x0 + x] = dist[bn, cn + x]
+                            pux[row + x0 + x] = u[bn, 0, cn + x]
+                            puy[row + x0 + x] = u[bn, 1, cn + x]
+                            puz[row + x0 + x] = u[bn, 2, cn + x]
+                    else:
+                        for x in range(n):
+                            pd[row + x0 + x] = int8(unfilled)
+                            pux[row + x0 + x] = zero
+                            puy[row + x0 + x] = zero
+                            puz[row + x0 + x] = zero
         sw = np.zeros(512, real)
         sx = np.zeros(512, real)
         sy = np.zeros(512, real)
         sz = np.zeros(512, real)
         prev = layer - 1
+        # the lines of 8 cells that can change: an unfilled cell and a filled cell in the line or the 8 lines
+        # around it (the 3 x 3 lines whose cells are its cells' neighbours); the others are not summed
+        filled = np.zeros(100, np.bool_)               # per scratch line (py, pz) in 1..10
+        for pz in range(1, 11):
+            for py in range(1, 11):
+                i0 = 1 + side * (py + side * pz)
+                f = False
+                for x in range(10):
+                    if pd[i0 + x] <= prev:
+                        f = True
+                filled[(py - 1) + 10 * (pz - 1)] = f
+        todo_line = np.zeros(64, np.bool_)
+        for z in range(8):
+            for y in range(8):
+                open_ = False
+                for x in range(8):
+                    if dist[b, x + 8 * (y + 8 * z)] > prev:
+                        open_ = True
+                reach = False
+                for dz in range(3):
+                    for dy in range(3):
+                        if filled[(y + dy) + 10 * (z + dz)]:
+                            reach = True
+                todo_line[y + 8 * z] = open_ and reach
         for q in range(1, 27):
             o = off[q]
             wq = w[q]
             for z in range(8):
                 for y in range(8):
+                    if not todo_line[y + 8 * z]:
+                        continue
                     i0 = 2 + side * ((y + 2) + side * (z + 2))
                     c0 = 8 * (y + 8 * z)
                     for x in range(8):

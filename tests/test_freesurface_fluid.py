@@ -106,7 +106,7 @@ def test_translating_flow_under_flat_surface_stays_flat():
 @pytest.mark.parametrize("walls", ["wall", "slip"])
 def test_cuda_matches_cpu_on_a_tilted_surface(walls):
     """Two steps of a tilted surface moving up (eq. 11 with u != 0, reflag, extension): the CUDA kernels
-    (simulator) reproduce the CPU populations and phi to 1e-12 in float64; with free-slip walls the surface
+    (simulator) reproduce the CPU populations, phi and velocity to 1e-12 in float64; with free-slip walls the surface
     meets the walls, so mirrored pulls from liquid and from gas cells (eq. 11) are taken."""
     fo = _tank(walls)
     x = np.arange(8) + 0.5
@@ -117,12 +117,14 @@ def test_cuda_matches_cpu_on_a_tilted_surface(walls):
                               precision="float64", target=target)
         fs.initialize(surface=surface, u=(0.0, 0.0, 0.02))
         fs.step(2)
-        out.append((fs.fluid.populations(), fs.phase.phi_host(), np.array(fs._host(fs.fluid.flags))))
-    (f_cpu, p_cpu, fl_cpu), (f_gpu, p_gpu, fl_gpu) = out
+        out.append((fs.fluid.populations(), fs.phase.phi_host(), np.array(fs._host(fs.fluid.flags)),
+                    np.array(fs._host(fs._u))))
+    (f_cpu, p_cpu, fl_cpu, u_cpu), (f_gpu, p_gpu, fl_gpu, u_gpu) = out
     assert np.array_equal(fl_cpu, fl_gpu)
     liquid = (fl_cpu & FL.FLUID) != 0
     assert np.allclose(f_cpu.transpose(1, 0, 2)[:, liquid], f_gpu.transpose(1, 0, 2)[:, liquid], atol=1e-12)
     assert np.allclose(p_cpu, p_gpu, atol=1e-12)
+    assert np.allclose(u_cpu, u_gpu, rtol=0.0, atol=1e-14)     # the velocity the fused update wrote, extended
 
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])
@@ -149,6 +151,43 @@ def test_velocity_block_form_equals_the_cell_form_bit_for_bit(precision):
         us.append(u)
     assert np.array_equal(us[0], us[1])
     assert np.abs(us[0]).max() > 5e-3                        # a moving flow, not two zero fields
+
+
+@pytest.mark.parametrize("precision", ["float64", "float32"])
+def test_fused_update_writes_the_velocity_of_the_velocity_pass(precision):
+    """The fused f update that also writes u (``pooled_fused_launcher(velocity=True)``, what ``step`` runs) against
+    the separate velocity pass on the populations it wrote, on a moving tilted surface in a pooled tank: u in every
+    cell (0 in gas cells and in blocks without a row) the same, to round-off (the sums in the same order; LLVM
+    may reassociate them), and the same populations as the update without u, bit for bit (the CUDA cell form's u:
+    ``test_cuda_matches_cpu_on_a_tilted_surface``). A population left out of a sum, a flipped sign or the force's
+    half step with the wrong sign (+ F / 2) fails it."""
+    from iceresist.freesurface.fluid import surface_launchers
+    from iceresist.freesurface.pool import pooled_fused_launcher
+
+    fo = BlockForest.uniform((16, 8, 32), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+    x = np.arange(16) + 0.5
+    surface = np.broadcast_to((DEPTH + 1.5 * (x - 8.0) / 8.0)[:, None], (16, 8))
+    fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=1e-3, depth_cells=DEPTH, operator="bgk", precision=precision)
+    fs.initialize(surface=surface, u=(0.01, -0.005, 0.02))
+    fs.step(3)
+    pool, t = fs.fluid, fs.fluid._tables
+    src = pool.state
+    args = (t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"], t["bc_rho"], *pool._scalars,
+            fs.phase.phi, fs.real(0.5 * fs.phase.width), pool.fslot)
+    dst_u, dst_plain = (np.full(src.shape, np.nan, fs.real) for _ in "ab")
+    u = np.full((fs.nblocks, 3, 512), np.nan, fs.real)
+    pooled_fused_launcher(jit.cpu, precision, "bgk", velocity=True)(fs.nblocks, src, dst_u, *args, u)
+    pooled_fused_launcher(jit.cpu, precision, "bgk")(fs.nblocks, src, dst_plain, *args)
+    fslot = np.asarray(pool.fslot)
+    assert (fslot < 0).any() and (fslot >= 0).any()         # blocks without a population row, and with one
+    rows = np.unique(fslot[fslot >= 0])
+    assert np.array_equal(dst_u[rows], dst_plain[rows], equal_nan=True)
+    vel = surface_launchers(jit.cpu, precision)[0]
+    u_pass = np.full_like(u, np.nan)
+    vel(fs.nblocks, dst_u, pool.fslot, pool.flags, u_pass, fs.real(0.0), fs.real(0.0), -fs.real(fs.g))
+    assert np.isfinite(u).all()
+    assert np.allclose(u, u_pass, rtol=0.0, atol=4 * np.finfo(fs.real).eps * 0.05)
+    assert np.abs(u_pass).max() > 5e-3 and (u_pass == 0).any()  # a moving flow, and gas cells at 0
 
 
 def test_depth_outside_domain_is_an_input_error():

@@ -6,8 +6,9 @@ One time step (:meth:`FreeSurfaceFluid.step`):
    populations pulled from a GAS cell follow eq. (11) with the hydrostatic density of the
    link midpoint below the sub-cell phi = 1/2 surface (:mod:`iceresist.lbm.stream`,
    ``free_surface=True``); gas cells are skipped like solids;
-2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), extended into the
-   gas layer by layer (:mod:`iceresist.freesurface.extension`);
+2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), written by the fused update of
+   step 1 as it writes the populations, extended into the gas layer by layer
+   (:mod:`iceresist.freesurface.extension`);
 3. one step of the conservative Allen-Cahn LBM advected by that velocity (eqs. 4-10,
    :class:`~iceresist.freesurface.phasefield.PhaseField`);
 4. move the population rows to follow the water (:mod:`iceresist.freesurface.pool`: blocks wholly
@@ -337,9 +338,14 @@ class FreeSurfaceFluid:
         self.iteration = 0
 
     def _velocity(self):
+        """The liquid's velocity from the populations (a pass of its own), then extended into the gas."""
         g = self.real(self.g)
         zero = self.real(0.0)
         self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
+        self._extend()
+
+    def _extend(self):
+        """The liquid's velocity ``_u`` extended into the gas near the surface (:mod:`~iceresist.freesurface.extension`)."""
         extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr,
                         near=self._block_phases(self.phase.phi))
 
@@ -354,14 +360,15 @@ class FreeSurfaceFluid:
         return self.real(self.g), self.real(0.5 * self.phase.width)
 
     def _stream_collide(self):
-        """Step 1: the fused update of the liquid with the current phi (``POOL_ARGS``); the buffers swap."""
-        self.fluid.step(1, self.phase.phi, self.real(0.5 * self.phase.width))
+        """Steps 1-2: the fused update of the liquid with the current phi (``POOL_U_ARGS``), which also writes the
+        liquid's velocity ``_u`` from the new populations; the buffers swap."""
+        self.fluid.step(1, self.phase.phi, self.real(0.5 * self.phase.width), u=self._u)
 
     def step(self, n: int = 1):
         """Advance ``n`` time steps (module docstring, steps 1-5)."""
         for _ in range(int(n)):
             self._stream_collide()
-            self._velocity()
+            self._extend()
             self.phase.step(self._u)
             self.fluid.update_rows(self.phase.phi, self._u)
             self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state,

@@ -32,7 +32,7 @@ from iceresist.errors import InputError
 from iceresist.grid.forest import CELLS
 from iceresist.freesurface import kernel_key
 from iceresist.lbm.solver import CUMULANT_MODULES, collide_builder
-from iceresist.lbm.stream import (POOL_ARGS, _namespace, block_namespace, cell_device, pooled_source,
+from iceresist.lbm.stream import (POOL_ARGS, POOL_U_ARGS, _namespace, block_namespace, cell_device, pooled_source,
                                   stream_collide_block_source, stream_collide_source)
 from iceresist.lbm.codegen import compile_source
 
@@ -43,23 +43,27 @@ DEFAULT_MARGIN = 0.25
 
 
 @lru_cache(maxsize=None)
-def pooled_fused_launcher(target, precision: str, operator: str) -> CellLauncher:
+def pooled_fused_launcher(target, precision: str, operator: str, velocity: bool = False) -> CellLauncher:
     """The free-surface fused stream-collide with f indexed through ``fslot`` (args ``POOL_ARGS``);
     per cell on CUDA, per block on the CPU (:func:`~iceresist.lbm.stream.stream_collide_block_source`: an
-    all-liquid block gathered line by line and collided across its 512 cells, which vectorises)."""
+    all-liquid block gathered line by line and collided across its 512 cells, which vectorises).
+    ``velocity``: the update also writes the velocity ``u`` of every cell (args ``POOL_U_ARGS``), which saves the
+    separate pass that reads the populations again."""
     real = jit.real_type(precision)
     collide = collide_builder(operator)(target, real)
+    args = POOL_U_ARGS if velocity else POOL_ARGS
     if target.is_cuda:
-        fn = compile_source(pooled_source(stream_collide_source(free_surface=True)), "stream_collide_cell",
-                            _namespace(target, real, collide), cell_device(target))
-        return CellLauncher(target, fn, POOL_ARGS, label="f_update")
-    key = kernel_key(target, f"f_update|{precision}|{operator}", CUMULANT_MODULES if operator == "cumulant" else ())
+        fn = compile_source(pooled_source(stream_collide_source(free_surface=True, velocity=velocity)),
+                            "stream_collide_cell", _namespace(target, real, collide), cell_device(target))
+        return CellLauncher(target, fn, args, label="f_update")
+    key = kernel_key(target, f"f_update|{precision}|{operator}|velocity={bool(velocity)}",
+                     CUMULANT_MODULES if operator == "cumulant" else ())
     # the vectorised block form: an all-liquid block gathered line by line and collided across its cells
-    src = pooled_source(stream_collide_block_source(free_surface=True))
+    src = pooled_source(stream_collide_block_source(free_surface=True, velocity=velocity))
     head, body = src.split("\n", 1)
     fn = compile_source(f"{head}\n    sb = fslot[b]\n{body}", "stream_collide_block",
                         block_namespace(target, real, collide), cell_device(target))
-    return CellLauncher(target, fn, POOL_ARGS, per_block=True, label="f_update", cache_key=key)
+    return CellLauncher(target, fn, args, per_block=True, label="f_update", cache_key=key)
 
 
 def build_pool_cells(target, real):
@@ -227,6 +231,7 @@ class PooledLBM:
         self.cells = forest.cells
         self.pool = FPool(forest.nbr, margin)
         self._launch = pooled_fused_launcher(target, precision, operator)
+        self._operator = operator
         self._wet_cells, self._fill = pool_launchers(target, precision)
         real = self.real
         tables = dict(nbr_key=forest.nbr_key.astype(np.int32), link_bc=forest.link_bc.astype(np.int32),
@@ -318,15 +323,20 @@ class PooledLBM:
         self._upload_map()
         self.iteration = 0
 
-    def step(self, n: int, phi, half_width):
+    def step(self, n: int, phi, half_width, u=None):
         """Advance ``n`` fused stream-collide steps with the phase field ``phi[block, cell]`` and W / 2
-        (lattice units) placing the surface inside the cell (eq. 11); the buffers swap after each."""
+        (lattice units) placing the surface inside the cell (eq. 11); the buffers swap after each. ``u``
+        (``[block, 3, cell]``, optional): written with each cell's velocity j / rho - F / 2 of the new populations,
+        0 outside the liquid (:func:`~iceresist.lbm.stream.velocity_lines`)."""
         t = self._tables
         nb = self.forest.nblocks
+        launch = self._launch if u is None else pooled_fused_launcher(self.target, self.precision, self._operator,
+                                                                       velocity=True)
+        extra = () if u is None else (u,)
         for _ in range(int(n)):
             src, dst = self._f
-            self._launch(nb, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
-                         t["bc_rho"], *self._scalars, phi, half_width, self.fslot)
+            launch(nb, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
+                   t["bc_rho"], *self._scalars, phi, half_width, self.fslot, *extra)
             self._f = [dst, src]
             self.iteration += 1
 

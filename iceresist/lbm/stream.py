@@ -46,6 +46,10 @@ TANH_CLIP = 0.999
 #: Arguments of the slot-indexed free-surface update: ``fslot[block]`` is the row of the population pool
 #: that holds the block (-1 for a block wholly in the gas, which holds none; :mod:`iceresist.freesurface.pool`).
 POOL_ARGS = FS_ARGS + ("fslot",)
+#: The same with the velocity written as the populations are: ``u[block, 3, cell]`` gets the cell's
+#: j / rho - F / 2 from its post-collision populations (0 outside the liquid), the field the phase field and the
+#: velocity extension read (:func:`velocity_lines`).
+POOL_U_ARGS = POOL_ARGS + ("u",)
 
 
 def _source_lines(q: int):
@@ -67,7 +71,7 @@ def _offset_lines(cvec):
     return " + ".join(parts_key), " + ".join(parts_cell)
 
 
-def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) -> str:
+def stream_collide_source(loop_cells: bool = False, free_surface: bool = False, velocity: bool = False) -> str:
     """Python source of the fused per-cell update ``stream_collide_cell(b, c, ...)``.
 
     With ``loop_cells`` the same body is wrapped in a loop over the 512 cells of block
@@ -97,11 +101,16 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
     (the odd terms of f^eq cancel); u is the cell's own velocity from its post-collision
     populations of the previous step, as at an outlet. A level surface at a cell face
     (s_mid = 0) gives back the paper's rule at rho0 = 1.
+
+    With ``velocity`` (free surface, one cell per call) the update also writes the cell's velocity ``u``
+    (:func:`velocity_lines`; 0 outside the liquid): the arguments are ``FS_ARGS`` and ``u``.
     """
-    args = FS_ARGS if free_surface else ARGS
+    if velocity and (loop_cells or not free_surface):
+        raise ValueError("velocity is written by the free-surface update of one cell per call only")
+    args = FS_ARGS + (("u",) if velocity else ()) if free_surface else ARGS
     s = "def stream_collide_cell(b, c, " + ", ".join(args) + "):\n"
     s += "    flag = flags[b, c]\n"
-    s += "    if (flag & FLUID) == 0:\n        return\n"
+    s += "    if (flag & FLUID) == 0:\n" + (_zero_velocity_lines("        ") if velocity else "") + "        return\n"
     s += "    ci = c + izero\n    lx = ci & 7\n    ly = (ci >> 3) & 7\n    lz = ci >> 6\n"
     s += "    f0 = src[b, 0, c]\n"
     # short path: all 26 sources are fluid cells of allocated blocks
@@ -165,12 +174,40 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
         s += f"    out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
     for q in range(Q):
         s += f"    dst[b, {q}, c] = out[{q}]\n"
+    if velocity:
+        s += velocity_lines("    ")
     if loop_cells:
         body = s.split("\n", 1)[1].replace("        return\n", "        continue\n")
         body = "".join("    " + line + "\n" for line in body.splitlines())
         s = (f"def stream_collide_block(b, {', '.join(args)}):\n"
              f"    for c in range({CELLS}):\n" + body)
     return s
+
+
+def velocity_lines(indent: str, pop: str = "out[{q}]") -> str:
+    """Source writing ``u[b, :, c]`` = j / rho - F / 2 of the populations ``pop`` (f - w, post-collision), the sums
+    in the order of the separate velocity pass (:func:`iceresist.freesurface.fluid.build_surface_cells`): rho = 1
+    plus f_0 .. f_26, j_a = 0 plus or minus the f_q with c_qa = +-1, q rising; so the fields agree bit for bit
+    where LLVM keeps that order. The post-collision j is the pre-collision one plus the full force, hence - F / 2."""
+    names = [pop.format(q=q) for q in range(Q)]
+    s = f"{indent}rho_u = one + {' + '.join(names)}\n"
+    for a, comp in enumerate("xyz"):
+        expr = "".join(term(C[q, a], names[q]) for q in range(Q))
+        s += f"{indent}u[b, {a}, c] = (zero{expr}) / rho_u - half * F{comp}\n"
+    return s
+
+
+def _block_velocity_lines() -> str:
+    """Source of the block form's velocity sweep (:func:`stream_collide_block_source`): :func:`velocity_lines` in a
+    loop of its own over the post-collision populations in the scratch (from the cache rather than from memory). In
+    the collision sweep itself the 30 extra stores stop LLVM vectorising it."""
+    s = f"    for c in range({CELLS}):\n"
+    s += "".join(f"        v{q} = tmp[{_slot(q)} + c]\n" for q in range(Q))
+    return s + velocity_lines("        ", "v{q}")
+
+
+def _zero_velocity_lines(indent: str) -> str:
+    return "".join(f"{indent}u[b, {a}, c] = zero\n" for a in range(3))
 
 
 def _slip_lines(q: int, free_surface: bool) -> str:
@@ -238,6 +275,7 @@ def pooled_source(src: str) -> str:
     s = re.sub(r"\b(src|dst)\[b, ", r"\1[sb, ", src)
     s = re.sub(r"\bsrc\[(nb|nbr_key\[b, [^\]]+\]), ", r"src[fslot[\1], ", s)
     s = re.sub(r"\n( +)ci = c \+ izero\n", r"\n\1ci = c + izero\n\1sb = fslot[b]\n", s)
+    s = s.replace(", ".join(FS_ARGS) + ", u):", ", ".join(POOL_U_ARGS) + "):", 1)
     return s.replace(", ".join(FS_ARGS) + "):", ", ".join(POOL_ARGS) + "):", 1)
 
 
@@ -317,7 +355,7 @@ def _line_gather(q: int) -> str:
     return s
 
 
-def stream_collide_block_source(free_surface: bool = False) -> str:
+def stream_collide_block_source(free_surface: bool = False, velocity: bool = False) -> str:
     """Python source of the CPU block update ``stream_collide_block(b, *ARGS)`` in three sweeps (``*FS_ARGS`` with
     ``free_surface``: the pull of a mixed block takes eq. (11) at GAS sources and the collision the force
     rho g, as in :func:`stream_collide_source`).
@@ -332,13 +370,20 @@ def stream_collide_block_source(free_surface: bool = False) -> str:
        offsets, which LLVM vectorises across cells (8 float32 or 4 float64 cells per AVX2 register);
     3. write: ``tmp`` to ``dst[b]`` (fluid cells only in a mixed block).
 
-    Same arithmetic as the per-cell form, cell by cell; only the order of the work differs.
+    Same arithmetic as the per-cell form, cell by cell; only the order of the work differs. With ``velocity``
+    (free surface) the collision sweep also writes each cell's velocity ``u`` from its post-collision populations
+    (:func:`velocity_lines`), and the cells outside the liquid get u = 0: the arguments are ``FS_ARGS`` and ``u``.
     """
-    s = f"def stream_collide_block(b, {', '.join(FS_ARGS if free_surface else ARGS)}):\n"
+    if velocity and not free_surface:
+        raise ValueError("velocity is written by the free-surface update only")
+    args = FS_ARGS + (("u",) if velocity else ()) if free_surface else ARGS
+    s = f"def stream_collide_block(b, {', '.join(args)}):\n"
     s += "    full = True\n    wet = False\n"
     s += (f"    for c in range({CELLS}):\n        fc = flags[b, c]\n        if fc != FLUID:\n            full = False\n"
           "        if fc & FLUID:\n            wet = True\n")
-    s += "    if not wet:\n        return\n"   # no cell to update: nothing is written
+    # no cell to update: nothing is written (but the velocity, 0)
+    zero_u = f"        for c in range({CELLS}):\n" + _zero_velocity_lines("            ") if velocity else ""
+    s += "    if not wet:\n" + zero_u + "        return\n"
     s += f"    tmp = np.empty({Q * PLANE}, rdtype)\n"
     # every block is gathered line by line; the cells with a boundary link (or none to update) are then pulled
     # again one by one, so only those pay for the neighbour look-ups
@@ -359,6 +404,8 @@ def stream_collide_block_source(free_surface: bool = False) -> str:
     else:
         s += f"        out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
     s += "".join(f"        tmp[{_slot(q)} + c] = out[{q}]\n" for q in range(Q))
+    if velocity:
+        s += _block_velocity_lines()
     # 3. write back
     s += "    if full:\n"
     s += f"        for q in range({Q}):\n"
@@ -367,6 +414,8 @@ def stream_collide_block_source(free_surface: bool = False) -> str:
     s += "    else:\n"
     s += f"        for c in range({CELLS}):\n            if flags[b, c] & FLUID:\n"
     s += f"                for q in range({Q}):\n                    dst[b, q, c] = tmp[q * PLANE + 8 + c]\n"
+    if velocity:
+        s += "            else:\n" + _zero_velocity_lines("                ")
     return s
 
 

@@ -49,7 +49,7 @@ log = logging.getLogger(__name__)
 
 
 def build_surface_cells(target, real):
-    """Compile ``(velocity_cell, reflag_cell)``.
+    """Compile ``(velocity_cell, reflag_cell, turn_liquid)``.
 
     * ``velocity_cell(b, c, f, fslot, flags, u, gx, gy, gz)``: u of a liquid cell from its post-collision
       populations f - w (pool row ``fslot[b]``) with the half-force shift of the force rho g removed;
@@ -59,7 +59,8 @@ def build_surface_cells(target, real):
       :data:`HAS_GAS`, :func:`build_block_phases`) a liquid cell has no gas neighbour and was not gas, so it
       takes its base flags without looking at its neighbours; a cell turning liquid gets f - w = f^eq(rho, u) - w with the hydrostatic
       rho = 1 + 3 g s, s = (W / 2) artanh(2 phi - 1) its depth below the phi = 1/2 surface (the rule
-      of the link density in :func:`iceresist.lbm.stream.stream_collide_source`).
+      of the link density in :func:`iceresist.lbm.stream.stream_collide_source`);
+    * ``turn_liquid(b, c, phi, f, fslot, u, g, half_width)``: that equilibrium, written into the cell's row.
     """
     neighbour, _ = build_neighbour(target)
     cx, cy, cz = (np.ascontiguousarray(L.C[:, a]) for a in range(3))  # int64: neighbour offsets
@@ -97,6 +98,21 @@ def build_surface_cells(target, real):
             u[b, 2, c] = zero
 
     @dev
+    def turn_liquid(b, c, phi, f, fslot, u, g, half_width):
+        """Gas -> liquid: f - w = f^eq(rho, u) - w at the hydrostatic density below the surface and the extended
+        velocity."""
+        ux = u[b, 0, c]
+        uy = u[b, 1, c]
+        uz = u[b, 2, c]
+        uu = ux * ux + uy * uy + uz * uz
+        s = int64(fslot[b])
+        t = min(two * phi[b, c] - one, tclip)
+        drho = c3 * g * half_width * math.atanh(t)
+        for q in range(27):
+            cu = ex[q] * ux + ey[q] * uy + ez[q] * uz
+            f[s, q, c] = w[q] * (drho + (one + drho) * (c3 * cu + c45 * cu * cu - c15 * uu))
+
+    @dev
     def reflag_cell(b, c, phi, base, flags, f, fslot, u, nbr, g, half_width, near):
         b = int64(b)
         if flags[b, c] & ghost:
@@ -109,17 +125,7 @@ def build_surface_cells(target, real):
             flags[b, c] = gas
             return
         if flags[b, c] & gas:
-            # gas -> liquid: equilibrium at the hydrostatic density below the surface and the extended velocity
-            ux = u[b, 0, c]
-            uy = u[b, 1, c]
-            uz = u[b, 2, c]
-            uu = ux * ux + uy * uy + uz * uz
-            s = int64(fslot[b])
-            t = min(two * phi[b, c] - one, tclip)
-            drho = c3 * g * half_width * math.atanh(t)
-            for q in range(27):
-                cu = ex[q] * ux + ey[q] * uy + ez[q] * uz
-                f[s, q, c] = w[q] * (drho + (one + drho) * (c3 * cu + c45 * cu * cu - c15 * uu))
+            turn_liquid(b, c, phi, f, fslot, u, g, half_width)
         z = c // 64
         y = (c // 8) % 8
         x = c % 8
@@ -134,7 +140,7 @@ def build_surface_cells(target, real):
         else:
             flags[b, c] = bf
 
-    return velocity_cell, reflag_cell
+    return velocity_cell, reflag_cell, turn_liquid
 
 
 
@@ -233,21 +239,96 @@ def build_velocity_block(real):
     return jit.cpu.device(velocity_block)
 
 
+def build_reflag_block(real, turn_liquid):
+    """Compile the CPU block form ``reflag_block(b, phi, base, flags, f, fslot, u, nbr, g, half_width, near)`` of
+    ``reflag_cell`` (:func:`build_surface_cells`): the same flags and the same populations of cells turning liquid,
+    cell by cell. A block with gas in reach copies the gas mask ((base & FLUID) and phi < 1/2) of itself and a
+    halo of one cell into a 10^3 scratch row by row (three runs per row, one block look-up each; outside the
+    domain: no gas), ORs it over the 26 neighbour offsets across the 512 cells (vectorised), then sets each cell's
+    flags as the cell form does."""
+    neighbour, _ = build_neighbour(jit.cpu)
+    half = real(0.5)
+    fluid, gas, near_surface, ghost = (np.uint8(FL.FLUID), np.uint8(FL.GAS), np.uint8(FL.NEAR_SURFACE),
+                                       np.uint8(FL.GHOST))
+    int64, int8 = np.int64, np.int8
+    has_gas = np.int8(HAS_GAS)
+    side = 10
+    off = np.array([int(L.C[q, 0]) + side * (int(L.C[q, 1]) + side * int(L.C[q, 2])) for q in range(27)], np.int64)
+
+    def reflag_block(b, phi, base, flags, f, fslot, u, nbr, g, half_width, near):
+        b = int64(b)
+        if (near[b] & has_gas) == 0:        # no gas in reach: every cell takes its base flags (GHOST kept)
+            for c in range(CELLS):
+                if (flags[b, c] & ghost) == 0:
+                    flags[b, c] = base[b, c]
+            return
+        gm = np.empty(side ** 3, int8)
+        for pz in range(side):
+            for py in range(side):
+                row = 1 + side * (py + side * pz)   # scratch index of the row's cell x = 0
+                for run in range(3):
+                    if run == 0:
+                        bn, cn = neighbour(nbr, b, 0, py - 1, pz - 1, -1, 0, 0)
+                        x0 = -1
+                        n = 1
+                    elif run == 1:
+                        bn, cn = neighbour(nbr, b, 0, py - 1, pz - 1, 0, 0, 0)
+                        x0 = 0
+                        n = 8
+                    else:
+                        bn, cn = neighbour(nbr, b, 8, py - 1, pz - 1, 0, 0, 0)
+                        x0 = 8
+                        n = 1
+                    if bn >= 0:
+                        for x in range(n):
+                            gm[row + x0 + x] = int8(1) if ((base[bn, cn + x] & fluid) != 0
+                                                           and phi[bn, cn + x] < half) else int8(0)
+                    else:
+                        for x in range(n):
+                            gm[row + x0 + x] = int8(0)
+        nm = np.zeros(CELLS, int8)
+        for q in range(1, 27):
+            o = off[q]
+            for z in range(8):
+                for y in range(8):
+                    i0 = 1 + side * ((y + 1) + side * (z + 1)) + o
+                    c0 = 8 * (y + 8 * z)
+                    for x in range(8):
+                        nm[c0 + x] |= gm[i0 + x]
+        for c in range(CELLS):
+            fl = flags[b, c]
+            if fl & ghost:
+                continue    # covered by a body: the coupling owns the cell
+            bf = base[b, c]
+            if (bf & fluid) == 0:
+                flags[b, c] = bf
+                continue
+            if phi[b, c] < half:
+                flags[b, c] = gas
+                continue
+            if fl & gas:
+                turn_liquid(b, c, phi, f, fslot, u, g, half_width)
+            flags[b, c] = bf | near_surface if nm[c] else bf
+
+    return jit.cpu.device(reflag_block)
+
+
 @lru_cache(maxsize=None)
 def surface_launchers(target, precision: str, vector: bool = True):
-    """``(velocity, reflag)`` launchers; on the CPU the velocity in its block form (:func:`build_velocity_block`)
-    unless ``vector=False``."""
-    vel, reflag = build_surface_cells(target, jit.real_type(precision))
+    """``(velocity, reflag)`` launchers; on the CPU in their block forms (:func:`build_velocity_block`,
+    :func:`build_reflag_block`) unless ``vector=False``."""
+    real = jit.real_type(precision)
+    vel, reflag, turn_liquid = build_surface_cells(target, real)
     vel_args = ("f", "fslot", "flags", "u", "gx", "gy", "gz")
+    reflag_args = ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width", "near")
     k = kernel_key(target, f"surface|{precision}|vector={bool(vector)}")
     if vector and not target.is_cuda:
-        velocity = CellLauncher(target, build_velocity_block(jit.real_type(precision)), vel_args, per_block=True,
-                                label="velocity", cache_key=k)
-    else:
-        velocity = CellLauncher(target, vel, vel_args, label="velocity", cache_key=k)
-    return (velocity,
-            CellLauncher(target, reflag, ("phi", "base", "flags", "f", "fslot", "u", "nbr", "g", "half_width",
-                                          "near"), label="reflag", cache_key=k))
+        return (CellLauncher(target, build_velocity_block(real), vel_args, per_block=True, label="velocity",
+                             cache_key=k),
+                CellLauncher(target, build_reflag_block(real, turn_liquid), reflag_args, per_block=True,
+                             label="reflag", cache_key=k))
+    return (CellLauncher(target, vel, vel_args, label="velocity", cache_key=k),
+            CellLauncher(target, reflag, reflag_args, label="reflag", cache_key=k))
 
 
 class FreeSurfaceFluid:

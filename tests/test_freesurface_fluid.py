@@ -124,7 +124,7 @@ def test_cuda_matches_cpu_on_a_tilted_surface(walls):
     liquid = (fl_cpu & FL.FLUID) != 0
     assert np.allclose(f_cpu.transpose(1, 0, 2)[:, liquid], f_gpu.transpose(1, 0, 2)[:, liquid], atol=1e-12)
     assert np.allclose(p_cpu, p_gpu, atol=1e-12)
-    assert np.allclose(u_cpu, u_gpu, rtol=0.0, atol=1e-14)     # the velocity the fused update wrote, extended
+    assert np.allclose(u_cpu, u_gpu, rtol=0.0, atol=1e-14)  # CPU: written by the f update; CUDA: its own pass
 
 
 @pytest.mark.parametrize("precision", ["float64", "float32"])
@@ -158,9 +158,9 @@ def test_fused_update_writes_the_velocity_of_the_velocity_pass(precision):
     """The fused f update that also writes u (``pooled_fused_launcher(velocity=True)``, what ``step`` runs) against
     the separate velocity pass on the populations it wrote, on a moving tilted surface in a pooled tank: u in every
     cell (0 in gas cells and in blocks without a row) the same, to round-off (the sums in the same order; LLVM
-    may reassociate them), and the same populations as the update without u, bit for bit (the CUDA cell form's u:
-    ``test_cuda_matches_cpu_on_a_tilted_surface``). A population left out of a sum, a flipped sign or the force's
-    half step with the wrong sign (+ F / 2) fails it."""
+    may reassociate them), and the same populations as the update without u, bit for bit (CUDA keeps the separate
+    pass; ``test_cuda_matches_cpu_on_a_tilted_surface`` compares the two). A population left out of a sum, a
+    flipped sign or the force's half step with the wrong sign (+ F / 2) fails it."""
     from iceresist.freesurface.fluid import surface_launchers
     from iceresist.freesurface.pool import pooled_fused_launcher
 

@@ -6,8 +6,8 @@ One time step (:meth:`FreeSurfaceFluid.step`):
    populations pulled from a GAS cell follow eq. (11) with the hydrostatic density of the
    link midpoint below the sub-cell phi = 1/2 surface (:mod:`iceresist.lbm.stream`,
    ``free_surface=True``); gas cells are skipped like solids;
-2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), written by the fused update of
-   step 1 as it writes the populations, extended into the gas layer by layer
+2. liquid velocity u = (sum c f* ) / rho - g / 2 (half-force shift), on the CPU written by the fused
+   update of step 1 as it writes the populations, extended into the gas layer by layer
    (:mod:`iceresist.freesurface.extension`);
 3. one step of the conservative Allen-Cahn LBM advected by that velocity (eqs. 4-10,
    :class:`~iceresist.freesurface.phasefield.PhaseField`);
@@ -420,8 +420,7 @@ class FreeSurfaceFluid:
 
     def _velocity(self):
         """The liquid's velocity from the populations (a pass of its own), then extended into the gas."""
-        g = self.real(self.g)
-        zero = self.real(0.0)
+        g, zero = self.real(self.g), self.real(0.0)
         self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
         self._extend()
 
@@ -441,9 +440,16 @@ class FreeSurfaceFluid:
         return self.real(self.g), self.real(0.5 * self.phase.width)
 
     def _stream_collide(self):
-        """Steps 1-2: the fused update of the liquid with the current phi (``POOL_U_ARGS``), which also writes the
-        liquid's velocity ``_u`` from the new populations; the buffers swap."""
-        self.fluid.step(1, self.phase.phi, self.real(0.5 * self.phase.width), u=self._u)
+        """Steps 1-2: the fused update of the liquid with the current phi, the buffers swapped, and the liquid's
+        velocity ``_u`` from the new populations: on the CPU written by the update itself (``POOL_U_ARGS``), on
+        CUDA by a pass of its own."""
+        half_width = self.real(0.5 * self.phase.width)
+        if self.target.is_cuda:
+            self.fluid.step(1, self.phase.phi, half_width)
+            g, zero = self.real(self.g), self.real(0.0)
+            self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
+        else:
+            self.fluid.step(1, self.phase.phi, half_width, u=self._u)
 
     def step(self, n: int = 1):
         """Advance ``n`` time steps (module docstring, steps 1-5)."""

@@ -47,13 +47,16 @@ def pooled_fused_launcher(target, precision: str, operator: str, velocity: bool 
     """The free-surface fused stream-collide with f indexed through ``fslot`` (args ``POOL_ARGS``);
     per cell on CUDA, per block on the CPU (:func:`~iceresist.lbm.stream.stream_collide_block_source`: an
     all-liquid block gathered line by line and collided across its 512 cells, which vectorises).
-    ``velocity``: the update also writes the velocity ``u`` of every cell (args ``POOL_U_ARGS``), which saves the
-    separate pass that reads the populations again."""
+    ``velocity`` (CPU only): the update also writes the velocity ``u`` of every cell (args ``POOL_U_ARGS``), which
+    saves the separate pass that reads the populations again. On CUDA the fused update has no registers to spare
+    for it (in float64 it spilled), so the velocity stays a pass of its own there."""
     real = jit.real_type(precision)
     collide = collide_builder(operator)(target, real)
     args = POOL_U_ARGS if velocity else POOL_ARGS
     if target.is_cuda:
-        fn = compile_source(pooled_source(stream_collide_source(free_surface=True, velocity=velocity)),
+        if velocity:
+            raise ValueError("the CUDA f update does not write the velocity (its own pass does)")
+        fn = compile_source(pooled_source(stream_collide_source(free_surface=True)),
                             "stream_collide_cell", _namespace(target, real, collide), cell_device(target))
         return CellLauncher(target, fn, args, label="f_update")
     key = kernel_key(target, f"f_update|{precision}|{operator}|velocity={bool(velocity)}",

@@ -71,7 +71,7 @@ def _offset_lines(cvec):
     return " + ".join(parts_key), " + ".join(parts_cell)
 
 
-def stream_collide_source(loop_cells: bool = False, free_surface: bool = False, velocity: bool = False) -> str:
+def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) -> str:
     """Python source of the fused per-cell update ``stream_collide_cell(b, c, ...)``.
 
     With ``loop_cells`` the same body is wrapped in a loop over the 512 cells of block
@@ -101,16 +101,11 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False, 
     (the odd terms of f^eq cancel); u is the cell's own velocity from its post-collision
     populations of the previous step, as at an outlet. A level surface at a cell face
     (s_mid = 0) gives back the paper's rule at rho0 = 1.
-
-    With ``velocity`` (free surface, one cell per call) the update also writes the cell's velocity ``u``
-    (:func:`velocity_lines`; 0 outside the liquid): the arguments are ``FS_ARGS`` and ``u``.
     """
-    if velocity and (loop_cells or not free_surface):
-        raise ValueError("velocity is written by the free-surface update of one cell per call only")
-    args = FS_ARGS + (("u",) if velocity else ()) if free_surface else ARGS
+    args = FS_ARGS if free_surface else ARGS
     s = "def stream_collide_cell(b, c, " + ", ".join(args) + "):\n"
     s += "    flag = flags[b, c]\n"
-    s += "    if (flag & FLUID) == 0:\n" + (_zero_velocity_lines("        ") if velocity else "") + "        return\n"
+    s += "    if (flag & FLUID) == 0:\n        return\n"
     s += "    ci = c + izero\n    lx = ci & 7\n    ly = (ci >> 3) & 7\n    lz = ci >> 6\n"
     s += "    f0 = src[b, 0, c]\n"
     # short path: all 26 sources are fluid cells of allocated blocks
@@ -174,8 +169,6 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False, 
         s += f"    out = collide(({', '.join(F_NAMES)}), omega, Fx, Fy, Fz)\n"
     for q in range(Q):
         s += f"    dst[b, {q}, c] = out[{q}]\n"
-    if velocity:
-        s += velocity_lines("    ")
     if loop_cells:
         body = s.split("\n", 1)[1].replace("        return\n", "        continue\n")
         body = "".join("    " + line + "\n" for line in body.splitlines())
@@ -184,7 +177,7 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False, 
     return s
 
 
-def velocity_lines(indent: str, pop: str = "out[{q}]") -> str:
+def velocity_lines(indent: str, pop: str) -> str:
     """Source writing ``u[b, :, c]`` = j / rho - F / 2 of the populations ``pop`` (f - w, post-collision), the sums
     in the order of the separate velocity pass (:func:`iceresist.freesurface.fluid.build_surface_cells`): rho = 1
     plus f_0 .. f_26, j_a = 0 plus or minus the f_q with c_qa = +-1, q rising; so the fields agree bit for bit

@@ -312,8 +312,14 @@ class ActiveLauncher(_GeneratedLauncher):
     name, fn_name = "launch_active", "visit"
     cpu_functions = (("block_loop", False), ("launch_active", True))
 
+    def __init__(self, target, visit, argnames, per_block: bool = False, label: str | None = None, **options):
+        """``per_block=True`` (CPU only): ``visit(b, *rest)`` updates the whole block b."""
+        if per_block and target.is_cuda:
+            raise ValueError("a per-block visit is a CPU form; CUDA visits one cell per thread")
+        super().__init__(target, visit, argnames, label=label, per_block=per_block, **options)
+
     @staticmethod
-    def _source(cuda: bool, argnames) -> str:
+    def _source(cuda: bool, argnames, per_block: bool = False) -> str:
         if argnames[0] != "active":
             raise ValueError(f"an active-block launcher takes 'active' first, not {argnames[0]!r}")
         rest = ", ".join(argnames[1:])
@@ -323,9 +329,9 @@ class ActiveLauncher(_GeneratedLauncher):
                     "    b = cuda.blockIdx.x\n"
                     "    if active[b] != 0:\n"
                     f"        visit(b, cuda.threadIdx.x, {rest})\n")
-        loop = (f"def block_loop(b, {rest}):\n"
+        loop = (f"def block_loop(b, {rest}):\n" + (f"    visit(b, {rest})\n" if per_block else
                 f"    for c in range({CUDA_BLOCK_CELLS}):\n"
-                f"        visit(b, c, {rest})\n")
+                f"        visit(b, c, {rest})\n"))
         return (f"{loop}\n\ndef launch_active(nactive, {sig}):\n"
                 "    for i in prange(nactive):\n"
                 f"        block_loop_jit(active[i], {rest})\n")

@@ -64,7 +64,7 @@ from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumu
 from iceresist.coupling.bodystate import build_reach_mask
 from iceresist.coupling.cellfunctions import (MIRROR_DEPTH, build_geometry_functions, build_link_root,
                                               build_refill_functions)
-from iceresist.coupling.surface_kernels import build_mirror, build_surface_visits
+from iceresist.coupling.surface_kernels import build_mirror, build_redistribute_block, build_surface_visits
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
@@ -422,7 +422,12 @@ def coupling_launchers(target, real, h_lattice=None):
         else:
             refill_fs, redist_fs = build_surface_visits(target, real, h_lattice)
             launchers["refill"] = ActiveLauncher(target, refill_fs, REFILL_FS_ARGS, label="refill_fs", cache_key=k)
-            launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS, label="redistribute_fs",
-                                                       cache_key=k)
+            if target.is_cuda:
+                launchers["redistribute"] = ActiveLauncher(target, redist_fs, REDIST_FS_ARGS,
+                                                           label="redistribute_fs")
+            else:       # the block form: only the cells next to an event visited
+                launchers["redistribute"] = ActiveLauncher(target, build_redistribute_block(real, h_lattice),
+                                                           REDIST_FS_ARGS, per_block=True, label="redistribute_fs",
+                                                           cache_key=k)
         _CACHE[key] = launchers
     return _CACHE[key]

@@ -225,6 +225,49 @@ def test_runs_partition_the_cell_box_of_a_body(runs):
     assert (bint[full, 10] < plane).all()
 
 
+def test_mark_run_form_gives_the_owners_of_the_cell_form():
+    """The CPU run form of ``mark`` (the sign of the next floor(|d| - 0.01) cells of a line taken from a cell at
+    distance |d|) against the per-cell visit: a sphere, a rotated box, a rotated convex polyhedron, a union of
+    three convex pieces (evaluated at every cell), a sphere across the periodic x boundary and a box longer than
+    half the periodic length (evaluated at every cell) in a periodic 48 x 32 x 32 box, launched whole and in runs
+    of 200 cells: the same owner in every cell. Skipping one cell too many (floor(|d| + 1)) fails it."""
+    from iceresist.backends.launch import BodyLauncher
+    from iceresist.coupling.geometry import ConvexUnion
+    from iceresist.coupling.kernels import MARK_ARGS, build_visits
+    from iceresist.dem import convex_polyhedron
+
+    octahedron = np.array([[6.0, 0, 0], [-6, 0, 0], [0, 5, 0], [0, -5, 0], [0, 0, 4], [0, 0, -4.5]])
+    a = np.array([[x, y, z] for x in (-8.0, 0.0) for y in (-3.0, 3.0) for z in (-2.0, 2.0)])
+    b = np.array([[x, y, z] for x in (0.0, 6.0) for y in (-3.0, 3.0) for z in (-2.0, 7.0)])
+    w = np.array([[6.0, -3, -2], [6, 3, -2], [6, -3, 2], [6, 3, 2], [11, 0, -2], [11, 0, 2]])
+    q1 = np.array([0.9, 0.2, -0.3, 0.25])
+    q2 = np.array([0.8, -0.1, 0.4, 0.3])
+    oct_shape = convex_polyhedron(octahedron, 900.0, 1.0)
+    union_shape = convex_polyhedron(np.vstack([a, b, w]), 900.0, 1.0)
+    bodies = [(Sphere(5.3), sphere(5.3, 900.0), (10.2, 8.3, 9.1), None),
+              (Box((9.0, 6.4, 4.2)), box((9.0, 6.4, 4.2), 900.0), (30.4, 10.2, 20.3), q1),
+              (ConvexPolyhedron.of_shape(octahedron, oct_shape), oct_shape, (20.3, 21.7, 12.2), q2),
+              (ConvexUnion.of_shape([a, b, w], 1.0, union_shape), union_shape, (34.1, 22.6, 12.4), q1),
+              (Sphere(4.0), sphere(4.0, 900.0), (0.7, 20.2, 22.3), None),
+              (Box((30.0, 3.0, 3.0)), box((30.0, 3.0, 3.0), 900.0), (24.2, 26.3, 27.1), None)]
+    for tile in (10 ** 6, 200):
+        solver = LBMSolver(BlockForest.uniform((48, 32, 32)), tau=0.6, operator="bgk", precision="float64")
+        solver.initialize()
+        dem = DEMSystem(gravity_m_s2=(0, 0, 0))
+        for _, shape, pos, q in bodies:
+            dem.add_body(shape, position_m=pos, orientation=q, kinematic=True)
+        cp = FluidStructureCoupling(solver, dem, [g for g, *_ in bodies], UNITS)
+        cp.tile_cells = tile
+        cp.update_boundaries()
+        d = cp._d
+        per_cell = BodyLauncher(jit.cpu, build_visits(jit.cpu, cp.real)[0], MARK_ARGS, label="mark_cells")
+        owner = np.full_like(d["owner"], -1)
+        per_cell(len(cp._rows), d["bint"], d["body"], d["planes"], d["grid"], d["block_map"], d["flags0"], owner)
+        assert np.array_equal(owner, d["owner"])
+        owners = cp.owners()
+        assert all((owners == i).sum() > 40 for i in range(len(bodies)))
+
+
 def _two_moving_boxes(target, tile_cells, steps, recount=False):
     """A small and a larger box moving (and the larger one spinning) in different directions through a periodic
     32 x 16 x 16 channel, launched with ``tile_cells`` per row; ``recount``: count the slabs anew every step."""

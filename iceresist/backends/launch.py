@@ -271,9 +271,18 @@ class BodyLauncher(_GeneratedLauncher):
     threads = BODY_THREADS
     cpu_functions = (("body_loop", False), ("launch_bodies", True))
 
+    def __init__(self, target, visit, argnames, per_row: bool = False, label: str | None = None, **options):
+        """``per_row=True`` (CPU only): ``visit(k, *args)`` walks the run of row k itself."""
+        if per_row and target.is_cuda:
+            raise ValueError("a per-row visit is a CPU form; CUDA visits one cell per thread")
+        super().__init__(target, visit, argnames, label=label, per_row=per_row, **options)
+
     @staticmethod
-    def _source(cuda: bool, argnames) -> str:
+    def _source(cuda: bool, argnames, per_row: bool = False) -> str:
         sig = ", ".join(argnames)
+        if per_row:
+            return (f"def body_loop(k, {sig}):\n    visit(k, {sig})\n\n\ndef launch_bodies(nbodies, {sig}):\n"
+                    f"    for k in prange(nbodies):\n        body_loop_jit(k, {sig})\n")
         if cuda:
             return (f"def launch_bodies({sig}):\n"
                     "    k = cuda.blockIdx.x\n"

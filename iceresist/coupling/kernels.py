@@ -59,11 +59,12 @@ import math
 
 import numpy as np
 
-from iceresist.backends import cache
+from iceresist.backends import cache, jit
 from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumulate
 from iceresist.coupling.bodystate import build_reach_mask
 from iceresist.coupling.cellfunctions import (MIRROR_DEPTH, build_geometry_functions, build_link_root,
                                               build_refill_functions)
+from iceresist.coupling.geometry import CONVEX
 from iceresist.coupling.surface_kernels import build_mirror, build_redistribute_block, build_surface_visits
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
@@ -89,6 +90,79 @@ LINK_FS_ARGS = LINK_ARGS + ("phi",)
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
 FILM_DEPTH = 2.0
+
+
+#: Margin (lattice units) below |signed distance| within which the mark's run form still evaluates the next cells.
+MARK_MARGIN = 0.01
+
+
+def build_mark_run(real):
+    """The CPU run form of ``mark`` (:func:`build_visits`), ``mark_run(k, bint, body, planes, grid, block_map, flags0,
+    owner)``: the cells of row k's run in the order of the per-cell launcher, the same owners. Where the shape's
+    signed distance is never larger than the distance to its surface (a sphere, a box, one convex polyhedron, on
+    a row that crosses no periodic image boundary), a cell at distance |d| tells the sign of the next
+    floor(|d| - ``MARK_MARGIN``) cells of its line along x (the distance changes by at most one per cell), which
+    are then taken without evaluating it: a hull's box holds mostly cells far from its surface."""
+    lookup, sdf_at, _ = build_geometry_functions(jit.cpu, real)
+    half, zero, margin = real(0.5), real(0.0), real(MARK_MARGIN)
+    fluid, convex = FL.FLUID, CONVEX
+
+    @jit.cpu.device
+    def lipschitz(k, bint, body, planes, grid):
+        """Whether a cell's |signed distance| bounds its distance to body k's surface along the lines of row k."""
+        if bint[k, 0] == convex:
+            first = bint[k, 1]
+            for i in range(first, first + bint[k, 2]):
+                nn = planes[i, 0] * planes[i, 0] + planes[i, 1] * planes[i, 1] + planes[i, 2] * planes[i, 2]
+                if nn == zero or nn > real(1.5):     # a separator or a shared cap: a union of pieces
+                    return False
+        if grid[3] != 0:        # periodic along x: the nearest image must not change along a line
+            lim = real(0.5) * real(grid[0]) - real(1.0)
+            if abs(real(bint[k, 3]) + half - body[k, 0]) >= lim or abs(real(bint[k, 6]) + half - body[k, 0]) >= lim:
+                return False
+        return True
+
+    def mark_run(k, bint, body, planes, grid, block_map, flags0, owner):
+        lx = bint[k, 3]
+        ly = bint[k, 4]
+        hx = bint[k, 6]
+        hy = bint[k, 7]
+        nx = hx - lx + 1
+        ny = hy - ly + 1
+        s = bint[k, 10]
+        e = bint[k, 11]
+        if e <= s:
+            return
+        skip = lipschitz(k, bint, body, planes, grid)
+        gx = lx + s % nx
+        gy = ly + (s // nx) % ny
+        gz = bint[k, 5] + s // (nx * ny)
+        known = 0               # cells ahead on this line whose sign is that of the last evaluated one
+        inside = False
+        for _ in range(e - s):
+            if known > 0:
+                known -= 1
+            else:
+                d = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
+                inside = d < zero
+                if skip:
+                    a = abs(d) - margin
+                    known = int(a) if a > zero else 0
+            if inside:
+                b, c = lookup(gx, gy, gz, grid, block_map)
+                if b >= 0:
+                    if flags0[b, c] & fluid:
+                        owner[b, c] = k
+            gx += 1
+            if gx > hx:
+                gx = lx
+                known = 0
+                gy += 1
+                if gy > hy:
+                    gy = ly
+                    gz += 1
+
+    return jit.cpu.device(mark_run)
 
 
 def build_visits(target, real, free_surface: bool = False):
@@ -411,7 +485,8 @@ def coupling_launchers(target, real, h_lattice=None):
         k = None if target.is_cuda else cache.fingerprint(variant_of(real, h_lattice, fs), KEY_MODULES)
         mark, links, refill, redist, poison = build_visits(target, real, free_surface=fs)
         launchers = {
-            "mark": BodyLauncher(target, mark, MARK_ARGS, label="mark", cache_key=k),
+            "mark": (BodyLauncher(target, mark, MARK_ARGS, label="mark") if target.is_cuda else
+                     BodyLauncher(target, build_mark_run(real), MARK_ARGS, per_row=True, label="mark", cache_key=k)),
             "links": BodyLauncher(target, links, LINK_FS_ARGS if fs else LINK_ARGS, label="links", cache_key=k),
             "poison": ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k),
         }

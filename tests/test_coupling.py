@@ -225,15 +225,17 @@ def test_runs_partition_the_cell_box_of_a_body(runs):
     assert (bint[full, 10] < plane).all()
 
 
-def test_mark_run_form_gives_the_owners_of_the_cell_form():
-    """The CPU run form of ``mark`` (the sign of the next floor(|d| - 0.01) cells of a line taken from a cell at
-    distance |d|) against the per-cell visit: a sphere, a rotated box, a rotated convex polyhedron, a union of
-    three convex pieces (evaluated at every cell), a sphere across the periodic x boundary and a box longer than
-    half the periodic length (evaluated at every cell) in a periodic 48 x 32 x 32 box, launched whole and in runs
-    of 200 cells: the same owner in every cell. Skipping one cell too many (floor(|d| + 1)) fails it."""
+def test_mark_and_link_run_forms_give_the_results_of_the_cell_forms():
+    """The CPU run forms of ``mark`` (the sign of the next floor(|d| - 0.01) cells of a line taken from a cell at
+    distance |d|) and of the link pass (cells far outside or deeper than 2 inside passed over) against the per-cell
+    visits: a sphere, a rotated box, a rotated convex polyhedron, a union of three convex pieces (evaluated at every
+    cell), a sphere across the periodic x boundary and a box longer than half the periodic length (evaluated at
+    every cell), moving and spinning in a periodic 48 x 32 x 32 box with a stream, launched whole and in runs of
+    200 cells: the same owner in every cell, the same populations written, links, forces and torques. Skipping one
+    cell too many (floor(|d| + 1)) in either fails it."""
     from iceresist.backends.launch import BodyLauncher
     from iceresist.coupling.geometry import ConvexUnion
-    from iceresist.coupling.kernels import MARK_ARGS, build_visits
+    from iceresist.coupling.kernels import LINK_ARGS, MARK_ARGS, build_visits
     from iceresist.dem import convex_polyhedron
 
     octahedron = np.array([[6.0, 0, 0], [-6, 0, 0], [0, 5, 0], [0, -5, 0], [0, 0, 4], [0, 0, -4.5]])
@@ -250,22 +252,36 @@ def test_mark_run_form_gives_the_owners_of_the_cell_form():
               (ConvexUnion.of_shape([a, b, w], 1.0, union_shape), union_shape, (34.1, 22.6, 12.4), q1),
               (Sphere(4.0), sphere(4.0, 900.0), (0.7, 20.2, 22.3), None),
               (Box((30.0, 3.0, 3.0)), box((30.0, 3.0, 3.0), 900.0), (24.2, 26.3, 27.1), None)]
+    rng = np.random.default_rng(3)
     for tile in (10 ** 6, 200):
         solver = LBMSolver(BlockForest.uniform((48, 32, 32)), tau=0.6, operator="bgk", precision="float64")
-        solver.initialize()
+        solver.initialize(u=(0.02, -0.01, 0.005))
         dem = DEMSystem(gravity_m_s2=(0, 0, 0))
         for _, shape, pos, q in bodies:
-            dem.add_body(shape, position_m=pos, orientation=q, kinematic=True)
+            dem.add_body(shape, position_m=pos, orientation=q, velocity_m_s=tuple(rng.uniform(-0.02, 0.02, 3)),
+                         angular_velocity_rad_s=tuple(rng.uniform(-0.005, 0.005, 3)), kinematic=True)
         cp = FluidStructureCoupling(solver, dem, [g for g, *_ in bodies], UNITS)
         cp.tile_cells = tile
+        cp.step(3)
         cp.update_boundaries()
-        d = cp._d
-        per_cell = BodyLauncher(jit.cpu, build_visits(jit.cpu, cp.real)[0], MARK_ARGS, label="mark_cells")
+        d, rows = cp._d, len(cp._rows)
+        mark, links = build_visits(jit.cpu, cp.real)[:2]
         owner = np.full_like(d["owner"], -1)
-        per_cell(len(cp._rows), d["bint"], d["body"], d["planes"], d["grid"], d["block_map"], d["flags0"], owner)
+        BodyLauncher(jit.cpu, mark, MARK_ARGS, label="mark_cells")(
+            rows, d["bint"], d["body"], d["planes"], d["grid"], d["block_map"], d["flags0"], owner)
         assert np.array_equal(owner, d["owner"])
         owners = cp.owners()
         assert all((owners == i).sum() > 40 for i in range(len(bodies)))
+        out = []
+        for launch in (cp._k["links"], BodyLauncher(jit.cpu, links, LINK_ARGS, label="links_cells")):
+            f = np.array(solver.state)
+            sums = [np.zeros_like(d[n]) for n in ("bforce", "btorque", "nlinks")]
+            launch(rows, d["bint"], d["body"], d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
+                   *sums, solver.flags, d["film"], np.int64(cp.nowned))
+            out.append((f, *sums))
+        assert out[0][3].sum() > 1000                           # links counted
+        for a, b in zip(out[0], out[1]):
+            assert np.array_equal(a, b)
 
 
 def _two_moving_boxes(target, tile_cells, steps, recount=False):

@@ -69,6 +69,7 @@ from iceresist.coupling.surface_kernels import build_mirror, build_redistribute_
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
+from iceresist.lbm.codegen import compile_source
 
 #: Regula-falsi (Illinois) iterations for the link distance where its closed form finds no entry (round-off at a
 #: cell centre on the surface); exact after one for planar faces.
@@ -96,20 +97,16 @@ FILM_DEPTH = 2.0
 MARK_MARGIN = 0.01
 
 
-def build_mark_run(real):
-    """The CPU run form of ``mark`` (:func:`build_visits`), ``mark_run(k, bint, body, planes, grid, block_map, flags0,
-    owner)``: the cells of row k's run in the order of the per-cell launcher, the same owners. Where the shape's
-    signed distance is never larger than the distance to its surface (a sphere, a box, one convex polyhedron, on
-    a row that crosses no periodic image boundary), a cell at distance |d| tells the sign of the next
-    floor(|d| - ``MARK_MARGIN``) cells of its line along x (the distance changes by at most one per cell), which
-    are then taken without evaluating it: a hull's box holds mostly cells far from its surface."""
-    lookup, sdf_at, _ = build_geometry_functions(jit.cpu, real)
-    half, zero, margin = real(0.5), real(0.0), real(MARK_MARGIN)
-    fluid, convex = FL.FLUID, CONVEX
+def build_lipschitz(real):
+    """``lipschitz(k, bint, body, planes, grid)``: whether body k's signed distance at a cell centre is never larger
+    in size than the cell's distance to its surface (a sphere, a box, one convex polyhedron; not a union of pieces,
+    whose distance inside reads the nearest piece's sides) and the nearest periodic image does not change along the
+    lines of row k's box. Then the distance changes by at most one per cell along a line."""
+    half, zero = real(0.5), real(0.0)
+    convex = CONVEX
 
     @jit.cpu.device
     def lipschitz(k, bint, body, planes, grid):
-        """Whether a cell's |signed distance| bounds its distance to body k's surface along the lines of row k."""
         if bint[k, 0] == convex:
             first = bint[k, 1]
             for i in range(first, first + bint[k, 2]):
@@ -121,6 +118,20 @@ def build_mark_run(real):
             if abs(real(bint[k, 3]) + half - body[k, 0]) >= lim or abs(real(bint[k, 6]) + half - body[k, 0]) >= lim:
                 return False
         return True
+
+    return lipschitz
+
+
+def build_mark_run(real):
+    """The CPU run form of ``mark`` (:func:`build_visits`), ``mark_run(k, bint, body, planes, grid, block_map, flags0,
+    owner)``: the cells of row k's run in the order of the per-cell launcher, the same owners. Where
+    :func:`build_lipschitz` allows, a cell at signed distance d tells the sign of the next floor(|d| -
+    ``MARK_MARGIN``) cells of its line along x, which are then taken without evaluating it: a hull's box holds
+    mostly cells far from its surface."""
+    lookup, sdf_at, _ = build_geometry_functions(jit.cpu, real)
+    lipschitz = build_lipschitz(real)
+    half, zero, margin = real(0.5), real(0.0), real(MARK_MARGIN)
+    fluid = FL.FLUID
 
     def mark_run(k, bint, body, planes, grid, block_map, flags0, owner):
         lx = bint[k, 3]
@@ -163,6 +174,57 @@ def build_mark_run(real):
                     gz += 1
 
     return jit.cpu.device(mark_run)
+
+
+def build_link_run(real, visit, argnames):
+    """The CPU run form of a link visit (``links`` or ``links_fs`` of :func:`build_visits`, arguments ``argnames``
+    after the cell): row k's run in the order of the per-cell launcher, the visit called where it can act. It acts
+    only on cells that row k covers (signed distance < 0) within ``FILM_DEPTH`` (links) or ``MIRROR_DEPTH`` (the
+    mirror) of the surface; where :func:`build_lipschitz` allows, a visited cell at signed distance d > 0 passes
+    over the next floor(d - ``MARK_MARGIN``) cells of its line, at d < -D (D the larger depth) the next
+    floor(-d - D - ``MARK_MARGIN``). The same forces, links and mirrored phi, without walking the cells deep inside
+    a hull or far outside it in its box."""
+    _, sdf_at, _ = build_geometry_functions(jit.cpu, real)
+    sig = ", ".join(argnames)
+    src = f"""def link_run(k, {sig}):
+    lx = bint[k, 3]
+    ly = bint[k, 4]
+    hx = bint[k, 6]
+    hy = bint[k, 7]
+    nx = hx - lx + 1
+    ny = hy - ly + 1
+    s = bint[k, 10]
+    e = bint[k, 11]
+    if e <= s:
+        return
+    skip = lipschitz(k, bint, body, planes, grid)
+    gx = lx + s % nx
+    gy = ly + (s // nx) % ny
+    gz = bint[k, 5] + s // (nx * ny)
+    known = 0
+    for _ in range(e - s):
+        if known > 0:
+            known -= 1
+        else:
+            visit(k, gx, gy, gz, {sig})
+            if skip:
+                d = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
+                if d > margin:
+                    known = int(d - margin)
+                elif d < -depth - margin:
+                    known = int(-d - depth - margin)
+        gx += 1
+        if gx > hx:
+            gx = lx
+            known = 0
+            gy += 1
+            if gy > hy:
+                gy = ly
+                gz += 1
+"""
+    ns = {"lipschitz": build_lipschitz(real), "sdf_at": sdf_at, "visit": visit, "real": real, "half": real(0.5),
+          "margin": real(MARK_MARGIN), "depth": real(max(FILM_DEPTH, MIRROR_DEPTH))}
+    return compile_source(src, "link_run", ns, jit.cpu.device)
 
 
 def build_visits(target, real, free_surface: bool = False):
@@ -487,7 +549,10 @@ def coupling_launchers(target, real, h_lattice=None):
         launchers = {
             "mark": (BodyLauncher(target, mark, MARK_ARGS, label="mark") if target.is_cuda else
                      BodyLauncher(target, build_mark_run(real), MARK_ARGS, per_row=True, label="mark", cache_key=k)),
-            "links": BodyLauncher(target, links, LINK_FS_ARGS if fs else LINK_ARGS, label="links", cache_key=k),
+            "links": (BodyLauncher(target, links, LINK_FS_ARGS if fs else LINK_ARGS, label="links")
+                      if target.is_cuda else
+                      BodyLauncher(target, build_link_run(real, links, LINK_FS_ARGS if fs else LINK_ARGS),
+                                   LINK_FS_ARGS if fs else LINK_ARGS, per_row=True, label="links", cache_key=k)),
             "poison": ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k),
         }
         if not fs:

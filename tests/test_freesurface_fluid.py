@@ -127,6 +127,18 @@ def test_cuda_matches_cpu_on_a_tilted_surface(walls):
     assert np.allclose(u_cpu, u_gpu, rtol=0.0, atol=1e-14)  # CPU: written by the f update; CUDA: its own pass
 
 
+def _moving_tilted_tank(precision):
+    """A pooled 16 x 8 x 32 walled tank (blocks with and without population rows), its surface tilted by 1.5 cells
+    across x, moving; three steps from the start."""
+    fo = BlockForest.uniform((16, 8, 32), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
+    x = np.arange(16) + 0.5
+    surface = np.broadcast_to((DEPTH + 1.5 * (x - 8.0) / 8.0)[:, None], (16, 8))
+    fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=1e-3, depth_cells=DEPTH, operator="bgk", precision=precision)
+    fs.initialize(surface=surface, u=(0.01, -0.005, 0.02))
+    fs.step(3)
+    return fs
+
+
 @pytest.mark.parametrize("precision", ["float64", "float32"])
 def test_velocity_block_form_equals_the_cell_form_bit_for_bit(precision):
     """The CPU block form of the velocity pass (sums across the cells of a block) against the per-cell form on a
@@ -134,12 +146,7 @@ def test_velocity_block_form_equals_the_cell_form_bit_for_bit(precision):
     population left out of one sum or a sign flipped would fail it."""
     from iceresist.freesurface.fluid import surface_launchers
 
-    fo = BlockForest.uniform((16, 8, 32), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
-    x = np.arange(16) + 0.5
-    surface = np.broadcast_to((DEPTH + 1.5 * (x - 8.0) / 8.0)[:, None], (16, 8))
-    fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=1e-3, depth_cells=DEPTH, operator="bgk", precision=precision)
-    fs.initialize(surface=surface, u=(0.01, -0.005, 0.02))
-    fs.step(3)
+    fs = _moving_tilted_tank(precision)
     fslot = np.asarray(fs.fluid.fslot)
     assert (fslot < 0).any() and (fslot >= 0).any()         # blocks without a population row, and with one
     us = []
@@ -164,12 +171,7 @@ def test_fused_update_writes_the_velocity_of_the_velocity_pass(precision):
     from iceresist.freesurface.fluid import surface_launchers
     from iceresist.freesurface.pool import pooled_fused_launcher
 
-    fo = BlockForest.uniform((16, 8, 32), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
-    x = np.arange(16) + 0.5
-    surface = np.broadcast_to((DEPTH + 1.5 * (x - 8.0) / 8.0)[:, None], (16, 8))
-    fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=1e-3, depth_cells=DEPTH, operator="bgk", precision=precision)
-    fs.initialize(surface=surface, u=(0.01, -0.005, 0.02))
-    fs.step(3)
+    fs = _moving_tilted_tank(precision)
     pool, t = fs.fluid, fs.fluid._tables
     src = pool.state
     args = (t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"], t["bc_rho"], *pool._scalars,

@@ -122,71 +122,12 @@ def build_lipschitz(real):
     return lipschitz
 
 
-def build_mark_run(real):
-    """The CPU run form of ``mark`` (:func:`build_visits`), ``mark_run(k, bint, body, planes, grid, block_map, flags0,
-    owner)``: the cells of row k's run in the order of the per-cell launcher, the same owners. Where
-    :func:`build_lipschitz` allows, a cell at signed distance d tells the sign of the next floor(|d| -
-    ``MARK_MARGIN``) cells of its line along x, which are then taken without evaluating it: a hull's box holds
-    mostly cells far from its surface."""
-    lookup, sdf_at, _ = build_geometry_functions(jit.cpu, real)
-    lipschitz = build_lipschitz(real)
-    half, zero, margin = real(0.5), real(0.0), real(MARK_MARGIN)
-    fluid = FL.FLUID
-
-    def mark_run(k, bint, body, planes, grid, block_map, flags0, owner):
-        lx = bint[k, 3]
-        ly = bint[k, 4]
-        hx = bint[k, 6]
-        hy = bint[k, 7]
-        nx = hx - lx + 1
-        ny = hy - ly + 1
-        s = bint[k, 10]
-        e = bint[k, 11]
-        if e <= s:
-            return
-        skip = lipschitz(k, bint, body, planes, grid)
-        gx = lx + s % nx
-        gy = ly + (s // nx) % ny
-        gz = bint[k, 5] + s // (nx * ny)
-        known = 0               # cells ahead on this line whose sign is that of the last evaluated one
-        inside = False
-        for _ in range(e - s):
-            if known > 0:
-                known -= 1
-            else:
-                d = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
-                inside = d < zero
-                if skip:
-                    a = abs(d) - margin
-                    known = int(a) if a > zero else 0
-            if inside:
-                b, c = lookup(gx, gy, gz, grid, block_map)
-                if b >= 0:
-                    if flags0[b, c] & fluid:
-                        owner[b, c] = k
-            gx += 1
-            if gx > hx:
-                gx = lx
-                known = 0
-                gy += 1
-                if gy > hy:
-                    gy = ly
-                    gz += 1
-
-    return jit.cpu.device(mark_run)
-
-
-def build_link_run(real, visit, argnames):
-    """The CPU run form of a link visit (``links`` or ``links_fs`` of :func:`build_visits`, arguments ``argnames``
-    after the cell): row k's run in the order of the per-cell launcher, the visit called where it can act. It acts
-    only on cells that row k covers (signed distance < 0) within ``FILM_DEPTH`` (links) or ``MIRROR_DEPTH`` (the
-    mirror) of the surface; where :func:`build_lipschitz` allows, a visited cell at signed distance d > 0 passes
-    over the next floor(d - ``MARK_MARGIN``) cells of its line, at d < -D (D the larger depth) the next
-    floor(-d - D - ``MARK_MARGIN``). The same forces, links and mirrored phi, without walking the cells deep inside
-    a hull or far outside it in its box."""
-    _, sdf_at, _ = build_geometry_functions(jit.cpu, real)
-    sig = ", ".join(argnames)
-    src = f"""def link_run(k, {sig}):
+def _run_source(name: str, sig: str, cell: str) -> str:
+    """Source of ``name(k, {sig})`` walking the run of row k's cell box (``bint[k, 10:12]``, x fastest, the order of
+    the per-cell launcher) with ``cell`` (indented 8) at each cell (gx, gy, gz); ``known`` counts the cells ahead
+    on the current line whose signed distance the last evaluated one decided (0 at each new line), ``skip`` says
+    whether :func:`build_lipschitz` allows that."""
+    return f"""def {name}(k, {sig}):
     lx = bint[k, 3]
     ly = bint[k, 4]
     hx = bint[k, 6]
@@ -202,8 +143,60 @@ def build_link_run(real, visit, argnames):
     gy = ly + (s // nx) % ny
     gz = bint[k, 5] + s // (nx * ny)
     known = 0
+    inside = False
     for _ in range(e - s):
-        if known > 0:
+{cell}        gx += 1
+        if gx > hx:
+            gx = lx
+            known = 0
+            gy += 1
+            if gy > hy:
+                gy = ly
+                gz += 1
+"""
+
+
+def _run_namespace(real) -> dict:
+    _, sdf_at, _ = build_geometry_functions(jit.cpu, real)
+    return {"lipschitz": build_lipschitz(real), "sdf_at": sdf_at, "real": real, "half": real(0.5),
+            "zero": real(0.0), "margin": real(MARK_MARGIN)}
+
+
+def build_mark_run(real):
+    """The CPU run form of ``mark`` (:func:`build_visits`), ``mark_run(k, bint, body, planes, grid, block_map, flags0,
+    owner)``: the cells of row k's run in the order of the per-cell launcher, the same owners. Where
+    :func:`build_lipschitz` allows, a cell at signed distance d tells the sign of the next floor(|d| -
+    ``MARK_MARGIN``) cells of its line along x, which are then taken without evaluating it: a hull's box holds
+    mostly cells far from its surface."""
+    cell = """        if known > 0:
+            known -= 1
+        else:
+            d = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
+            inside = d < zero
+            if skip:
+                a = abs(d) - margin
+                known = int(a) if a > zero else 0
+        if inside:
+            b, c = lookup(gx, gy, gz, grid, block_map)
+            if b >= 0:
+                if flags0[b, c] & FLUID:
+                    owner[b, c] = k
+"""
+    lookup = build_geometry_functions(jit.cpu, real)[0]
+    ns = {**_run_namespace(real), "lookup": lookup, "FLUID": FL.FLUID}
+    return compile_source(_run_source("mark_run", ", ".join(MARK_ARGS), cell), "mark_run", ns, jit.cpu.device)
+
+
+def build_link_run(real, visit, argnames):
+    """The CPU run form of a link visit (``links`` or ``links_fs`` of :func:`build_visits`, arguments ``argnames``
+    after the cell): row k's run in the order of the per-cell launcher, the visit called where it can act. It acts
+    only on cells that row k covers (signed distance < 0) within ``FILM_DEPTH`` (links) or ``MIRROR_DEPTH`` (the
+    mirror) of the surface; where :func:`build_lipschitz` allows, a visited cell at signed distance d > 0 passes
+    over the next floor(d - ``MARK_MARGIN``) cells of its line, at d < -D (D the larger depth) the next
+    floor(-d - D - ``MARK_MARGIN``). The same forces, links and mirrored phi, without walking the cells deep inside
+    a hull or far outside it in its box."""
+    sig = ", ".join(argnames)
+    cell = f"""        if known > 0:
             known -= 1
         else:
             visit(k, gx, gy, gz, {sig})
@@ -213,18 +206,9 @@ def build_link_run(real, visit, argnames):
                     known = int(d - margin)
                 elif d < -depth - margin:
                     known = int(-d - depth - margin)
-        gx += 1
-        if gx > hx:
-            gx = lx
-            known = 0
-            gy += 1
-            if gy > hy:
-                gy = ly
-                gz += 1
 """
-    ns = {"lipschitz": build_lipschitz(real), "sdf_at": sdf_at, "visit": visit, "real": real, "half": real(0.5),
-          "margin": real(MARK_MARGIN), "depth": real(max(FILM_DEPTH, MIRROR_DEPTH))}
-    return compile_source(src, "link_run", ns, jit.cpu.device)
+    ns = {**_run_namespace(real), "visit": visit, "depth": real(max(FILM_DEPTH, MIRROR_DEPTH))}
+    return compile_source(_run_source("link_run", sig, cell), "link_run", ns, jit.cpu.device)
 
 
 def build_visits(target, real, free_surface: bool = False):

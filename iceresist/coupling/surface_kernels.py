@@ -36,6 +36,7 @@ import numpy as np
 from iceresist.backends import jit
 from iceresist.coupling.bodystate import build_reach_mask
 from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions
+from iceresist.freesurface.layout import HALO1_SIDE, build_halo_or
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
 from iceresist.lbm.boundary import GHOST
@@ -200,8 +201,8 @@ def build_redistribute_block(real, hlat):
     _, redistribute_fs = build_surface_visits(jit.cpu, real, hlat)
     fluid = FL.FLUID
     int8 = np.int8
-    side = 10
-    off = np.array([int(C[q, 0]) + side * (int(C[q, 1]) + side * int(C[q, 2])) for q in range(Q)], np.int64)
+    side = HALO1_SIDE
+    halo_or = build_halo_or()
 
     def redistribute_fs_block(b, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h):
         b = np.int64(b)
@@ -224,15 +225,8 @@ def build_redistribute_block(real, hlat):
                     for x in range(n):
                         if (flags0[yb, yc + x] & fluid) != 0 and (owner[yb, yc + x] >= 0) != (owner_prev[yb, yc + x] >= 0):
                             ev[row + 1 + x0 + x] = int8(1)
-        nm = np.zeros(512, int8)
-        for q in range(1, Q):
-            o = off[q]
-            for z in range(8):
-                for y in range(8):
-                    i0 = 1 + side * ((y + 1) + side * (z + 1)) + o
-                    c0 = 8 * (y + 8 * z)
-                    for x in range(8):
-                        nm[c0 + x] |= ev[i0 + x]
+        nm = np.empty(512, int8)
+        halo_or(ev, nm)
         for c in range(512):
             if nm[c]:
                 redistribute_fs(b, c, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h)

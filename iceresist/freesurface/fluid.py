@@ -37,7 +37,7 @@ from iceresist.backends.launch import BlockLauncher, CellLauncher, copy_into
 from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
-from iceresist.freesurface.layout import HAS_GAS, HAS_LIQUID, build_neighbour
+from iceresist.freesurface.layout import HALO1_SIDE, HAS_GAS, HAS_LIQUID, build_halo_or, build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
 from iceresist.grid import flags as FL
@@ -252,8 +252,8 @@ def build_reflag_block(real, turn_liquid):
                                        np.uint8(FL.GHOST))
     int64, int8 = np.int64, np.int8
     has_gas = np.int8(HAS_GAS)
-    side = 10
-    off = np.array([int(L.C[q, 0]) + side * (int(L.C[q, 1]) + side * int(L.C[q, 2])) for q in range(27)], np.int64)
+    side = HALO1_SIDE
+    halo_or = build_halo_or()
 
     def reflag_block(b, phi, base, flags, f, fslot, u, nbr, g, half_width, near):
         b = int64(b)
@@ -286,15 +286,8 @@ def build_reflag_block(real, turn_liquid):
                     else:
                         for x in range(n):
                             gm[row + x0 + x] = int8(0)
-        nm = np.zeros(CELLS, int8)
-        for q in range(1, 27):
-            o = off[q]
-            for z in range(8):
-                for y in range(8):
-                    i0 = 1 + side * ((y + 1) + side * (z + 1)) + o
-                    c0 = 8 * (y + 8 * z)
-                    for x in range(8):
-                        nm[c0 + x] |= gm[i0 + x]
+        nm = np.empty(CELLS, int8)
+        halo_or(gm, nm)
         for c in range(CELLS):
             fl = flags[b, c]
             if fl & ghost:

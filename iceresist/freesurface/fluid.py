@@ -412,10 +412,14 @@ class FreeSurfaceFluid:
         self.iteration = 0
 
     def _velocity(self):
-        """The liquid's velocity from the populations (a pass of its own), then extended into the gas."""
+        """The liquid's velocity from the populations, then extended into the gas."""
+        self._velocity_pass()
+        self._extend()
+
+    def _velocity_pass(self):
+        """The liquid's velocity ``_u`` from the populations by a pass of its own (0 outside the liquid)."""
         g, zero = self.real(self.g), self.real(0.0)
         self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
-        self._extend()
 
     def _extend(self):
         """The liquid's velocity ``_u`` extended into the gas near the surface (:mod:`~iceresist.freesurface.extension`)."""
@@ -439,8 +443,7 @@ class FreeSurfaceFluid:
         half_width = self.real(0.5 * self.phase.width)
         if self.target.is_cuda:
             self.fluid.step(1, self.phase.phi, half_width)
-            g, zero = self.real(self.g), self.real(0.0)
-            self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
+            self._velocity_pass()
         else:
             self.fluid.step(1, self.phase.phi, half_width, u=self._u)
 

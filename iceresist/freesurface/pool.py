@@ -234,7 +234,6 @@ class PooledLBM:
         self.cells = forest.cells
         self.pool = FPool(forest.nbr, margin)
         self._launch = pooled_fused_launcher(target, precision, operator)
-        self._operator = operator
         self._wet_cells, self._fill = pool_launchers(target, precision)
         real = self.real
         tables = dict(nbr_key=forest.nbr_key.astype(np.int32), link_bc=forest.link_bc.astype(np.int32),
@@ -330,10 +329,10 @@ class PooledLBM:
         """Advance ``n`` fused stream-collide steps with the phase field ``phi[block, cell]`` and W / 2
         (lattice units) placing the surface inside the cell (eq. 11); the buffers swap after each. ``u``
         (``[block, 3, cell]``, optional): written with each cell's velocity j / rho - F / 2 of the new populations,
-        0 outside the liquid (:func:`~iceresist.lbm.stream.velocity_lines`)."""
+        0 outside the liquid (the CPU block form only)."""
         t = self._tables
         nb = self.forest.nblocks
-        launch = self._launch if u is None else pooled_fused_launcher(self.target, self.precision, self._operator,
+        launch = self._launch if u is None else pooled_fused_launcher(self.target, self.precision, self.operator,
                                                                        velocity=True)
         extra = () if u is None else (u,)
         for _ in range(int(n)):

@@ -48,7 +48,7 @@ TANH_CLIP = 0.999
 POOL_ARGS = FS_ARGS + ("fslot",)
 #: The same with the velocity written as the populations are: ``u[block, 3, cell]`` gets the cell's
 #: j / rho - F / 2 from its post-collision populations (0 outside the liquid), the field the phase field and the
-#: velocity extension read (:func:`velocity_lines`).
+#: velocity extension read (:func:`_block_velocity_lines`).
 POOL_U_ARGS = POOL_ARGS + ("u",)
 
 
@@ -177,26 +177,20 @@ def stream_collide_source(loop_cells: bool = False, free_surface: bool = False) 
     return s
 
 
-def velocity_lines(indent: str, pop: str) -> str:
-    """Source writing ``u[b, :, c]`` = j / rho - F / 2 of the populations ``pop`` (f - w, post-collision), the sums
-    in the order of the separate velocity pass (:func:`iceresist.freesurface.fluid.build_surface_cells`): rho = 1
-    plus f_0 .. f_26, j_a = 0 plus or minus the f_q with c_qa = +-1, q rising; so the fields agree bit for bit
-    where LLVM keeps that order. The post-collision j is the pre-collision one plus the full force, hence - F / 2."""
-    names = [pop.format(q=q) for q in range(Q)]
-    s = f"{indent}rho_u = one + {' + '.join(names)}\n"
-    for a, comp in enumerate("xyz"):
-        expr = "".join(term(C[q, a], names[q]) for q in range(Q))
-        s += f"{indent}u[b, {a}, c] = (zero{expr}) / rho_u - half * F{comp}\n"
-    return s
-
-
 def _block_velocity_lines() -> str:
-    """Source of the block form's velocity sweep (:func:`stream_collide_block_source`): :func:`velocity_lines` in a
-    loop of its own over the post-collision populations in the scratch (from the cache rather than from memory). In
-    the collision sweep itself the 30 extra stores stop LLVM vectorising it."""
+    """Source of the block form's velocity sweep (:func:`stream_collide_block_source`), a loop of its own over the
+    post-collision populations in the scratch (from the cache rather than from memory; in the collision sweep itself
+    the 30 extra stores stop LLVM vectorising it): ``u[b, :, c]`` = j / rho - F / 2, the sums in the order of the
+    separate velocity pass (:func:`iceresist.freesurface.fluid.build_velocity_block`): rho = 1 plus f_0 .. f_26, j_a =
+    0 plus or minus the f_q with c_qa = +-1, q rising. The post-collision j is the pre-collision one plus the full
+    force, hence - F / 2."""
     s = f"    for c in range({CELLS}):\n"
     s += "".join(f"        v{q} = tmp[{_slot(q)} + c]\n" for q in range(Q))
-    return s + velocity_lines("        ", "v{q}")
+    s += f"        rho_u = one + {' + '.join(f'v{q}' for q in range(Q))}\n"
+    for a, comp in enumerate("xyz"):
+        expr = "".join(term(C[q, a], f"v{q}") for q in range(Q))
+        s += f"        u[b, {a}, c] = (zero{expr}) / rho_u - half * F{comp}\n"
+    return s
 
 
 def _zero_velocity_lines(indent: str) -> str:
@@ -365,7 +359,7 @@ def stream_collide_block_source(free_surface: bool = False, velocity: bool = Fal
 
     Same arithmetic as the per-cell form, cell by cell; only the order of the work differs. With ``velocity``
     (free surface) the collision sweep also writes each cell's velocity ``u`` from its post-collision populations
-    (:func:`velocity_lines`), and the cells outside the liquid get u = 0: the arguments are ``FS_ARGS`` and ``u``.
+    (:func:`_block_velocity_lines`), and the cells outside the liquid get u = 0: the arguments are ``FS_ARGS`` and ``u``.
     """
     if velocity and not free_surface:
         raise ValueError("velocity is written by the free-surface update only")

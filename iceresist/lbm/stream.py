@@ -355,7 +355,7 @@ def stream_collide_block_source(free_surface: bool = False, velocity: bool = Fal
        writes nothing in any form;
     2. collide: one branch-free loop over the 512 cells reading and writing ``tmp`` at constant
        offsets, which LLVM vectorises across cells (8 float32 or 4 float64 cells per AVX2 register);
-    3. write: ``tmp`` to ``dst[b]`` (fluid cells only in a mixed block).
+    3. write: ``tmp`` to ``dst[b]``, population by population (fluid cells only in a mixed block).
 
     Same arithmetic as the per-cell form, cell by cell; only the order of the work differs. With ``velocity``
     (free surface) the collision sweep also writes each cell's velocity ``u`` from its post-collision populations
@@ -398,11 +398,15 @@ def stream_collide_block_source(free_surface: bool = False, velocity: bool = Fal
     s += f"        for q in range({Q}):\n"
     s += "            to = q * PLANE + 8\n"
     s += f"            for c in range({CELLS}):\n                dst[b, q, c] = tmp[to + c]\n"
+    # a mixed block: population by population, so that the stores run along dst's contiguous cell index (cell by
+    # cell with the populations inner, each store 512 values from the last, this write cost a third of the update)
     s += "    else:\n"
-    s += f"        for c in range({CELLS}):\n            if flags[b, c] & FLUID:\n"
-    s += f"                for q in range({Q}):\n                    dst[b, q, c] = tmp[q * PLANE + 8 + c]\n"
+    s += f"        for q in range({Q}):\n            to = q * PLANE + 8\n"
+    s += f"            for c in range({CELLS}):\n                if flags[b, c] & FLUID:\n"
+    s += "                    dst[b, q, c] = tmp[to + c]\n"
     if velocity:
-        s += "            else:\n" + _zero_velocity_lines("                ")
+        s += f"        for c in range({CELLS}):\n            if (flags[b, c] & FLUID) == 0:\n"
+        s += _zero_velocity_lines("                ")
     return s
 
 

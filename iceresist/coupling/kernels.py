@@ -343,9 +343,16 @@ def build_visits(target, real, free_surface: bool = False):
         near = film[0] != zero
         nfilm = 0
         kb = bint[k, 9]
+        lcx = c & 7
+        lcy = (c >> 3) & 7
+        lcz = c >> 6
         for q in range(1, nq):
             hx, hy, hz = gx + CXI[q], gy + CYI[q], gz + CZI[q]
-            xb, xc = lookup(hx, hy, hz, grid, block_map)
+            ax, ay, az = lcx + CXI[q], lcy + CYI[q], lcz + CZI[q]
+            if ax >= 0 and ax < 8 and ay >= 0 and ay < 8 and az >= 0 and az < 8:
+                xb, xc = b, ax + 8 * (ay + 8 * az)      # in the cell's own block: no look-up in the forest
+            else:
+                xb, xc = lookup(hx, hy, hz, grid, block_map)
             if xb >= 0:
                 o = owner[xb, xc]
                 if o >= 0:

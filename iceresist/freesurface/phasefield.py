@@ -200,10 +200,9 @@ def build_phase_blocks(real, lat: HLattice):
     them once per block, ``CellLauncher(per_block=True)``): the same updates as :func:`build_phase_cells`,
     arranged so that LLVM vectorises them across the cells of a block.
 
-    * pull: h_k of the 512 cells line by line (8 cells from the source line, the one cell that crosses the
-      block's x face from the neighbour line; a whole line bounces back half-way where its source lies in no
-      block); in a block with a solid cell in reach, the cells next to one then bounce back instead (found from
-      the solid cells, few) and the solid cells keep their h and phi;
+    * pull: h_k of the 512 cells into a block scratch line by line (8 cells from the source line, the one
+      cell that crosses the block's x face from the neighbour), then one select per cell between the pulled
+      value and the half-way bounce-back (a source outside the domain or solid);
     * normal: from phi of the block and its halo in a 10^3 scratch (along a wall face the halo repeats the
       boundary cell, the cell form's clamp), the D3Q27 stencil applied as a product of three 1-D stencils (its
       weights factorise), in float64; the per-cell clamped stencil only in a block next to a hole in the forest;
@@ -232,6 +231,45 @@ def build_phase_blocks(real, lat: HLattice):
         if v >= 8 and not high_open:
             return 7
         return v
+
+    @dev
+    def gather(b, k, h_in, nbr, solid, tmp, ln, sl):
+        """tmp[c] = h_k pulled into cell c of block b (bounce-back where the source is outside or solid)."""
+        cx = hcx[k]
+        cy = hcy[k]
+        cz = hcz[k]
+        ko = hopp[k]
+        for z in range(8):
+            for y in range(8):
+                bm, sbase = neighbour(nbr, b, 0, y, z, 0, -cy, -cz)  # the source line, its cell x = 0
+                if bm >= 0:
+                    for x in range(8):
+                        ln[x + 1] = h_in[bm, k, sbase + x]
+                    for x in range(8):
+                        sl[x + 1] = solid[bm, sbase + x]
+                else:
+                    for x in range(10):
+                        ln[x] = zero
+                        sl[x] = 0
+                if cx == 1:  # cell x = 0 pulls from x = -1: the last cell of the line of the -x block
+                    be, ce = neighbour(nbr, b, 0, y, z, -1, -cy, -cz)
+                    if be >= 0:
+                        ln[0] = h_in[be, k, ce]
+                        sl[0] = solid[be, ce]
+                    else:
+                        sl[0] = 0
+                elif cx == -1:
+                    be, ce = neighbour(nbr, b, 7, y, z, 1, -cy, -cz)
+                    if be >= 0:
+                        ln[9] = h_in[be, k, ce]
+                        sl[9] = solid[be, ce]
+                    else:
+                        sl[9] = 0
+                c0 = 8 * (y + 8 * z)
+                o = 1 - cx
+                for x in range(8):
+                    own = h_in[b, ko, c0 + x]
+                    tmp[c0 + x] = ln[x + o] if sl[x + o] < 0 else own
 
     @dev
     def wrap(v):
@@ -294,71 +332,33 @@ def build_phase_blocks(real, lat: HLattice):
             phi[b, c] = acc[c]
 
     @dev
-    def bounce_from_solids(b, h_in, h_out, nbr, solid, redo):
-        """After the plain pull of block b: every cell that pulled h_k from a solid cell takes the half-way
-        bounce-back instead, and ``redo`` marks it. The solid cells in reach (of b itself, and the one-cell layer of
-        each neighbour block next to b) are visited, not the cells of b: a body covers few of them."""
-        for dz in range(-1, 2):
-            zlo = 7 if dz < 0 else 0
-            zhi = 0 if dz > 0 else 7
-            for dy in range(-1, 2):
-                ylo = 7 if dy < 0 else 0
-                yhi = 0 if dy > 0 else 7
-                for dx in range(-1, 2):
-                    d = 13 + dx + 3 * dy + 9 * dz
-                    bn = b if d == 13 else nbr[b, dir_of[d]]
-                    if bn < 0:
-                        continue
-                    xlo = 7 if dx < 0 else 0
-                    xhi = 0 if dx > 0 else 7
-                    for sz in range(zlo, zhi + 1):
-                        for sy in range(ylo, yhi + 1):
-                            for sx in range(xlo, xhi + 1):
-                                if solid[bn, sx + 8 * (sy + 8 * sz)] < 0:
-                                    continue
-                                for k in range(nq):     # the cells of b that pull h_k from this solid cell
-                                    tx = sx + 8 * dx + hcx[k]
-                                    ty = sy + 8 * dy + hcy[k]
-                                    tz = sz + 8 * dz + hcz[k]
-                                    if tx < 0 or tx > 7 or ty < 0 or ty > 7 or tz < 0 or tz > 7:
-                                        continue
-                                    t = tx + 8 * (ty + 8 * tz)
-                                    if solid[b, t] < 0:
-                                        h_out[b, k, t] = h_in[b, hopp[k], t]
-                                        redo[t] = 1
-
-    @dev
     def stream_block(b, h_in, h_out, phi, nbr, solid, clear):
         """Pass 1 for block b: h_out = pulled h, phi = sum_k of them; a solid cell keeps its h and phi.
-        ``clear[b]`` (:func:`build_clear_blocks`): neither b nor its neighbours hold a solid cell, and the plain
-        pull of :func:`stream_clear` is the whole pass. Otherwise that pull is followed by the bounce-back of the
-        cells next to a solid (:func:`bounce_from_solids`) and their phi summed again in the same order; the solid
-        cells of b get back the h and phi they held."""
+        ``clear[b]`` (:func:`build_clear_blocks`): neither b nor its neighbours hold a solid cell."""
         b = np.int64(b)
         acc = np.zeros(512, rdtype)
         if clear[b]:
             stream_clear(b, h_in, h_out, phi, nbr, acc)
             return
-        keep = np.empty(nq * 512, rdtype)
-        keep_phi = np.empty(512, rdtype)
-        redo = np.zeros(512, np.int8)
+        tmp = np.empty(512, rdtype)
+        ln = np.empty(10, rdtype)
+        sl = np.empty(10, np.int32)
+        covered = False
         for c in range(512):
             if solid[b, c] >= 0:
-                keep_phi[c] = phi[b, c]
-                for k in range(nq):
-                    keep[k * 512 + c] = h_out[b, k, c]
-        stream_clear(b, h_in, h_out, phi, nbr, acc)
-        bounce_from_solids(b, h_in, h_out, nbr, solid, redo)
+                covered = True
+        for k in range(nq):
+            gather(b, k, h_in, nbr, solid, tmp, ln, sl)
+            for c in range(512):
+                acc[c] += tmp[c]
+            if covered:
+                for c in range(512):
+                    h_out[b, k, c] = tmp[c] if solid[b, c] < 0 else h_out[b, k, c]
+            else:  # a plain store: no read of h_out
+                for c in range(512):
+                    h_out[b, k, c] = tmp[c]
         for c in range(512):
-            if solid[b, c] >= 0:
-                phi[b, c] = keep_phi[c]
-                for k in range(nq):
-                    h_out[b, k, c] = keep[k * 512 + c]
-            elif redo[c] != 0:
-                s = zero
-                for k in range(nq):
-                    s += h_out[b, k, c]
-                phi[b, c] = s
+            phi[b, c] = acc[c] if solid[b, c] < 0 else phi[b, c]
 
     @dev
     def normals(b, phi, nbr, nx_, ny_, nz_, pad, sx, dx, t1, t2, t3):

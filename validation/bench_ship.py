@@ -114,6 +114,9 @@ PARTS = {
     "velocity": "velocity",
     "mark": "redistribute / refill / mark", "refill_fs": "redistribute / refill / mark",
     "redistribute_fs": "redistribute / refill / mark",
+    "h_init": "phase field frozen bulk (roles, settle, ghost refill)",
+    "bulk_roles": "phase field frozen bulk (roles, settle, ghost refill)",
+    "bulk_settle": "phase field frozen bulk (roles, settle, ghost refill)",
 }
 
 

@@ -305,7 +305,7 @@ class FluidStructureCoupling:
                               d["owner"], d["owner_prev"], f)
         else:
             k["redistribute"](nb, d["near"], d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"], flags,
-                              d["owner"], d["owner_prev"], f, phase.phi, phase.h)
+                              d["owner"], d["owner_prev"], f, phase.phi, phase.h, phase.valid)
         if self.debug:
             k["poison"](nb, active, d["flags0"], d["owner"], d["owner_prev"], f)
         # with a free surface the same walk mirrors phi into the covered cells near the surface

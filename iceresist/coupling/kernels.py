@@ -86,7 +86,7 @@ REDIST_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "owne
 POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
 REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
 REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
-                  "phi", "h")
+                  "phi", "h", "valid")
 LINK_FS_ARGS = LINK_ARGS + ("phi",)
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).

@@ -13,8 +13,9 @@ the phase field (``phi[block, cell]``, ``h[block, k, cell]`` on the h lattice):
 2. ``redistribute_fs`` (per cell of the blocks next to events): a liquid cell takes its share of the mass
    excess of a newly covered liquid cell (and gives back that of a refilled liquid cell), as before; every
    cell not covered takes its share w_q / sum w of the phi of a newly covered cell (and gives back that of a
-   refilled one), added to its rest population h_0: sum phi over the cells outside the bodies, the water
-   volume, is unchanged by the motion of the bodies;
+   refilled one), added to its rest population h_0 (and to phi in a block whose phi, not h, is the state:
+   :mod:`iceresist.freesurface.bulk`): sum phi over the cells outside the bodies, the water volume, is unchanged
+   by the motion of the bodies;
 3. ``mirror`` (in the link pass, :func:`build_mirror`): a covered cell within ``MIRROR_DEPTH`` of the surface gets the
    phi at its mirror point across the surface, p = y - 2 s(y) grad s (s the signed distance), interpolated
    trilinearly from the cells outside the bodies. The gradient stencil of the phase field reads it: the
@@ -140,7 +141,7 @@ def build_surface_visits(target, real, hlat):
             f[b, m, c] = f[b, m, c] * inv + WR[m] * ((rho - one) + rho * (three * cu + c45 * cu * cu - c15 * vv))
 
     @dev
-    def redistribute_fs(b, c, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h):
+    def redistribute_fs(b, c, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h, valid):
         if (reach_mask(c) & near[b]) == 0:   # no neighbour in a block with an event
             return
         if not stable(b, c, flags0, owner, owner_prev):
@@ -163,7 +164,7 @@ def build_surface_visits(target, real, hlat):
                 continue
             # a newly covered cell was liquid if its phi (of the last step) was; a refilled one if flagged so
             y_liquid = phi[yb, yc] >= half if now else (flags[yb, yc] & fluid) != 0
-            ph = phase_of(yb, yc, h)
+            ph = phase_of(yb, yc, h) if valid[yb] != 0 else phi[yb, yc]   # phi is the state of a frozen block
             excess = zero
             if liquid and y_liquid:
                 for m in range(nq):
@@ -184,6 +185,8 @@ def build_surface_visits(target, real, hlat):
             if liquid and y_liquid:
                 accf += excess * WR[q] / wf
         h[b, 0, c] += acch
+        if valid[b] == 0:
+            phi[b, c] += acch
         if liquid:
             f[b, 0, c] += accf
 
@@ -204,7 +207,7 @@ def build_redistribute_block(real, hlat):
     side = HALO1_SIDE
     halo_or = build_halo_or()
 
-    def redistribute_fs_block(b, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h):
+    def redistribute_fs_block(b, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h, valid):
         b = np.int64(b)
         ev = np.empty(side ** 3, int8)
         gx0 = borigin[b, 0] * 8
@@ -229,7 +232,8 @@ def build_redistribute_block(real, hlat):
         halo_or(ev, nm)
         for c in range(512):
             if nm[c]:
-                redistribute_fs(b, c, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h)
+                redistribute_fs(b, c, near, borigin, grid, block_map, flags0, flags, owner, owner_prev, f, phi, h,
+                                valid)
 
     return jit.cpu.device(redistribute_fs_block)
 

@@ -6,7 +6,7 @@ kernel cache (:mod:`iceresist.backends.cache`) with the builder's own parameters
 
 KEY_MODULES = ("iceresist.freesurface.phasefield", "iceresist.freesurface.fluid", "iceresist.freesurface.pool",
                "iceresist.freesurface.extension", "iceresist.freesurface.hlattice", "iceresist.freesurface.layout",
-               "iceresist.freesurface.probe",
+               "iceresist.freesurface.probe", "iceresist.freesurface.bulk",
                "iceresist.lbm.stream", "iceresist.lbm.boundary", "iceresist.lbm.codegen", "iceresist.lbm.collide",
                "iceresist.lattice", "iceresist.grid.flags", "iceresist.grid.forest")
 

@@ -36,6 +36,7 @@ from iceresist.backends import jit
 from iceresist.backends.launch import BlockLauncher, CellLauncher, copy_into
 from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
+from iceresist.freesurface.bulk import FrozenBulk
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
 from iceresist.freesurface.layout import HALO1_SIDE, HAS_GAS, HAS_LIQUID, build_halo_or, build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
@@ -334,11 +335,14 @@ class FreeSurfaceFluid:
     ``f_pool_margin``: spare population rows as a fraction of the wet blocks at the start, or None for
     populations in every block (:mod:`iceresist.freesurface.pool`). ``fluid`` is the
     :class:`~iceresist.freesurface.pool.PooledLBM`; its ``fslot`` maps a block to its row of ``fluid.state``.
+    ``frozen_bulk``: the phase field runs only in the blocks that reach the interface
+    (:mod:`iceresist.freesurface.bulk`); False runs it in every block.
     """
 
     def __init__(self, forest, *, tau: float, gravity_lattice: float, depth_cells: float, mobility: float = 0.05,
                  width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
-                 precision: str = "float32", target=jit.cpu, f_pool_margin: float | None = DEFAULT_MARGIN):
+                 precision: str = "float32", target=jit.cpu, f_pool_margin: float | None = DEFAULT_MARGIN,
+                 frozen_bulk: bool = True):
         if not gravity_lattice >= 0:
             raise InputError(f"free_surface.gravity_lattice must be >= 0 (lattice units), not {gravity_lattice}")
         if not 0 < depth_cells < forest.shape_cells[2]:
@@ -363,6 +367,7 @@ class FreeSurfaceFluid:
         self._phases = self._to_target(np.zeros(self.nblocks, np.int8))
         self._near = self._to_target(np.zeros(self.nblocks, np.int8))
         self._probe = None  # the watchdog's FluidProbe, made at the first probe()
+        self._bulk = FrozenBulk(self.phase, exchange=self._exchange_blocks) if frozen_bulk else None
         #: The :class:`~iceresist.parallel.decomposition.Decomposition` of a fluid split over MPI ranks (set by its
         #: owner), or None. On several ranks the dense views (:meth:`phi`, :meth:`macroscopic`, :meth:`velocity`,
         #: :meth:`liquid`, :meth:`surface_height`) are the whole domain's on rank 0 and None on the other ranks
@@ -426,6 +431,11 @@ class FreeSurfaceFluid:
         extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr,
                         near=self._block_phases(self.phase.phi))
 
+    def _exchange_blocks(self, per_block):
+        """On several ranks: the halo blocks of a per-block int8 array on the target take their owners' values."""
+        if self.decomp is not None:
+            self.decomp.exchange(per_block.reshape(-1, 1), self.target, full=True)
+
     def _block_phases(self, phi):
         """``near`` per block (:func:`build_block_phases`) from ``phi`` and the current flags, on the target."""
         self._phases_launch(self.nblocks, phi, self.fluid.flags, self._phases)
@@ -452,7 +462,10 @@ class FreeSurfaceFluid:
         for _ in range(int(n)):
             self._stream_collide()
             self._extend()
-            self.phase.step(self._u)
+            if self._bulk is None:
+                self.phase.step(self._u)
+            else:
+                self._bulk.step(self._u, self._near)   # _near: the phase bits _extend() just found
             self.fluid.update_rows(self.phase.phi, self._u)
             self._reflag(self.nblocks, self.phase.phi, self._base, self.fluid.flags, self.fluid.state,
                          self.fluid.fslot, self._u, self.phase.nbr, *self._surface_scalars(),
@@ -481,21 +494,25 @@ class FreeSurfaceFluid:
         so that a checkpoint restarts on any number of ranks."""
         blocks, f = self.fluid.rows()
         h, phi, flags = self._host(self.phase.h), self._host(self.phase.phi), np.asarray(self._host(self.fluid.flags))
+        valid = np.asarray(self._host(self.phase.valid))
         if self.decomp is None:
             return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(self.fluid.pool.capacity),
-                    "h": h, "phi": phi, "flags": flags, "iteration": np.int64(self.iteration)}
+                    "h": h, "phi": phi, "h_valid": valid, "flags": flags, "iteration": np.int64(self.iteration)}
         d = self.decomp
-        f, h, phi, flags = (d.gather_rows(a) for a in (f, h, phi, flags))   # every block holds a row: block order
+        # every block holds a row: block order
+        f, h, phi, valid, flags = (d.gather_rows(a) for a in (f, h, phi, valid, flags))
         if f is None:
             return None
         n = d.forest.nblocks
         return {"f_blocks": np.arange(n, dtype=np.int64), "f": f, "f_rows": np.int64(n), "h": h, "phi": phi,
-                "flags": flags, "iteration": np.int64(self.iteration)}
+                "h_valid": valid, "flags": flags, "iteration": np.int64(self.iteration)}
 
     def load_state(self, state: dict):
         """Continue from :meth:`state` of a fluid built the same way (same forest, h lattice, precision)."""
         if "h" not in state or "f_blocks" not in state:
             raise InputError("checkpoint holds no free-surface state: it belongs to another scene")
+        # h holds the state of every block in a checkpoint written before the frozen bulk
+        state = {**state, "h_valid": np.asarray(state.get("h_valid", np.ones(len(state["h"]), np.int8)))}
         if self.decomp is not None:     # the whole domain's (written on any number of ranks): this rank's blocks
             d, n = self.decomp, self.decomp.forest.nblocks
             f_blocks, f = np.asarray(state["f_blocks"]), np.asarray(state["f"])
@@ -505,7 +522,7 @@ class FreeSurfaceFluid:
             whole[f_blocks] = f
             nl = len(d.global_ids)
             state = {**state, "f_blocks": np.arange(nl, dtype=np.int64), "f": d.local_rows(whole),
-                     "f_rows": np.int64(nl), **{k: d.local_rows(np.asarray(state[k])) for k in ("h", "phi", "flags")}}
+                     "f_rows": np.int64(nl), **{k: d.local_rows(np.asarray(state[k])) for k in ("h", "phi", "h_valid", "flags")}}
         h = np.asarray(state["h"])
         if h.shape != tuple(self.phase.h.shape):
             raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs "
@@ -515,6 +532,7 @@ class FreeSurfaceFluid:
                             int(state["f_rows"]))
         copy_into(self.phase.h, h.astype(self.real))
         copy_into(self.phase.phi, np.asarray(state["phi"]).astype(self.real))
+        copy_into(self.phase.valid, np.asarray(state["h_valid"]).astype(np.int8))
         copy_into(self.fluid.flags, np.asarray(state["flags"]).astype(np.uint8))
         self.iteration = self.fluid.iteration = int(state["iteration"])
 

@@ -46,7 +46,7 @@ from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
 from iceresist.freesurface.hlattice import HLattice
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
-from iceresist.backends.launch import BlockLauncher, CellLauncher
+from iceresist.backends.launch import ActiveLauncher, BlockLauncher, CellLauncher
 from iceresist.freesurface.layout import DIR_OF_OFFSET, build_neighbour
 from iceresist.grid.forest import CELLS
 
@@ -196,8 +196,9 @@ def build_phase_cells(target, real, lat: HLattice):
 
 
 def build_phase_blocks(real, lat: HLattice):
-    """Compile the CPU block forms ``(stream_block, collide_block)`` of passes 1 and 2 (the launchers call
-    them once per block, ``CellLauncher(per_block=True)``): the same updates as :func:`build_phase_cells`,
+    """Compile the CPU block forms ``(stream_block, collide_block, init_block)`` of passes 1 and 2 and of h = h^eq
+    (the launchers call them once per block, ``CellLauncher(per_block=True)``): the same updates as
+    :func:`build_phase_cells`,
     arranged so that LLVM vectorises them across the cells of a block.
 
     * pull: h_k of the 512 cells into a block scratch line by line (8 cells from the source line, the one
@@ -429,17 +430,11 @@ def build_phase_blocks(real, lat: HLattice):
                 nx_[c], ny_[c], nz_[c] = normal(phi, nbr, b, c % 8, (c // 8) % 8, c // 64)
 
     @dev
-    def collide_block(b, h_out, phi, u, nbr, omega, kappa, solid):
-        """Pass 2 for block b: collide the streamed h in place towards h^eq(phi, u, n) (eqs. 6-9); a solid cell
-        keeps its h."""
-        b = np.int64(b)
+    def equilibrium_terms(b, phi, u, nbr, kappa, tx_, ty_, tz_, uu_):
+        """theta n (eq. 9) and u . u of every cell of block b, in the working precision."""
         nx_ = np.empty(512, np.float64)  # the stencil sums in float64
         ny_ = np.empty(512, np.float64)
         nz_ = np.empty(512, np.float64)
-        tx_ = np.empty(512, rdtype)
-        ty_ = np.empty(512, rdtype)
-        tz_ = np.empty(512, rdtype)
-        uu_ = np.empty(512, rdtype)
         pad = np.empty(1000, rdtype)
         sx = np.empty(800, np.float64)
         dx = np.empty(800, np.float64)
@@ -447,7 +442,7 @@ def build_phase_blocks(real, lat: HLattice):
         t2 = np.empty(640, np.float64)
         t3 = np.empty(640, np.float64)
         normals(b, phi, nbr, nx_, ny_, nz_, pad, sx, dx, t1, t2, t3)
-        for c in range(512):  # theta n (eq. 9) and u . u in the working precision
+        for c in range(512):
             dp = phi[b, c] - half
             th = kappa * (one - four * dp * dp)
             tx_[c] = rdtype(th * nx_[c])
@@ -457,20 +452,47 @@ def build_phase_blocks(real, lat: HLattice):
             uy = u[b, 1, c]
             uz = u[b, 2, c]
             uu_[c] = ux * ux + uy * uy + uz * uz
+
+    @dev
+    def h_eq(b, c, k, phi, u, tx_, ty_, tz_, uu_):
+        """h_k^eq of cell c of block b (eqs. 7-8) from the terms of ``equilibrium_terms``."""
+        cx = hex_[k]
+        cy = hey[k]
+        cz = hez[k]
+        cu = cx * u[b, 0, c] + cy * u[b, 1, c] + cz * u[b, 2, c]
+        cn = cx * tx_[c] + cy * ty_[c] + cz * tz_[c]
+        return hw[k] * (phi[b, c] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu_[c])) + cn)
+
+    @dev
+    def collide_block(b, h_out, phi, u, nbr, omega, kappa, solid):
+        """Pass 2 for block b: collide the streamed h in place towards h^eq(phi, u, n) (eqs. 6-9); a solid cell
+        keeps its h."""
+        b = np.int64(b)
+        tx_ = np.empty(512, rdtype)
+        ty_ = np.empty(512, rdtype)
+        tz_ = np.empty(512, rdtype)
+        uu_ = np.empty(512, rdtype)
+        equilibrium_terms(b, phi, u, nbr, kappa, tx_, ty_, tz_, uu_)
         for k in range(nq):
-            cx = hex_[k]
-            cy = hey[k]
-            cz = hez[k]
-            wk = hw[k]
             for c in range(512):
                 hk = h_out[b, k, c]
-                cu = cx * u[b, 0, c] + cy * u[b, 1, c] + cz * u[b, 2, c]
-                cn = cx * tx_[c] + cy * ty_[c] + cz * tz_[c]
-                heq = wk * (phi[b, c] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu_[c])) + cn)
-                new = hk + omega * (heq - hk)
+                new = hk + omega * (h_eq(b, c, k, phi, u, tx_, ty_, tz_, uu_) - hk)
                 h_out[b, k, c] = new if solid[b, c] < 0 else h_out[b, k, c]
 
-    return stream_block, collide_block
+    @dev
+    def init_block(b, h_out, phi, u, nbr, kappa):
+        """h = h^eq(phi, u, n) in every cell of block b (``init_cell`` of :func:`build_phase_cells`)."""
+        b = np.int64(b)
+        tx_ = np.empty(512, rdtype)
+        ty_ = np.empty(512, rdtype)
+        tz_ = np.empty(512, rdtype)
+        uu_ = np.empty(512, rdtype)
+        equilibrium_terms(b, phi, u, nbr, kappa, tx_, ty_, tz_, uu_)
+        for k in range(nq):
+            for c in range(512):
+                h_out[b, k, c] = h_eq(b, c, k, phi, u, tx_, ty_, tz_, uu_)
+
+    return stream_block, collide_block, init_block
 
 
 def build_clear_blocks():
@@ -523,28 +545,55 @@ def phase_launchers(target, precision: str, lattice_name: str, vector: bool = Tr
     if target.is_cuda or not vector:
         return (CellLauncher(target, stream_cell, st_args, label="h_stream", cache_key=k),
                 CellLauncher(target, collide_cell, co_args, label="h_collide", cache_key=k), init)
-    stream_block, collide_block = build_phase_blocks(real, lat)
+    stream_block, collide_block, _ = build_phase_blocks(real, lat)
     return (CellLauncher(target, stream_block, st_args + ("clear",), per_block=True, label="h_stream", cache_key=k),
             CellLauncher(target, collide_block, co_args, per_block=True, label="h_collide", cache_key=k), init)
 
 
 @lru_cache(maxsize=None)
+def active_phase_launchers(target, precision: str, lattice_name: str):
+    """The launchers ``(stream, collide, init)`` of :func:`phase_launchers` over the blocks flagged in a mask
+    passed first (:class:`~iceresist.backends.launch.ActiveLauncher`; :mod:`iceresist.freesurface.bulk`)."""
+    real, lat = jit.real_type(precision), lookup_h_lattice(lattice_name)
+    stream_cell, collide_cell, init_cell = build_phase_cells(target, real, lat)
+    st_args, co_args = ("active", "h_in", "h_out", "phi", "nbr", "solid"), \
+        ("active", "h_out", "phi", "u", "nbr", "omega", "kappa", "solid")
+    init_args = ("active", "h_out", "phi", "u", "nbr", "kappa")
+    k = kernel_key(target, f"phase_active|{precision}|{lattice_name}")
+    if target.is_cuda:
+        return (ActiveLauncher(target, stream_cell, st_args, label="h_stream", cache_key=k),
+                ActiveLauncher(target, collide_cell, co_args, label="h_collide", cache_key=k),
+                ActiveLauncher(target, init_cell, init_args, label="h_init", cache_key=k))
+    stream_block, collide_block, init_block = build_phase_blocks(real, lat)
+    return (ActiveLauncher(target, stream_block, st_args + ("clear",), per_block=True, label="h_stream", cache_key=k),
+            ActiveLauncher(target, collide_block, co_args, per_block=True, label="h_collide", cache_key=k),
+            ActiveLauncher(target, init_block, init_args, per_block=True, label="h_init", cache_key=k))
+
+
+@lru_cache(maxsize=None)
 def volume_launcher(target, lattice_name: str) -> BlockLauncher:
-    """``launch(nblocks, h, solid, out)``: ``out[b]`` = sum_k h_k over the cells of block b no solid covers, in
-    float64 (the conserved phase volume of the block, cells^3), reduced on the target."""
+    """``launch(nblocks, h, phi, valid, solid, out)``: ``out[b]`` = sum over the cells of block b no solid covers
+    of sum_k h_k where ``valid[b]`` (h holds the state), else of phi (a block the phase field left frozen,
+    :mod:`iceresist.freesurface.bulk`), in float64 (the conserved phase volume of the block, cells^3), reduced on
+    the target."""
     nq = lookup_h_lattice(lattice_name).q
     f64 = np.float64
 
-    def volume_block(b, h, solid, out):
+    def volume_block(b, h, phi, valid, solid, out):
         acc = f64(0.0)
-        for c in range(CELLS):
-            if solid[b, c] < 0:
-                for k in range(nq):
-                    acc += f64(h[b, k, c])
+        if valid[b] != 0:
+            for c in range(CELLS):
+                if solid[b, c] < 0:
+                    for k in range(nq):
+                        acc += f64(h[b, k, c])
+        else:
+            for c in range(CELLS):
+                if solid[b, c] < 0:
+                    acc += f64(phi[b, c])
         out[b] = acc
 
-    return BlockLauncher(target, target.device(volume_block), ("h", "solid", "out"), label="water_volume",
-                         cache_key=kernel_key(target, f"water_volume|{lattice_name}"))
+    return BlockLauncher(target, target.device(volume_block), ("h", "phi", "valid", "solid", "out"),
+                         label="water_volume", cache_key=kernel_key(target, f"water_volume|{lattice_name}"))
 
 
 class PhaseField:
@@ -585,6 +634,10 @@ class PhaseField:
         self.phi = self._to_target(np.zeros((self.nblocks, CELLS), self.real))
         #: Body covering each cell (-1: none), ``[block, cell]`` int32; the coupling replaces it by its own table.
         self.solid = self._to_target(np.full((self.nblocks, CELLS), -1, np.int32))
+        #: 1 where a block's h holds its state, 0 where phi does (a block left frozen by
+        #: :mod:`iceresist.freesurface.bulk`), ``[block]`` int8: h is pulled and summed only where it is 1.
+        self.valid = self._to_target(np.ones(self.nblocks, np.int8))
+        self._active = None  # (stream, collide, init) over a block mask, made at the first masked step
         self._volume = None  # (launcher, per-block sums), made at the first volume()
         self._clear = None   # (launchers, has-solid and clear flags per block), made at the first block-form step
 
@@ -611,19 +664,45 @@ class PhaseField:
         """Set phi (``[block, cell]``) and h = h^eq(phi, u, n)."""
         self.phi = self._to_target(np.array(phi0, dtype=self.real, order="C"))  # a copy: phi is state
         self._init(self.nblocks, self.h, self.phi, self._u(u), self.nbr, self.kappa)
+        self.valid = self._to_target(np.ones(self.nblocks, np.int8))
+
+    def _clear_blocks(self):
+        """The blocks where the block form of pass 1 may pull plainly (:func:`build_clear_blocks`), host int8."""
+        if self._clear is None:
+            self._clear = (*clear_launchers(), np.zeros(self.nblocks, np.int8), np.zeros(self.nblocks, np.int8))
+        solid_block, clear_block, has, clear = self._clear
+        solid_block(self.nblocks, self.solid, has)
+        clear_block(self.nblocks, has, self.nbr, clear)
+        return clear
 
     def step(self, u) -> None:
         """One time step: h and phi(t+1) by pull streaming, then collide h with u (``[block, 3, cell]``)."""
         if self._block_form:
-            if self._clear is None:
-                self._clear = (*clear_launchers(), np.zeros(self.nblocks, np.int8), np.zeros(self.nblocks, np.int8))
-            solid_block, clear_block, has, clear = self._clear
-            solid_block(self.nblocks, self.solid, has)
-            clear_block(self.nblocks, has, self.nbr, clear)
-            self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid, clear)
+            self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid, self._clear_blocks())
         else:
             self._stream(self.nblocks, self.h, self.h_next, self.phi, self.nbr, self.solid)
         self._collide(self.nblocks, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa, self.solid)
+        self.h, self.h_next = self.h_next, self.h
+
+    def _masked(self):
+        if self._active is None:
+            self._active = active_phase_launchers(self.target, np.dtype(self.real).name, self.lat.name)
+        return self._active
+
+    def _init_active(self, nblocks, active, h, phi, u, nbr, kappa) -> None:
+        """h = h^eq(phi, u, n) in the blocks flagged in ``active``."""
+        self._masked()[2](nblocks, active, h, phi, u, nbr, kappa)
+
+    def stream_collide(self, u, active) -> None:
+        """:meth:`step` in the blocks flagged in ``active`` (int8 per block, on the target) only. Every neighbour of a
+        flagged block must hold h to pull (flagged, or refilled: :class:`~iceresist.freesurface.bulk.FrozenBulk`)."""
+        stream, collide, _ = self._masked()
+        n = self.nblocks
+        if self._block_form:
+            stream(n, active, self.h, self.h_next, self.phi, self.nbr, self.solid, self._clear_blocks())
+        else:
+            stream(n, active, self.h, self.h_next, self.phi, self.nbr, self.solid)
+        collide(n, active, self.h_next, self.phi, self._u(u), self.nbr, self.omega, self.kappa, self.solid)
         self.h, self.h_next = self.h_next, self.h
 
     def phi_host(self) -> np.ndarray:
@@ -641,5 +720,5 @@ class PhaseField:
             self._volume = (volume_launcher(self.target, self.lat.name),
                             self._to_target(np.zeros(self.nblocks, np.float64)))
         launch, out = self._volume
-        launch(self.nblocks, self.h, self.solid, out)
+        launch(self.nblocks, self.h, self.phi, self.valid, self.solid, out)
         return np.asarray(self._host(out))

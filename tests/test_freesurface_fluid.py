@@ -235,7 +235,8 @@ def test_surface_passes_skip_blocks_far_from_the_surface_without_changing_a_bit(
     """Reflag and the velocity extension skip the blocks with no gas (or no liquid) in reach
     (``build_block_phases``): on a 5-block-tall tank whose tilted surface rises through a block face (cells turn
     from gas to liquid), 12 steps give the same populations, phi, velocity and flags, bit for bit, as visiting
-    every block; and blocks of both kinds were skipped."""
+    every block; and blocks of both kinds were skipped. The phase field runs in every block in both runs (its own
+    skipping, the frozen bulk, is an approximation with a test of its own: tests/test_frozen_bulk.py)."""
     fo = BlockForest.uniform((16, 16, 40), {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
     x = np.arange(16) + 0.5
     surface = np.broadcast_to((23.0 + 1.5 * (x - 8.0) / 8.0)[:, None], (16, 16))  # crosses z = 24 at x = 8
@@ -243,7 +244,7 @@ def test_surface_passes_skip_blocks_far_from_the_surface_without_changing_a_bit(
 
     def run():
         fs = FreeSurfaceFluid(fo, tau=0.6, gravity_lattice=1e-3, depth_cells=23.0, operator="bgk",
-                              precision="float64")
+                              precision="float64", frozen_bulk=False)
         fs.initialize(surface=surface, u=(0.0, 0.0, 0.03))
         for _ in range(12):
             fs.step(1)

@@ -298,7 +298,7 @@ class FluidStructureCoupling:
             phase = self.surface.phase
             phase.solid = d["owner"]
             k["refill"](nb, visit, d["borigin"], body, d["grid"], d["block_map"], d["flags0"], flags, d["owner"],
-                        d["owner_prev"], f, evt, Fx, Fy, Fz, phase.phi, phase.h)
+                        d["owner_prev"], f, evt, Fx, Fy, Fz, phase.phi, phase.h, phase.valid)
         s["near_events"](nb, evt, d["nbr"], d["near"])
         if self.surface is None:
             k["redistribute"](nb, d["near"], d["near"], d["borigin"], d["grid"], d["block_map"], d["flags0"],

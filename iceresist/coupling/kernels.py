@@ -84,7 +84,7 @@ REFILL_ARGS = ("active", "borigin", "body", "grid", "block_map", "flags0", "flag
                "block_evt", "Fx", "Fy", "Fz")
 REDIST_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "owner", "owner_prev", "f")
 POISON_ARGS = ("active", "flags0", "owner", "owner_prev", "f")
-REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h")
+REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h", "valid")
 REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                   "phi", "h", "valid")
 LINK_FS_ARGS = LINK_ARGS + ("phi",)

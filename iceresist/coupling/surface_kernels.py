@@ -13,9 +13,9 @@ the phase field (``phi[block, cell]``, ``h[block, k, cell]`` on the h lattice):
 2. ``redistribute_fs`` (per cell of the blocks next to events): a liquid cell takes its share of the mass
    excess of a newly covered liquid cell (and gives back that of a refilled liquid cell), as before; every
    cell not covered takes its share w_q / sum w of the phi of a newly covered cell (and gives back that of a
-   refilled one), added to its rest population h_0 (and to phi in a block whose phi, not h, is the state:
-   :mod:`iceresist.freesurface.bulk`): sum phi over the cells outside the bodies, the water volume, is unchanged
-   by the motion of the bodies;
+   refilled one), added to its rest population h_0: sum phi over the cells outside the bodies, the water volume,
+   is unchanged by the motion of the bodies. A block whose phi, not h, is the state (:mod:`iceresist.freesurface.bulk`,
+   deep in one phase) takes no share: nothing there would carry it away;
 3. ``mirror`` (in the link pass, :func:`build_mirror`): a covered cell within ``MIRROR_DEPTH`` of the surface gets the
    phi at its mirror point across the surface, p = y - 2 s(y) grad s (s the signed distance), interpolated
    trilinearly from the cells outside the bodies. The gradient stencil of the phase field reads it: the
@@ -71,7 +71,7 @@ def build_surface_visits(target, real, hlat):
 
     @dev
     def classify_refill_fs(b, c, borigin, body, grid, block_map, flags0, flags, owner, owner_prev, f, block_evt,
-                           Fx, Fy, Fz, phi, h):
+                           Fx, Fy, Fz, phi, h, valid):
         k = owner[b, c]
         if k >= 0:
             flags[b, c] = ghost
@@ -90,7 +90,8 @@ def build_surface_visits(target, real, hlat):
         gy = borigin[b, 1] * 8 + ((c >> 3) & 7)
         gz = borigin[b, 2] * 8 + (c >> 6)
         ux, uy, uz, rx, ry, rz = wall_velocity(kp, real(gx) + half, real(gy) + half, real(gz) + half, body, grid)
-        # phase field: phi from the cells outside the bodies, h at equilibrium
+        # phase field: phi from the cells outside the bodies (sum h where h is the state, phi in a frozen
+        # block, whose h is stale: iceresist.freesurface.bulk), h at equilibrium
         wsum = zero
         psum = zero
         for q in range(1, nq):
@@ -99,7 +100,7 @@ def build_surface_visits(target, real, hlat):
                 continue
             if stable(nb, nc, flags0, owner, owner_prev):
                 wsum += WR[q]
-                psum += WR[q] * phase_of(nb, nc, h)
+                psum += WR[q] * (phase_of(nb, nc, h) if valid[nb] != 0 else phi[nb, nc])
         p = phi[b, c]
         if wsum > zero:
             p = psum / wsum
@@ -184,9 +185,13 @@ def build_surface_visits(target, real, hlat):
             acch += ph * WR[q] / wh
             if liquid and y_liquid:
                 accf += excess * WR[q] / wf
-        h[b, 0, c] += acch
-        if valid[b] == 0:
-            phi[b, c] += acch
+        # Where h is the state the hand-over is advected and diffused by the phase field. A frozen block
+        # (iceresist.freesurface.bulk) has nothing to carry it away: each cell a moving body covers would hand on
+        # what its neighbours gave it, and the excess would pile up ahead of the body (in the quick tier-2 case
+        # phi grew by 0.1 per record ahead of the keel, up to NaN). There phi keeps 1 (or 0): a body in the
+        # frozen liquid covers and uncovers as many liquid cells.
+        if valid[b] != 0:
+            h[b, 0, c] += acch
         if liquid:
             f[b, 0, c] += accf
 

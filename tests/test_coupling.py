@@ -226,13 +226,14 @@ def test_runs_partition_the_cell_box_of_a_body(runs):
 
 
 def test_mark_and_link_run_forms_give_the_results_of_the_cell_forms():
-    """The CPU run forms of ``mark`` (the sign of the next floor(|d| - 0.01) cells of a line taken from a cell at
-    distance |d|) and of the link pass (cells far outside or deeper than 2 inside passed over) against the per-cell
-    visits: a sphere, a rotated box, a rotated convex polyhedron, a union of three convex pieces (evaluated at every
-    cell), a sphere across the periodic x boundary and a box longer than half the periodic length (evaluated at
-    every cell), moving and spinning in a periodic 48 x 32 x 32 box with a stream, launched whole and in runs of
-    200 cells: the same owner in every cell, the same populations written, links, forces and torques. Skipping one
-    cell too many (floor(|d| + 1)) in either fails it."""
+    """The CPU run forms of ``mark`` (the sign of the next cells of a line taken from an evaluated cell: from its face
+    planes for a box or a convex polyhedron, floor(|d| - 0.01) cells for a sphere) and of the link pass (cells far
+    outside or deeper than 2 inside passed over) against the per-cell visits: a sphere, a rotated box, a rotated
+    convex polyhedron, a union of three convex pieces (evaluated at every cell), a sphere across the periodic x
+    boundary and a box longer than half the periodic length (evaluated at every cell), moving and spinning in a
+    periodic 48 x 32 x 32 box with a stream, launched whole and in runs of 200 cells: the same owner in every cell,
+    the same populations written, links, forces and torques. Skipping one cell too many (floor(|d| + 1) for the
+    sphere, one more than the planes allow for the boxes and the polyhedron, iceresist.coupling.runs) fails it."""
     from iceresist.backends.launch import BodyLauncher
     from iceresist.coupling.geometry import ConvexUnion
     from iceresist.coupling.kernels import LINK_ARGS, MARK_ARGS, build_visits

@@ -18,7 +18,8 @@ Arrays the kernels share:
 
 Passes of one coupling step, each a launch:
 
-1. ``mark`` (per body over its cell box): owner = body where the signed distance at the cell centre < 0;
+1. ``mark`` (per body over its cell box; on the CPU walked along x lines that pass over the cells whose side of the
+   surface is known, :mod:`iceresist.coupling.runs`): owner = body where the signed distance at the cell centre < 0;
 2. ``classify_refill`` (per cell of the active blocks): flags = GHOST where covered, else the static flags;
    a cell a body uncovered gets equilibrium populations at the body's velocity there and the weighted
    mean density of its fluid neighbours, plus their mean non-equilibrium part (the refill);
@@ -59,17 +60,16 @@ import math
 
 import numpy as np
 
-from iceresist.backends import cache, jit
+from iceresist.backends import cache
 from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumulate
 from iceresist.coupling.bodystate import build_reach_mask
 from iceresist.coupling.cellfunctions import (MIRROR_DEPTH, build_geometry_functions, build_link_root,
                                               build_refill_functions)
-from iceresist.coupling.geometry import CONVEX
+from iceresist.coupling.runs import build_link_run, build_mark_run
 from iceresist.coupling.surface_kernels import build_mirror, build_redistribute_block, build_surface_visits
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, OPP, Q, W
 from iceresist.lbm.boundary import GHOST
-from iceresist.lbm.codegen import compile_source
 
 #: Regula-falsi (Illinois) iterations for the link distance where its closed form finds no entry (round-off at a
 #: cell centre on the surface); exact after one for planar faces.
@@ -91,124 +91,8 @@ LINK_FS_ARGS = LINK_ARGS + ("phi",)
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
 FILM_DEPTH = 2.0
-
-
-#: Margin (lattice units) below |signed distance| within which the mark's run form still evaluates the next cells.
-MARK_MARGIN = 0.01
-
-
-def build_lipschitz(real):
-    """``lipschitz(k, bint, body, planes, grid)``: whether body k's signed distance at a cell centre is never larger
-    in size than the cell's distance to its surface (a sphere, a box, one convex polyhedron; not a union of pieces,
-    whose distance inside reads the nearest piece's sides) and the nearest periodic image does not change along the
-    lines of row k's box. Then the distance changes by at most one per cell along a line."""
-    half, zero = real(0.5), real(0.0)
-    convex = CONVEX
-
-    @jit.cpu.device
-    def lipschitz(k, bint, body, planes, grid):
-        if bint[k, 0] == convex:
-            first = bint[k, 1]
-            for i in range(first, first + bint[k, 2]):
-                nn = planes[i, 0] * planes[i, 0] + planes[i, 1] * planes[i, 1] + planes[i, 2] * planes[i, 2]
-                if nn == zero or nn > real(1.5):     # a separator or a shared cap: a union of pieces
-                    return False
-        if grid[3] != 0:        # periodic along x: the nearest image must not change along a line
-            lim = real(0.5) * real(grid[0]) - real(1.0)
-            if abs(real(bint[k, 3]) + half - body[k, 0]) >= lim or abs(real(bint[k, 6]) + half - body[k, 0]) >= lim:
-                return False
-        return True
-
-    return lipschitz
-
-
-def _run_source(name: str, sig: str, cell: str) -> str:
-    """Source of ``name(k, {sig})`` walking the run of row k's cell box (``bint[k, 10:12]``, x fastest, the order of
-    the per-cell launcher) with ``cell`` (indented 8) at each cell (gx, gy, gz); ``known`` counts the cells ahead
-    on the current line whose signed distance the last evaluated one decided (0 at each new line), ``skip`` says
-    whether :func:`build_lipschitz` allows that."""
-    return f"""def {name}(k, {sig}):
-    lx = bint[k, 3]
-    ly = bint[k, 4]
-    hx = bint[k, 6]
-    hy = bint[k, 7]
-    nx = hx - lx + 1
-    ny = hy - ly + 1
-    s = bint[k, 10]
-    e = bint[k, 11]
-    if e <= s:
-        return
-    skip = lipschitz(k, bint, body, planes, grid)
-    gx = lx + s % nx
-    gy = ly + (s // nx) % ny
-    gz = bint[k, 5] + s // (nx * ny)
-    known = 0
-    inside = False
-    for _ in range(e - s):
-{cell}        gx += 1
-        if gx > hx:
-            gx = lx
-            known = 0
-            gy += 1
-            if gy > hy:
-                gy = ly
-                gz += 1
-"""
-
-
-def _run_namespace(real) -> dict:
-    _, sdf_at, _ = build_geometry_functions(jit.cpu, real)
-    return {"lipschitz": build_lipschitz(real), "sdf_at": sdf_at, "real": real, "half": real(0.5),
-            "zero": real(0.0), "margin": real(MARK_MARGIN)}
-
-
-def build_mark_run(real):
-    """The CPU run form of ``mark`` (:func:`build_visits`), ``mark_run(k, bint, body, planes, grid, block_map, flags0,
-    owner)``: the cells of row k's run in the order of the per-cell launcher, the same owners. Where
-    :func:`build_lipschitz` allows, a cell at signed distance d tells the sign of the next floor(|d| -
-    ``MARK_MARGIN``) cells of its line along x, which are then taken without evaluating it: a hull's box holds
-    mostly cells far from its surface."""
-    cell = """        if known > 0:
-            known -= 1
-        else:
-            d = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
-            inside = d < zero
-            if skip:
-                a = abs(d) - margin
-                known = int(a) if a > zero else 0
-        if inside:
-            b, c = lookup(gx, gy, gz, grid, block_map)
-            if b >= 0:
-                if flags0[b, c] & FLUID:
-                    owner[b, c] = k
-"""
-    lookup = build_geometry_functions(jit.cpu, real)[0]
-    ns = {**_run_namespace(real), "lookup": lookup, "FLUID": FL.FLUID}
-    return compile_source(_run_source("mark_run", ", ".join(MARK_ARGS), cell), "mark_run", ns, jit.cpu.device)
-
-
-def build_link_run(real, visit, argnames):
-    """The CPU run form of a link visit (``links`` or ``links_fs`` of :func:`build_visits`, arguments ``argnames``
-    after the cell): row k's run in the order of the per-cell launcher, the visit called where it can act. It acts
-    only on cells that row k covers (signed distance < 0) within ``FILM_DEPTH`` (links) or ``MIRROR_DEPTH`` (the
-    mirror) of the surface; where :func:`build_lipschitz` allows, a visited cell at signed distance d > 0 passes
-    over the next floor(d - ``MARK_MARGIN``) cells of its line, at d < -D (D the larger depth) the next
-    floor(-d - D - ``MARK_MARGIN``). The same forces, links and mirrored phi, without walking the cells deep inside
-    a hull or far outside it in its box."""
-    sig = ", ".join(argnames)
-    cell = f"""        if known > 0:
-            known -= 1
-        else:
-            visit(k, gx, gy, gz, {sig})
-            if skip:
-                d = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
-                if d > margin:
-                    known = int(d - margin)
-                elif d < -depth - margin:
-                    known = int(-d - depth - margin)
-"""
-    ns = {**_run_namespace(real), "visit": visit, "depth": real(max(FILM_DEPTH, MIRROR_DEPTH))}
-    return compile_source(_run_source("link_run", sig, cell), "link_run", ns, jit.cpu.device)
+#: The deepest covered cells the link pass acts on: links and film, or the mirror with a free surface.
+LINK_DEPTH = max(FILM_DEPTH, MIRROR_DEPTH)
 
 
 def build_visits(target, real, free_surface: bool = False):
@@ -298,23 +182,42 @@ def build_visits(target, real, free_surface: bool = False):
         return math.exp(three * film[1] * depth)
 
     @dev
-    def covered(k, gx, gy, gz, bint, body, planes, grid, block_map, owner):
-        """(b, c, centre x, y, z, signed distance) of cell (gx, gy, gz) where row k covers it; b = -1 where not."""
+    def links_at(k, gx, gy, gz, s_in, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks,
+                 flags, film, nowned):
+        """``links`` of cell (gx, gy, gz) at signed distance ``s_in`` from body k (the run form has it)."""
+        # a cell deeper than FILM_DEPTH (> sqrt(3), the longest link) inside its convex body has every neighbour
+        # inside it too (the signed distance changes by at most the link length): no link and no film there
+        if s_in <= -fdepth:
+            return
         b, c = lookup(gx, gy, gz, grid, block_map)
-        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
         if b < 0:
-            return -1, c, yx, yy, yz, zero
+            return
         if owner[b, c] != k:
-            return -1, c, yx, yy, yz, zero
-        return b, c, yx, yy, yz, sdf_at(k, yx, yy, yz, body, bint, planes, grid)
+            return
+        link_cell(k, gx, gy, gz, b, c, real(gx) + half, real(gy) + half, real(gz) + half, s_in, bint, body, planes,
+                  grid, block_map, flags0, owner, f, bforce, btorque, nlinks, flags, film, nowned)
 
     @dev
     def links(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks, flags,
               film, nowned):
-        b, c, yx, yy, yz, s_in = covered(k, gx, gy, gz, bint, body, planes, grid, block_map, owner)
-        # a cell deeper than FILM_DEPTH (> sqrt(3), the longest link) inside its convex body has every neighbour
-        # inside it too (the signed distance changes by at most the link length): no link and no film there
-        if b < 0 or s_in <= -fdepth:
+        s_in = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
+        links_at(k, gx, gy, gz, s_in, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks,
+                 flags, film, nowned)
+
+    @dev
+    def links_fs_at(k, gx, gy, gz, s_in, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque,
+                    nlinks, flags, film, nowned, phi):
+        """``links_at`` with the phase field's mirror (:func:`iceresist.coupling.surface_kernels.build_mirror`) in
+        the same visit of each covered cell: one walk over the body's cell box instead of two."""
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        if b < 0:
+            return
+        if owner[b, c] != k:
+            return
+        yx, yy, yz = real(gx) + half, real(gy) + half, real(gz) + half
+        if s_in >= -mdepth:
+            mirror(k, b, c, yx, yy, yz, s_in, body, bint, planes, grid, block_map, flags0, owner, phi)
+        if s_in <= -fdepth:
             return
         link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
                   bforce, btorque, nlinks, flags, film, nowned)
@@ -322,17 +225,9 @@ def build_visits(target, real, free_surface: bool = False):
     @dev
     def links_fs(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque, nlinks,
                  flags, film, nowned, phi):
-        """``links`` with the phase field's mirror (:func:`iceresist.coupling.surface_kernels.build_mirror`) in the
-        same visit of each covered cell: one walk over the body's cell box instead of two."""
-        b, c, yx, yy, yz, s_in = covered(k, gx, gy, gz, bint, body, planes, grid, block_map, owner)
-        if b < 0:
-            return
-        if s_in >= -mdepth:
-            mirror(k, b, c, yx, yy, yz, s_in, body, bint, planes, grid, block_map, flags0, owner, phi)
-        if s_in <= -fdepth:
-            return
-        link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
-                  bforce, btorque, nlinks, flags, film, nowned)
+        s_in = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
+        links_fs_at(k, gx, gy, gz, s_in, bint, body, planes, grid, block_map, flags0, owner, f, bforce, btorque,
+                    nlinks, flags, film, nowned, phi)
 
     @dev
     def link_cell(k, gx, gy, gz, b, c, yx, yy, yz, s_in, bint, body, planes, grid, block_map, flags0, owner, f,
@@ -509,14 +404,15 @@ def build_visits(target, real, free_surface: bool = False):
             for p in range(nq):
                 f[b, p, c] = nan
 
-    return mark, (links_fs if fs else links), classify_refill, redistribute, poison
+    return (mark, (links_fs if fs else links), classify_refill, redistribute, poison,
+            (links_fs_at if fs else links_at))
 
 
 #: Modules whose source decides the compiled coupling code (visits, geometry, lattice constants, flags); the key
 #: of the kernel cache.
-KEY_MODULES = ("iceresist.coupling.kernels", "iceresist.coupling.surface_kernels", "iceresist.coupling.cellfunctions",
-               "iceresist.coupling.bodystate", "iceresist.coupling.geometry", "iceresist.grid.flags", "iceresist.lattice",
-               "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
+KEY_MODULES = ("iceresist.coupling.kernels", "iceresist.coupling.runs", "iceresist.coupling.surface_kernels",
+               "iceresist.coupling.cellfunctions", "iceresist.coupling.bodystate", "iceresist.coupling.geometry",
+               "iceresist.grid.flags", "iceresist.lattice", "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
 
 
 def variant_of(real, h_lattice=None, free_surface: bool = False) -> str:
@@ -536,14 +432,15 @@ def coupling_launchers(target, real, h_lattice=None):
     if key not in _CACHE:
         fs = h_lattice is not None
         k = None if target.is_cuda else cache.fingerprint(variant_of(real, h_lattice, fs), KEY_MODULES)
-        mark, links, refill, redist, poison = build_visits(target, real, free_surface=fs)
+        mark, links, refill, redist, poison, links_at = build_visits(target, real, free_surface=fs)
+        link_args = LINK_FS_ARGS if fs else LINK_ARGS
         launchers = {
             "mark": (BodyLauncher(target, mark, MARK_ARGS, label="mark") if target.is_cuda else
-                     BodyLauncher(target, build_mark_run(real), MARK_ARGS, per_row=True, label="mark", cache_key=k)),
-            "links": (BodyLauncher(target, links, LINK_FS_ARGS if fs else LINK_ARGS, label="links")
-                      if target.is_cuda else
-                      BodyLauncher(target, build_link_run(real, links, LINK_FS_ARGS if fs else LINK_ARGS),
-                                   LINK_FS_ARGS if fs else LINK_ARGS, per_row=True, label="links", cache_key=k)),
+                     BodyLauncher(target, build_mark_run(real, MARK_ARGS), MARK_ARGS, per_row=True, label="mark",
+                                  cache_key=k)),
+            "links": (BodyLauncher(target, links, link_args, label="links") if target.is_cuda else
+                      BodyLauncher(target, build_link_run(real, links_at, link_args, LINK_DEPTH), link_args,
+                                   per_row=True, label="links", cache_key=k)),
             "poison": ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k),
         }
         if not fs:

@@ -45,6 +45,44 @@ def build_offset(target, real):
     return offset
 
 
+def build_body_frame(target, real):
+    """``(to_body, body_point)``: ``to_body(k, vx, vy, vz, body) -> R^T v``, a world vector in body k's frame, and
+    ``body_point(k, px, py, pz, body, grid) -> R^T (p - x_s)``, a world point (the nearest periodic image,
+    :func:`build_offset`)."""
+    offset = build_offset(target, real)
+
+    @target.device
+    def to_body(k, vx, vy, vz, body):
+        return (body[k, 3] * vx + body[k, 6] * vy + body[k, 9] * vz,
+                body[k, 4] * vx + body[k, 7] * vy + body[k, 10] * vz,
+                body[k, 5] * vx + body[k, 8] * vy + body[k, 11] * vz)
+
+    @target.device
+    def body_point(k, px, py, pz, body, grid):
+        dx, dy, dz = offset(k, px, py, pz, body, grid)
+        return to_body(k, dx, dy, dz, body)
+
+    return to_body, body_point
+
+
+def build_box_distance(target, real):
+    """``box_distance(x, y, z, hx, hy, hz)``: signed distance of body-frame point (x, y, z) to the box of half
+    extents h about the origin (exact inside and outside)."""
+    zero = real(0.0)
+
+    @target.device
+    def box_distance(x, y, z, hx, hy, hz):
+        qx = abs(x) - hx
+        qy = abs(y) - hy
+        qz = abs(z) - hz
+        mx = max(qx, zero)
+        my = max(qy, zero)
+        mz = max(qz, zero)
+        return math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
+
+    return box_distance
+
+
 def build_geometry_functions(target, real):
     """Small device functions: ``lookup`` of a global cell, ``sdf_at`` a world point, ``wall_velocity``."""
     half, zero, two, big = real(0.5), real(0.0), real(2.0), real(1e30)
@@ -71,25 +109,18 @@ def build_geometry_functions(target, real):
         return b, (gx & 7) + 8 * ((gy & 7) + 8 * (gz & 7))
 
     offset = build_offset(target, real)
+    _, body_point = build_body_frame(target, real)
+    box_distance = build_box_distance(target, real)
 
     @dev
     def sdf_at(k, px, py, pz, body, bint, planes, grid):
         """Signed distance (lattice units) of world point p to body k, negative inside."""
-        dx, dy, dz = offset(k, px, py, pz, body, grid)
-        x = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
-        y = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
-        z = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
+        x, y, z = body_point(k, px, py, pz, body, grid)
         kind = bint[k, 0]
         if kind == sphere_kind:
             return math.sqrt(x * x + y * y + z * z) - body[k, 18]
         if kind == box_kind:
-            qx = abs(x) - body[k, 18]
-            qy = abs(y) - body[k, 19]
-            qz = abs(z) - body[k, 20]
-            mx = max(qx, zero)
-            my = max(qy, zero)
-            mz = max(qz, zero)
-            return math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
+            return box_distance(x, y, z, body[k, 18], body[k, 19], body[k, 20])
         # convex pieces (geometry.ConvexUnion): dp = max over a piece's planes, ds = the same without its caps
         # (rows of normal length 2, shared with the next piece); outside: min over the pieces of dp; inside a
         # piece: min of ds over the pieces that hold p (the distance to the surface, not to a seam). One piece
@@ -136,16 +167,13 @@ def build_sdf_normal(target, real):
     radius of a sphere, the face or corner of a box, the plane of a convex piece that gives the distance, as a unit
     vector (at an edge the face found first; the zero vector at a sphere's centre). One evaluation instead of the
     six of a central difference."""
-    offset = build_offset(target, real)
+    _, body_point = build_body_frame(target, real)
     half, zero, one, two, big = real(0.5), real(0.0), real(1.0), real(2.0), real(1e30)
     sphere_kind, box_kind = SPHERE, BOX
 
     @target.device
     def sdf_normal_at(k, px, py, pz, body, bint, planes, grid):
-        dx, dy, dz = offset(k, px, py, pz, body, grid)
-        x = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
-        y = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
-        z = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
+        x, y, z = body_point(k, px, py, pz, body, grid)
         kind = bint[k, 0]
         gx = zero
         gy = zero
@@ -235,7 +263,7 @@ def build_link_root(target, real):
     [0, 1]: the caller then finds the root on the signed distance."""
     zero, one, big = real(0.0), real(1.0), real(1e30)
     sphere_kind, box_kind = SPHERE, BOX
-    offset = build_offset(target, real)
+    to_body, body_point = build_body_frame(target, real)
     dev = target.device
 
     @dev
@@ -247,13 +275,8 @@ def build_link_root(target, real):
 
     @dev
     def link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid):
-        dx, dy, dz = offset(k, px, py, pz, body, grid)
-        ox = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
-        oy = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
-        oz = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
-        ex = body[k, 3] * cx + body[k, 6] * cy + body[k, 9] * cz     # R^T c
-        ey = body[k, 4] * cx + body[k, 7] * cy + body[k, 10] * cz
-        ez = body[k, 5] * cx + body[k, 8] * cy + body[k, 11] * cz
+        ox, oy, oz = body_point(k, px, py, pz, body, grid)
+        ex, ey, ez = to_body(k, cx, cy, cz, body)
         kind = bint[k, 0]
         if kind == sphere_kind:
             r = body[k, 18]

@@ -22,10 +22,8 @@ extrapolated and the evaluated distance cannot move a cell across them.
 
 from __future__ import annotations
 
-import math
-
 from iceresist.backends import jit
-from iceresist.coupling.cellfunctions import build_geometry_functions, build_offset
+from iceresist.coupling.cellfunctions import build_body_frame, build_box_distance, build_geometry_functions
 from iceresist.coupling.geometry import BOX, CONVEX, SPHERE
 from iceresist.grid import flags as FL
 from iceresist.lbm.codegen import compile_source
@@ -76,7 +74,8 @@ def build_sdf_ahead(real):
     ``below`` (where d < below) or above ``above`` (where d > above); n = 0 between them and in mode ``EVERY_CELL``.
     ``mode`` from :func:`build_line_mode` (module docstring)."""
     _, sdf_at, _ = build_geometry_functions(jit.cpu, real)
-    offset = build_offset(jit.cpu, real)
+    _, body_point = build_body_frame(jit.cpu, real)
+    box_distance = build_box_distance(jit.cpu, real)
     zero, big, cap = real(0.0), real(1e30), real(1 << 30)
     box = BOX
 
@@ -97,6 +96,16 @@ def build_sdf_ahead(real):
         return t
 
     @jit.cpu.device
+    def slab_inside(t, x, h, a, below):
+        """``plane_inside`` of the two faces +-x - h of a box, rates +-a."""
+        return plane_inside(plane_inside(t, x - h, a, below), -x - h, -a, below)
+
+    @jit.cpu.device
+    def slab_outside(t, x, h, a, above):
+        """``plane_outside`` of the two faces +-x - h of a box, rates +-a."""
+        return plane_outside(plane_outside(t, x - h, a, above), -x - h, -a, above)
+
+    @jit.cpu.device
     def steps(t):
         """Whole cells within the bound t (at most ``cap``)."""
         return int(min(t, cap))
@@ -111,38 +120,18 @@ def build_sdf_ahead(real):
                 if d < below:
                     return d, int(below - d)
             return d, 0
-        dx, dy, dz = offset(k, px, py, pz, body, grid)
-        x = body[k, 3] * dx + body[k, 6] * dy + body[k, 9] * dz     # R^T (p - x_s)
-        y = body[k, 4] * dx + body[k, 7] * dy + body[k, 10] * dz
-        z = body[k, 5] * dx + body[k, 8] * dy + body[k, 11] * dz
+        x, y, z = body_point(k, px, py, pz, body, grid)
         ax, ay, az = body[k, 3], body[k, 4], body[k, 5]               # R^T e_x: the line's direction, body frame
         if bint[k, 0] == box:
             hx, hy, hz = body[k, 18], body[k, 19], body[k, 20]
-            qx = abs(x) - hx
-            qy = abs(y) - hy
-            qz = abs(z) - hz
-            mx = max(qx, zero)
-            my = max(qy, zero)
-            mz = max(qz, zero)
-            d = math.sqrt(mx * mx + my * my + mz * mz) + min(max(qx, max(qy, qz)), zero)
+            d = box_distance(x, y, z, hx, hy, hz)
             # six planes: +-x_b - h_x etc., rates +-a
             if d < below:
-                t = big
-                t = plane_inside(t, x - hx, ax, below)
-                t = plane_inside(t, -x - hx, -ax, below)
-                t = plane_inside(t, y - hy, ay, below)
-                t = plane_inside(t, -y - hy, -ay, below)
-                t = plane_inside(t, z - hz, az, below)
-                t = plane_inside(t, -z - hz, -az, below)
+                t = slab_inside(slab_inside(slab_inside(big, x, hx, ax, below), y, hy, ay, below), z, hz, az, below)
                 return d, steps(t)
             if d > above:
-                t = zero
-                t = plane_outside(t, x - hx, ax, above)
-                t = plane_outside(t, -x - hx, -ax, above)
-                t = plane_outside(t, y - hy, ay, above)
-                t = plane_outside(t, -y - hy, -ay, above)
-                t = plane_outside(t, z - hz, az, above)
-                t = plane_outside(t, -z - hz, -az, above)
+                t = slab_outside(slab_outside(slab_outside(zero, x, hx, ax, above), y, hy, ay, above), z, hz, az,
+                                 above)
                 return d, steps(t)
             return d, 0
         # one convex polyhedron: the distance is the largest plane value (sdf_at's loop for one piece)

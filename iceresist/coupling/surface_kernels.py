@@ -17,8 +17,7 @@ the phase field (``phi[block, cell]``, ``h[block, k, cell]`` on the h lattice):
    is unchanged by the motion of the bodies. A block whose phi, not h, is the state (:mod:`iceresist.freesurface.bulk`,
    deep in one phase) takes no share: nothing there would carry it away;
 3. ``mirror`` (in the link pass, :func:`build_mirror`): a covered cell within ``MIRROR_DEPTH`` of the surface gets the
-   phi at its mirror point across the surface, p = y - 2 s(y) grad s (s the signed distance, grad s the normal
-   of the face that gives it, :func:`~iceresist.coupling.cellfunctions.build_sdf_normal`), interpolated
+   phi at its mirror point across the surface, p = y - 2 s(y) grad s (s the signed distance), interpolated
    trilinearly from the cells outside the bodies. The gradient stencil of the phase field reads it: the
    normal derivative of phi at the surface vanishes (neutral wetting, a 90 degree contact angle, as at the
    walls of the domain); the h of the outside cells bounce back from covered cells
@@ -37,7 +36,7 @@ import numpy as np
 
 from iceresist.backends import jit
 from iceresist.coupling.bodystate import build_reach_mask
-from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions, build_sdf_normal
+from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions
 from iceresist.freesurface.layout import HALO1_SIDE, build_halo_or
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
@@ -250,14 +249,18 @@ def build_mirror(target, real):
     ``MIRROR_DEPTH`` of the surface; the caller checks). The link pass calls it for each covered cell it visits
     (:func:`iceresist.coupling.kernels.build_visits`): it reads phi only outside the bodies and writes it only
     inside, and the links read no phi, so one visit does both."""
-    lookup, _, _ = build_geometry_functions(target, real)
-    sdf_normal_at = build_sdf_normal(target, real)
+    lookup, sdf_at, _ = build_geometry_functions(target, real)
     zero, half, one, eps = real(0.0), real(0.5), real(1.0), real(1e-12)
     fluid = FL.FLUID
 
     @target.device
     def mirror(k, b, c, yx, yy, yz, s, body, bint, planes, grid, block_map, flags0, owner, phi):
-        _, nx, ny, nz = sdf_normal_at(k, yx, yy, yz, body, bint, planes, grid)
+        nx = sdf_at(k, yx + half, yy, yz, body, bint, planes, grid) - sdf_at(k, yx - half, yy, yz, body, bint,
+                                                                             planes, grid)
+        ny = sdf_at(k, yx, yy + half, yz, body, bint, planes, grid) - sdf_at(k, yx, yy - half, yz, body, bint,
+                                                                             planes, grid)
+        nz = sdf_at(k, yx, yy, yz + half, body, bint, planes, grid) - sdf_at(k, yx, yy, yz - half, body, bint,
+                                                                             planes, grid)
         nn = math.sqrt(nx * nx + ny * ny + nz * nz)
         if nn < eps:
             return

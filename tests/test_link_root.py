@@ -105,3 +105,43 @@ def test_link_distance_into_a_union_of_convex_pieces(roots):
     assert len(x) > 500
     t = roots(x, c, *_tables(union, centre, rot))
     assert np.abs(t - exact).max() < 1e-9
+
+
+@pytest.mark.parametrize("geometry", [Sphere(5.3), Box((9.0, 6.4, 4.2)), ConvexPolyhedron(OCTAHEDRON), "union"],
+                         ids=["sphere", "box", "polyhedron", "union"])
+def test_central_difference_of_the_signed_distance_in_one_pass(geometry):
+    """``build_sdf_difference`` (the phi mirror's normal, iceresist.coupling.surface_kernels) against the six
+    evaluations of ``sdf_at`` it replaces, sdf(p + e/2) - sdf(p - e/2) along each world axis, at every point of a
+    quarter-cell lattice within 2 of the surface of a rotated body (float64): equal to 1e-12, the union by the six
+    evaluations themselves. Planted: the columns of R taken for its rows as the world axes in the body frame: fails
+    for the sphere, the box and the polyhedron (the union takes the six evaluations)."""
+    from iceresist.coupling.cellfunctions import build_geometry_functions, build_sdf_difference
+
+    if geometry == "union":
+        a = np.array([[x, y, z] for x in (-8.0, 0.0) for y in (-3.0, 3.0) for z in (-2.0, 2.0)])
+        b = np.array([[x, y, z] for x in (0.0, 6.0) for y in (-3.0, 3.0) for z in (-2.0, 7.0)])
+        w = np.array([[6.0, -3, -2], [6, 3, -2], [6, -3, 2], [6, 3, 2], [11, 0, -2], [11, 0, 2]])
+        geometry = ConvexUnion([a, b, w], 1.0)
+    centre, rot = np.array([31.3, 30.8, 32.6]), _rotation((1.0, 2.0, 0.5), 0.7)
+    sdf_difference = build_sdf_difference(jit.cpu, np.float64)
+    sdf_at = build_geometry_functions(jit.cpu, np.float64)[1]
+
+    @njit
+    def evaluate(p, body, bint, planes, grid, out):
+        for i in range(len(p)):
+            out[i, 0:3] = sdf_difference(0, p[i, 0], p[i, 1], p[i, 2], body, bint, planes, grid)
+            for a in range(3):
+                e = np.zeros(3)
+                e[a] = 0.5
+                out[i, 3 + a] = (sdf_at(0, p[i, 0] + e[0], p[i, 1] + e[1], p[i, 2] + e[2], body, bint, planes, grid)
+                                 - sdf_at(0, p[i, 0] - e[0], p[i, 1] - e[1], p[i, 2] - e[2], body, bint, planes, grid))
+
+    g = np.arange(16, 48, 0.25) + 0.125
+    points = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    s = geometry.sdf((points - centre) @ rot)
+    p = points[(s < 0) & (s > -2.0)]
+    assert len(p) > 5000
+    out = np.empty((len(p), 6))
+    evaluate(p, *_tables(geometry, centre, rot), out)
+    assert np.abs(out[:, :3]).max() > 0.5
+    assert np.abs(out[:, :3] - out[:, 3:]).max() < 1e-12

@@ -161,6 +161,68 @@ def build_geometry_functions(target, real):
     return lookup, sdf_at, wall_velocity
 
 
+def build_sdf_difference(target, real):
+    """``sdf_difference(k, px, py, pz, body, bint, planes, grid) -> (gx, gy, gz)``: the central differences of
+    ``sdf_at`` (:func:`build_geometry_functions`) at world point p with a step of 1/2 each side, sdf(p + e/2) -
+    sdf(p - e/2) along each world axis e: the same values, to round-off, from one rotation into the body frame
+    (the world axes there are the rows of R) and, for one convex polyhedron, one loop over its planes, each plane's
+    value at the six points being its value at p plus or minus half its rate along the axis. A union of convex
+    pieces and a periodic domain (whose nearest image may change between the points) take the six distances."""
+    _, sdf_at, _ = build_geometry_functions(target, real)
+    _, body_point = build_body_frame(target, real)
+    box_distance = build_box_distance(target, real)
+    zero, half, big = real(0.0), real(0.5), real(1e30)
+    sphere, box = SPHERE, BOX
+
+    @target.device
+    def sphere_difference(x, y, z, ex, ey, ez):
+        return (math.sqrt((x + ex) ** 2 + (y + ey) ** 2 + (z + ez) ** 2)
+                - math.sqrt((x - ex) ** 2 + (y - ey) ** 2 + (z - ez) ** 2))
+
+    @target.device
+    def sdf_difference(k, px, py, pz, body, bint, planes, grid):
+        kind = bint[k, 0]
+        one_piece = grid[3] == 0 and grid[4] == 0 and grid[5] == 0
+        if one_piece and kind != sphere and kind != box:
+            for i in range(bint[k, 1], bint[k, 1] + bint[k, 2]):
+                nn = planes[i, 0] * planes[i, 0] + planes[i, 1] * planes[i, 1] + planes[i, 2] * planes[i, 2]
+                if nn == zero or nn > real(1.5):     # a separator or a shared cap: a union of pieces
+                    one_piece = False
+        if not one_piece:
+            return (sdf_at(k, px + half, py, pz, body, bint, planes, grid)
+                    - sdf_at(k, px - half, py, pz, body, bint, planes, grid),
+                    sdf_at(k, px, py + half, pz, body, bint, planes, grid)
+                    - sdf_at(k, px, py - half, pz, body, bint, planes, grid),
+                    sdf_at(k, px, py, pz + half, body, bint, planes, grid)
+                    - sdf_at(k, px, py, pz - half, body, bint, planes, grid))
+        x, y, z = body_point(k, px, py, pz, body, grid)
+        # half a world axis in the body frame: row a of R (R^T e_a)
+        xx, xy, xz = half * body[k, 3], half * body[k, 4], half * body[k, 5]
+        yx, yy, yz = half * body[k, 6], half * body[k, 7], half * body[k, 8]
+        zx, zy, zz = half * body[k, 9], half * body[k, 10], half * body[k, 11]
+        if kind == sphere:
+            return (sphere_difference(x, y, z, xx, xy, xz), sphere_difference(x, y, z, yx, yy, yz),
+                    sphere_difference(x, y, z, zx, zy, zz))
+        if kind == box:
+            hx, hy, hz = body[k, 18], body[k, 19], body[k, 20]
+            return (box_distance(x + xx, y + xy, z + xz, hx, hy, hz) - box_distance(x - xx, y - xy, z - xz, hx, hy, hz),
+                    box_distance(x + yx, y + yy, z + yz, hx, hy, hz) - box_distance(x - yx, y - yy, z - yz, hx, hy, hz),
+                    box_distance(x + zx, y + zy, z + zz, hx, hy, hz) - box_distance(x - zx, y - zy, z - zz, hx, hy, hz))
+        xp, xm, yp, ym, zp, zm = -big, -big, -big, -big, -big, -big
+        for i in range(bint[k, 1], bint[k, 1] + bint[k, 2]):
+            nx, ny, nz = planes[i, 0], planes[i, 1], planes[i, 2]
+            v = nx * x + ny * y + nz * z + planes[i, 3]
+            rx = nx * xx + ny * xy + nz * xz
+            ry = nx * yx + ny * yy + nz * yz
+            rz = nx * zx + ny * zy + nz * zz
+            xp, xm = max(xp, v + rx), max(xm, v - rx)
+            yp, ym = max(yp, v + ry), max(ym, v - ry)
+            zp, zm = max(zp, v + rz), max(zm, v - rz)
+        return xp - xm, yp - ym, zp - zm
+
+    return sdf_difference
+
+
 def build_link_root(target, real):
     """``link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid) -> t``: where the segment p - t c,
     t in [0, 1], from a cell centre p outside body k to the centre p - c of a covered cell enters the body, in

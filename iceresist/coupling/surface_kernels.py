@@ -36,7 +36,7 @@ import numpy as np
 
 from iceresist.backends import jit
 from iceresist.coupling.bodystate import build_reach_mask
-from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions
+from iceresist.coupling.cellfunctions import build_geometry_functions, build_refill_functions, build_sdf_difference
 from iceresist.freesurface.layout import HALO1_SIDE, build_halo_or
 from iceresist.grid import flags as FL
 from iceresist.lattice import C, Q, W
@@ -249,18 +249,14 @@ def build_mirror(target, real):
     ``MIRROR_DEPTH`` of the surface; the caller checks). The link pass calls it for each covered cell it visits
     (:func:`iceresist.coupling.kernels.build_visits`): it reads phi only outside the bodies and writes it only
     inside, and the links read no phi, so one visit does both."""
-    lookup, sdf_at, _ = build_geometry_functions(target, real)
+    lookup = build_geometry_functions(target, real)[0]
+    sdf_difference = build_sdf_difference(target, real)
     zero, half, one, eps = real(0.0), real(0.5), real(1.0), real(1e-12)
     fluid = FL.FLUID
 
     @target.device
     def mirror(k, b, c, yx, yy, yz, s, body, bint, planes, grid, block_map, flags0, owner, phi):
-        nx = sdf_at(k, yx + half, yy, yz, body, bint, planes, grid) - sdf_at(k, yx - half, yy, yz, body, bint,
-                                                                             planes, grid)
-        ny = sdf_at(k, yx, yy + half, yz, body, bint, planes, grid) - sdf_at(k, yx, yy - half, yz, body, bint,
-                                                                             planes, grid)
-        nz = sdf_at(k, yx, yy, yz + half, body, bint, planes, grid) - sdf_at(k, yx, yy, yz - half, body, bint,
-                                                                             planes, grid)
+        nx, ny, nz = sdf_difference(k, yx, yy, yz, body, bint, planes, grid)
         nn = math.sqrt(nx * nx + ny * ny + nz * nz)
         if nn < eps:
             return

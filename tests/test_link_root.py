@@ -107,6 +107,36 @@ def test_link_distance_into_a_union_of_convex_pieces(roots):
     assert np.abs(t - exact).max() < 1e-9
 
 
+
+def _union():
+    a = np.array([[x, y, z] for x in (-8.0, 0.0) for y in (-3.0, 3.0) for z in (-2.0, 2.0)])
+    b = np.array([[x, y, z] for x in (0.0, 6.0) for y in (-3.0, 3.0) for z in (-2.0, 7.0)])
+    w = np.array([[6.0, -3, -2], [6, 3, -2], [6, -3, 2], [6, 3, 2], [11, 0, -2], [11, 0, 2]])
+    return ConvexUnion([a, b, w], 1.0)
+
+
+@pytest.mark.parametrize("geometry", [Sphere(5.3), Box((9.0, 6.4, 4.2)), ConvexPolyhedron(OCTAHEDRON), "union"],
+                         ids=["sphere", "box", "polyhedron", "union"])
+def test_link_distance_from_a_point_inside_is_at_most_zero(roots, geometry):
+    """The link pass (iceresist.coupling.kernels, ``link_cell``) takes the closed form before the fluid cell's own
+    signed distance, which only its fallback (t < 0) reads: a fluid cell whose centre lies inside the body (where
+    the covering differs from the signed distance by round-off) must come out at t <= 0, which the pass clamps
+    to Q_MIN as it did when it read that distance first. Every point of a quarter-cell lattice inside the rotated
+    body, with each of the 26 links, gives t <= 0 (to 1e-12). Planted: the sphere's larger root, and the
+    polyhedron's entry taken as the latest crossing of any plane (nd != 0 instead of nd > 0): fail for the sphere,
+    the polyhedron and the union."""
+    if geometry == "union":
+        geometry = _union()
+    centre, rot = np.array([31.3, 30.8, 32.6]), _rotation((1.0, 2.0, 0.5), 0.7)
+    g = np.arange(16, 48, 0.5) + 0.125
+    points = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    p = points[geometry.sdf((points - centre) @ rot) < 0]
+    assert len(p) > 1000
+    x = np.repeat(p, 26, axis=0)
+    c = np.tile(C[1:].astype(float), (len(p), 1))
+    t = roots(x, c, *_tables(geometry, centre, rot))
+    assert t.max() <= 1e-12
+
 @pytest.mark.parametrize("geometry", [Sphere(5.3), Box((9.0, 6.4, 4.2)), ConvexPolyhedron(OCTAHEDRON), "union"],
                          ids=["sphere", "box", "polyhedron", "union"])
 def test_central_difference_of_the_signed_distance_in_one_pass(geometry):

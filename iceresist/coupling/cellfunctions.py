@@ -229,8 +229,8 @@ def build_link_root(target, real):
     closed form (the link distance q_d of eq. 16): a sphere by the smaller root of |o - t d|^2 = r^2, a box by the
     latest entry into its three slabs, a convex polyhedron by the latest entry through the planes facing p,
     max over n . d > 0 of (n . o + e) / (n . d) (o = p - x_s and d = c in the body frame), a union of convex
-    pieces by the first entry into a piece the segment crosses. Returns -1 where round-off leaves no entry in
-    [0, 1]: the caller then finds the root on the signed distance."""
+    pieces by the first entry into a piece the segment crosses. A p inside the body (by round-off) gives t <= 0.
+    Returns -1 where round-off leaves no entry in [0, 1]: the caller then finds the root on the signed distance."""
     zero, one, big = real(0.0), real(1.0), real(1e30)
     sphere_kind, box_kind = SPHERE, BOX
     to_body, body_point = build_body_frame(target, real)

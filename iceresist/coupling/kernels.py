@@ -260,22 +260,26 @@ def build_visits(target, real, free_surface: bool = False):
                 continue
             cx, cy, cz = CXR[q], CYR[q], CZR[q]
             px, py, pz = yx + cx, yy + cy, yz + cz
-            # link distance: where x - t c_q, t in [0, 1], enters the body, in closed form; where round-off leaves
-            # none, the root of the SDF (Illinois regula falsi)
-            t0, s0 = zero, sdf_at(k, px, py, pz, body, bint, planes, grid)
-            t1, s1 = one, s_in
-            t = qmin if s0 <= zero else link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid)
+            # link distance: where x - t c_q, t in [0, 1], enters the body, in closed form (at most 0 where the
+            # fluid cell's centre is inside the body by round-off: q_d = Q_MIN); where round-off leaves none (t < 0),
+            # Q_MIN if that centre is inside, else the root of the SDF (Illinois regula falsi)
+            t = link_root(k, px, py, pz, cx, cy, cz, body, bint, planes, grid)
             if t < zero:
-                for _ in range(niter):
+                t0, s0 = zero, sdf_at(k, px, py, pz, body, bint, planes, grid)
+                t1, s1 = one, s_in
+                if s0 <= zero:
+                    t = qmin
+                else:
+                    for _ in range(niter):
+                        t = (t0 * s1 - t1 * s0) / (s1 - s0)
+                        st = sdf_at(k, px - t * cx, py - t * cy, pz - t * cz, body, bint, planes, grid)
+                        if st > zero:
+                            t0, s0 = t, st
+                            s1 = s1 * half
+                        else:
+                            t1, s1 = t, st
+                            s0 = s0 * half
                     t = (t0 * s1 - t1 * s0) / (s1 - s0)
-                    st = sdf_at(k, px - t * cx, py - t * cy, pz - t * cz, body, bint, planes, grid)
-                    if st > zero:
-                        t0, s0 = t, st
-                        s1 = s1 * half
-                    else:
-                        t1, s1 = t, st
-                        s0 = s0 * half
-                t = (t0 * s1 - t1 * s0) / (s1 - s0)
             qd = min(max(t, qmin), one)
             ux, uy, uz, rx, ry, rz = wall_velocity(k, px - qd * cx, py - qd * cy, pz - qd * cz, body, grid)
             o = OPPI[q]

@@ -65,6 +65,16 @@ class BlockOctree:
         self.coord = np.stack([bx.ravel(), by.ravel(), bz.ravel()], axis=1).astype(np.int64)
         self._order()
 
+    @classmethod
+    def from_leaves(cls, root, max_level: int, periodic, level, coord) -> "BlockOctree":
+        """The octree whose leaves are (``level``, ``coord``) (e.g. a checkpoint's; the caller checks that they
+        tile the domain)."""
+        t = cls(root, max_level, periodic=periodic)
+        t.level = np.asarray(level, dtype=np.int64).copy()
+        t.coord = np.asarray(coord, dtype=np.int64).reshape(-1, 3).copy()
+        t._order()
+        return t
+
     # ------------------------------------------------------------------ keys and lookup
     @property
     def nleaves(self) -> int:

@@ -23,6 +23,7 @@ everything written before.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 from pathlib import Path
@@ -201,23 +202,37 @@ class RunFile:
     def write_level_fields(self, iteration: int, time_s: float, levels, units: dict | None = None):
         """One snapshot of the leaf cells of every refinement level: ``levels`` is a list of dicts with ``level``,
         ``dx_m``, ``cells_ijk`` ((n, 3) cell indices of that level) and ``fields`` (name -> (n,) or (n, 3) array in
-        the order of ``cells_ijk``). A level's mesh is written the first time it appears (static refinement)."""
+        the order of ``cells_ijk``). A level's mesh is written when it first appears and again whenever its leaf
+        cells change (a regridding run): each snapshot's level names the mesh it sits on."""
         root = self.h5.require_group("levels")
         mesh = root.require_group("mesh")
+        names = {}
         for lv in levels:
-            name = f"level_{int(lv['level'])}"
-            if name not in mesh:
-                nodes, hexes = io_levels.hexahedra(lv["cells_ijk"], lv["dx_m"], self.origin_m)
-                g = mesh.create_group(name)
-                g.attrs["level"] = int(lv["level"])
-                g.attrs["dx_m"] = float(lv["dx_m"])
-                g.create_dataset("nodes", data=nodes)
-                g.create_dataset("hexahedra", data=hexes)
+            level = int(lv["level"])
+            cells = np.ascontiguousarray(lv["cells_ijk"], dtype=np.int64)
+            digest = hashlib.sha1(cells.tobytes()).hexdigest()
+            current = mesh.attrs.get(f"current_level_{level}")
+            if current is not None and mesh[current].attrs.get("cells_sha1", digest) == digest:
+                names[level] = current
+                continue
+            name = f"level_{level}" if f"level_{level}" not in mesh else f"level_{level}_{int(iteration):010d}"
+            nodes, hexes = io_levels.hexahedra(cells, lv["dx_m"], self.origin_m)
+            g = mesh.create_group(name)
+            g.attrs["level"] = level
+            g.attrs["dx_m"] = float(lv["dx_m"])
+            g.attrs["cells_sha1"] = digest
+            g.create_dataset("nodes", data=nodes)
+            g.create_dataset("hexahedra", data=hexes)
+            mesh.attrs[f"current_level_{level}"] = name
+            names[level] = name
         snap = root.create_group(_SNAP_FMT.format(int(iteration)))
         snap.attrs["iteration"] = int(iteration)
         snap.attrs["time_s"] = float(time_s)
         for lv in levels:
-            n = mesh[f"level_{int(lv['level'])}/hexahedra"].shape[0]
+            level = int(lv["level"])
+            n = mesh[f"{names[level]}/hexahedra"].shape[0]
+            lg = snap.create_group(f"level_{level}")
+            lg.attrs["mesh"] = names[level]
             for fname, arr in lv["fields"].items():
                 arr = np.asarray(arr)
                 if arr.shape[0] != n:
@@ -225,7 +240,7 @@ class RunFile:
                                      f"{n} cells")
                 if np.issubdtype(arr.dtype, np.floating):
                     arr = arr.astype(np.float32)
-                ds = snap.create_dataset(f"level_{int(lv['level'])}/{fname}", data=arr)
+                ds = lg.create_dataset(fname, data=arr)
                 if units and fname in units:
                     ds.attrs["units"] = units[fname]
         self.flush()
@@ -238,29 +253,39 @@ class RunFile:
         return sorted(int(k) for k in self.h5["levels"].keys() if k != "mesh")
 
     def read_level_field(self, iteration: int, level: int, name: str) -> np.ndarray:
-        """A stored level field, (n,) or (n, 3), rows in the order of the level's hexahedra."""
+        """A stored level field, (n,) or (n, 3), rows in the order of the level's hexahedra at that snapshot."""
         return self.h5["levels"][_SNAP_FMT.format(int(iteration))][f"level_{int(level)}"][name][...]
 
-    def level_mesh(self, level: int):
-        """(nodes (m, 3) metres, hexahedra (n, 8)) of one level."""
-        g = self.h5["levels"]["mesh"][f"level_{int(level)}"]
+    def _mesh_name(self, level: int, iteration: int | None) -> str:
+        if iteration is None:
+            return f"level_{int(level)}"
+        lg = self.h5["levels"][_SNAP_FMT.format(int(iteration))][f"level_{int(level)}"]
+        return str(lg.attrs.get("mesh", f"level_{int(level)}"))
+
+    def level_mesh(self, level: int, iteration: int | None = None):
+        """(nodes (m, 3) metres, hexahedra (n, 8)) of one level: its first mesh, or the one of snapshot
+        ``iteration`` (a regridding run writes a new mesh when a level's cells change)."""
+        g = self.h5["levels"]["mesh"][self._mesh_name(level, iteration)]
         return g["nodes"][...], g["hexahedra"][...]
 
     def write_levels_xdmf(self):
-        """(Re)write the levels sidecar listing every level snapshot in the file (none without levels)."""
+        """(Re)write the levels sidecar listing every level snapshot in the file (none without levels), each level
+        of each snapshot on its own mesh."""
         if "levels" not in self.h5:
             return None
         mesh = self.h5["levels"]["mesh"]
-        meshes = sorted((io_levels.LevelMesh(int(g.attrs["level"]), float(g.attrs["dx_m"]), g["nodes"].shape[0],
-                                             g["hexahedra"].shape[0]) for g in mesh.values()), key=lambda m: m.level)
+        meshes = {name: io_levels.LevelMesh(int(g.attrs["level"]), float(g.attrs["dx_m"]), g["nodes"].shape[0],
+                                            g["hexahedra"].shape[0], name) for name, g in mesh.items()}
         snaps = []
         for key in sorted(k for k in self.h5["levels"].keys() if k != "mesh"):
             g = self.h5["levels"][key]
             arrays = tuple((int(lname.split("_")[1]),
                             xdmf.Array(n, f"/levels/{key}/{lname}/{n}", tuple(ds.shape), ds.dtype.str[1:]))
                            for lname, lg in g.items() for n, ds in lg.items())
-            snaps.append(xdmf.Snapshot(float(g.attrs["time_s"]), int(g.attrs["iteration"]), arrays))
-        return io_levels.write(self.levels_xdmf_path, self.path, meshes, snaps)
+            on = tuple(sorted((meshes[str(lg.attrs.get("mesh", lname))] for lname, lg in g.items()),
+                              key=lambda m: m.level))
+            snaps.append((xdmf.Snapshot(float(g.attrs["time_s"]), int(g.attrs["iteration"]), arrays), on))
+        return io_levels.write(self.levels_xdmf_path, self.path, snaps)
 
     # -- time series ----------------------------------------------------------------------------------
     def append_timeseries(self, row: dict, group: str = "timeseries"):

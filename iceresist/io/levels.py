@@ -1,7 +1,8 @@
 """The leaves of every refinement level as hexahedra, with an XDMF sidecar so ParaView opens the levels of a refined
 run as one multiblock data set (paper section 2.5, fig. 1).
 
-A level's leaf cells are written once (static refinement) as an unstructured mesh: shared corner nodes ``nodes``
+A level's leaf cells are written as an unstructured mesh when they first appear and again when they change (a
+regridding run; each snapshot's level names its mesh in the attribute ``mesh``): shared corner nodes ``nodes``
 (m, 3) in metres, x y z, and ``hexahedra`` (n, 8), the eight node indices of each cell in VTK's order (the bottom
 face counter-clockwise, then the top face). Field values sit at the cell centres (``Center="Cell"``), one row per
 leaf cell, in the order of the mesh. The sidecar is a temporal collection of spatial collections, one grid per level
@@ -10,10 +11,12 @@ named ``level_<l>``, so ParaView shows each level as a block that can be coloure
 Layout inside the run's HDF5 file (:class:`~iceresist.io.hdf5.RunFile`)::
 
     levels/                   attrs: levels (the levels present)
-      mesh/level_1/           attrs: level, dx_m
+      mesh/level_1/           attrs: level, dx_m, cells_sha1
         nodes       [m, 3]    float64, metres
         hexahedra   [n, 8]    int64
+      mesh/level_1_0000000200/  the same level after a regrid at iteration 200
       0000000100/             one snapshot, attrs: iteration, time_s
+        level_1/              attrs: mesh (the name of its mesh group)
         level_1/rho [n]       float32
         level_1/u   [n, 3]    float32
 """
@@ -54,10 +57,15 @@ class LevelMesh:
     dx_m: float
     nodes: int
     cells: int
+    name: str = ""
+
+    @property
+    def group(self) -> str:
+        return self.name or f"level_{self.level}"
 
 
 def _grid(h5_name: str, mesh: LevelMesh, arrays) -> list[str]:
-    base = f"/levels/mesh/level_{mesh.level}"
+    base = f"/levels/mesh/{mesh.group}"
     out = [f'        <Grid Name="level_{mesh.level}" GridType="Uniform">\n',
            f'          <Topology TopologyType="Hexahedron" NumberOfElements="{mesh.cells}">\n',
            f'            <DataItem Dimensions="{mesh.cells} 8" NumberType="Int" Precision="8" Format="HDF">'
@@ -72,13 +80,13 @@ def _grid(h5_name: str, mesh: LevelMesh, arrays) -> list[str]:
     return out
 
 
-def render(h5_name: str, meshes, snapshots) -> str:
-    """The XDMF text: a temporal collection of ``snapshots`` (:class:`iceresist.io.xdmf.Snapshot` whose arrays are
-    (level, :class:`~iceresist.io.xdmf.Array`) pairs, the shapes (n,) or (n, 3)), each a spatial collection of the
-    ``meshes`` (one grid per level)."""
+def render(h5_name: str, snapshots) -> str:
+    """The XDMF text: a temporal collection of ``snapshots``, pairs of an :class:`iceresist.io.xdmf.Snapshot` (whose
+    arrays are (level, :class:`~iceresist.io.xdmf.Array`) pairs, the shapes (n,) or (n, 3)) and the
+    :class:`LevelMesh` of each level it holds; each a spatial collection of one grid per level."""
     out = ['<?xml version="1.0" ?>\n', '<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>\n', '<Xdmf Version="2.0">\n',
            '  <Domain>\n', '    <Grid Name="levels" GridType="Collection" CollectionType="Temporal">\n']
-    for snap in snapshots:
+    for snap, meshes in snapshots:
         out += [f'      <Grid Name="iteration_{snap.iteration}" GridType="Collection" CollectionType="Spatial">\n',
                 f'        <Time Value="{snap.time_s!r}"/>\n']
         for mesh in meshes:
@@ -88,10 +96,10 @@ def render(h5_name: str, meshes, snapshots) -> str:
     return "".join(out)
 
 
-def write(xdmf_path, h5_path, meshes, snapshots) -> Path:
+def write(xdmf_path, h5_path, snapshots) -> Path:
     """Write the levels sidecar atomically (temporary name, then rename) next to the HDF5 file it points to."""
     xdmf_path = Path(xdmf_path)
-    text = render(Path(h5_path).name, meshes, snapshots)
+    text = render(Path(h5_path).name, snapshots)
     tmp = xdmf_path.with_name(f".{xdmf_path.name}.tmp{os.getpid()}")
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, xdmf_path)

@@ -469,9 +469,11 @@ class RefinedLBM:
             self._advance(finer)
 
     def step(self, n: int = 1):
-        """Advance the coarsest level by ``n`` steps (level l by n 2^(l - coarsest))."""
+        """Advance by ``n`` level-0 steps: level l by n 2^l steps (an octree whose coarsest leaves are finer than
+        level 0, e.g. after a regrid, still steps by level-0 steps)."""
         for _ in range(int(n)):
-            self._advance(self.levels[0])
+            for _ in range(2 ** self.levels[0]):
+                self._advance(self.levels[0])
             self.iteration += 1
 
     def leaf_fields(self, lv: int):

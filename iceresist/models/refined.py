@@ -40,17 +40,13 @@ def available_memory_bytes() -> int:
         return 1 << 62
 
 
-def build_octree(scene: Scene):
-    """The static octree of a scene's ``[refinement]``: level-0 blocks of ``domain.dx_m``; a block takes the highest
-    level of the regions its box overlaps (the boxes, the band around the still-water level, the bands along the
-    solid faces), then 2:1 balance."""
-    from iceresist.grid.octree import BlockOctree
-
+def static_regions(scene: Scene) -> list:
+    """The regions of a scene's ``[refinement]`` that do not move, as (lo, hi, level) in level-0 cell units: the
+    boxes, the band around the still-water level, the bands along the solid faces, the bodies' boxes at the
+    start."""
     ref = scene.refinement
     dx = scene.domain.dx_m or 1.0
     shape = scene.domain.shape_cells()
-    periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
-    t = BlockOctree(tuple(n // 8 for n in shape), ref.levels, periodic=periodic)
     boxes = [(np.asarray(b.lo_m) / dx, np.asarray(b.hi_m) / dx, b.level) for b in ref.boxes]
     if ref.surface_band_m is not None:
         depth, band = scene.free_surface.water_depth_m / dx, ref.surface_band_m / dx
@@ -73,12 +69,30 @@ def build_octree(scene: Scene):
                 lo, hi = np.full(3, -np.inf), np.full(3, np.inf)
                 lo[a], hi[a] = (n - band, n + band)
                 boxes.append((lo, hi, ref.levels))
+    return boxes
+
+
+def build_octree(scene: Scene, hot: np.ndarray | None = None):
+    """The octree of a scene's ``[refinement]``: level-0 blocks of ``domain.dx_m``; a block takes the highest level
+    of the regions its box overlaps (:func:`static_regions`) and, where ``hot`` (a bool array on the level-0 cells:
+    the cells a moving criterion marks, e.g. vorticity) holds a True cell in its box, the finest level; then 2:1
+    balance."""
+    from iceresist.grid.octree import BlockOctree
+    from iceresist.grid.regrid import any_in_boxes
+
+    ref = scene.refinement
+    shape = scene.domain.shape_cells()
+    periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
+    t = BlockOctree(tuple(n // 8 for n in shape), ref.levels, periodic=periodic)
+    boxes = static_regions(scene)
 
     def wanted(lo, hi):
         level = np.zeros(len(lo), dtype=np.int64)
         for blo, bhi, lv in boxes:
             overlap = ((lo < bhi[None, :]) & (hi > blo[None, :])).all(axis=1)
             level = np.where(overlap, np.maximum(level, lv), level)
+        if hot is not None:
+            level = np.where(any_in_boxes(hot, lo, hi), ref.levels, level)
         return level
 
     return t.refine(wanted)
@@ -89,6 +103,9 @@ class RefinedFluidModel(Model):
     interface, every level's state and the transfers on the device)."""
 
     components = ("fluid", "refinement")
+
+    #: Whether the model regrids (``refinement.regrid_every_steps``, :meth:`regrid`): the fluid alone so far.
+    regrids = True
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
         from iceresist.grid.levels import level_views
@@ -108,42 +125,113 @@ class RefinedFluidModel(Model):
             raise InputError("refinement.scheme: the interpolating level interface runs on the CPU only; use "
                              "scheme = \"conservative\" with backend = \"cuda\"")
         self.precision = precision or scene.numerics.precision
+        ref = scene.refinement
+        if ref.regrid_every_steps is not None and not self.regrids:
+            raise InputError("refinement.regrid_every_steps: regridding runs for the fluid alone so far (no "
+                             "[free_surface], no [[bodies]]); leave refinement.regrid_every_steps and "
+                             "refinement.vorticity_1_s out")
+        self.regrid_every = ref.regrid_every_steps
+        self.regrid_count = 0
         self.octree = build_octree(scene)
         views = level_views(self.octree, forest_faces(scene, u))
         self.level_bytes = self._level_bytes(views)
-        total = sum(self.level_bytes.values())
         for lv, nbytes in self.level_bytes.items():
             v = views[lv]
             log.info("refinement level %d: dx %.4g m, %d leaf blocks + %d ghost blocks, %.3g MB", lv,
                      u.dx_m / 2 ** lv, v.nleaves, v.nghosts, nbytes / 1e6)
+        self._check_memory(self.level_bytes)
+        fl = scene.fluid
+        self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
+                                   for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
+        self._build()
+        self._count_cells()
+        self.dt_s = u.dt_s
+
+    def _check_memory(self, level_bytes: dict):
+        total = sum(level_bytes.values())
         free = available_memory_bytes()
         if total > MEMORY_SHARE * free:
             raise InputError(f"refinement.levels: the blocks need {total / 2**30:.3g} GiB, more than "
                              f"{MEMORY_SHARE:.0%} of the {free / 2**30:.3g} GiB available; use fewer levels or "
                              f"smaller refinement.boxes")
-        fl = scene.fluid
-        self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
-                                   for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
-        self._build()
+
+    def _count_cells(self):
         self.cells_per_level = {lv: int(self.lbm.views[lv].nleaves) * CELLS for lv in self.lbm.levels}
         self.cells = int(sum(self.cells_per_level.values()))
-        self.dt_s = u.dt_s
 
     def _level_bytes(self, views) -> dict[int, int]:
         """Bytes each level's blocks take (leaves and ghosts): both population buffers."""
         itemsize = np.dtype(self.precision).itemsize
         return {v.level: 2 * Q * CELLS * itemsize * v.forest.nblocks for v in views if v is not None}
 
-    def _build(self):
-        """The levels' solver (``self.lbm``), initialised from the scene."""
+    def _build(self, initialize: bool = True):
+        """The levels' solver (``self.lbm``) on ``self.octree``, initialised from the scene (or left for the caller
+        to fill: a regrid, a pickup)."""
         from iceresist.lbm.refinement import RefinedLBM
 
         scene, u, fl = self.scene, self.units, self.scene.fluid
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
                               rescale=scene.refinement.scheme == "interpolate", target=self.target)
-        u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
-        self.lbm.initialize(1.0, u0)
+        if initialize:
+            u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
+            self.lbm.initialize(1.0, u0)
+
+    # -- regridding ---------------------------------------------------------------------------------------
+    def hot_cells(self) -> np.ndarray:
+        """The level-0 cells a moving criterion marks for the finest level: vorticity |curl u| above
+        ``refinement.vorticity_1_s``, from the velocity on the level-0 grid (central differences over level-0
+        cells)."""
+        from iceresist.grid.regrid import vorticity_magnitude
+
+        _, u_lat, _ = self._level0()
+        threshold = self.scene.refinement.vorticity_1_s * self.units.dt_s      # per level-0 step
+        return vorticity_magnitude(np.nan_to_num(u_lat)) > threshold
+
+    def regrid(self) -> bool:
+        """Build the octree again from the criteria on the current flow (:func:`build_octree`, :meth:`hot_cells`);
+        where it changed, carry every level's populations to the new blocks (:func:`iceresist.grid.regrid.carry_over`)
+        and step on from there. Returns whether the blocks changed."""
+        from iceresist.grid.levels import level_views
+
+        octree = build_octree(self.scene, self.hot_cells())
+        if np.array_equal(octree.level, self.octree.level) and np.array_equal(octree.coord, self.octree.coord):
+            return False
+        views = level_views(octree, forest_faces(self.scene, self.units))
+        level_bytes = self._level_bytes(views)
+        try:
+            self._check_memory(level_bytes)
+        except InputError as err:
+            log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.iteration, err)
+            return False
+        old_views = self.lbm.views
+        old = {lv: s.populations() for lv, s in self.lbm.solvers.items()}
+        self._adopt(octree, level_bytes)
+        self._fill(old_views, old)
+        self.regrid_count += 1
+        log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.iteration,
+                 [int(n) for n in octree.blocks_per_level()])
+        return True
+
+    def _adopt(self, octree, level_bytes: dict):
+        """New levels' solvers on ``octree`` (their populations to be filled), the iteration kept."""
+        iteration = self.iteration
+        self.octree = octree
+        self.level_bytes = level_bytes
+        self._build(initialize=False)
+        self.lbm.iteration = iteration
+        self._count_cells()
+
+    def _fill(self, old_views, old: dict):
+        """The new levels' populations (leaves and ghosts) from ``old`` (per level, over ``old_views``' forests)."""
+        from iceresist.grid.regrid import carry_over
+        from iceresist.models.fluid import _set_populations
+
+        new = {lv: np.zeros((s.forest.nblocks, Q, CELLS)) for lv, s in self.lbm.solvers.items()}
+        carry_over(old_views, old, self.lbm.views, new)
+        for lv, s in self.lbm.solvers.items():
+            _set_populations(s, new[lv].astype(s.real))
+            s.iteration = self.iteration * 2 ** lv
 
     # -- protocol -------------------------------------------------------------------------------------
     @property
@@ -151,7 +239,18 @@ class RefinedFluidModel(Model):
         return int(self.lbm.iteration)
 
     def step(self, n: int = 1):
-        self.lbm.step(n)
+        """``n`` level-0 steps; with ``refinement.regrid_every_steps`` a :meth:`regrid` after every step that is
+        a multiple of it."""
+        n = int(n)
+        if not self.regrid_every:
+            self.lbm.step(n)
+            return
+        while n > 0:
+            k = min(n, self.regrid_every - self.iteration % self.regrid_every)
+            self.lbm.step(k)
+            n -= k
+            if self.iteration % self.regrid_every == 0:
+                self.regrid()
 
     @property
     def lattice_updates_per_step(self) -> int:
@@ -230,8 +329,11 @@ class RefinedFluidModel(Model):
             mass += float(u.density_to_physical(rho).sum() * vol)
             ke += float(0.5 * (u.density_to_physical(rho) * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
             umax = max(umax, float(np.sqrt(speed2.max())))
-        return {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
-                "max_lattice_speed": umax}
+        out = {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
+               "max_lattice_speed": umax}
+        if self.regrid_every:
+            out["leaf_cells"] = float(self.cells)
+        return out
 
     def watchdog_probe(self) -> dict:
         from iceresist.models.probe import fluid_probe
@@ -246,23 +348,50 @@ class RefinedFluidModel(Model):
         (the level and coordinates of every leaf)."""
         return {"f": {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()},
                 "iteration": np.int64(self.iteration), "precision": self.precision,
-                "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}
+                "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
+                "regrid_count": np.int64(self.regrid_count)}
 
     def check_checkpoint(self, state: dict):
-        """A checkpoint of another precision or another block octree is refused in one line."""
+        """A checkpoint of another precision or another block octree is refused in one line (a regridding run
+        takes the checkpoint's octree if the scene's allows it: same root blocks and at most its levels)."""
         if state.get("precision", self.precision) != self.precision:
             raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
                              f"restart with --precision {state.get('precision')}")
         lev, coord = state.get("octree_level"), state.get("octree_coord")
-        if lev is None or coord is None or not (np.array_equal(lev, self.octree.level)
-                                                and np.array_equal(coord, self.octree.coord)):
-            raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or "
-                             "regions changed): run the scene again without --pickup")
+        if lev is None or coord is None:
+            raise InputError("the checkpoint holds no block octree: it belongs to a run without [refinement]; run "
+                             "the scene again without --pickup")
+        if np.array_equal(lev, self.octree.level) and np.array_equal(coord, self.octree.coord):
+            return
+        if self.regrid_every and self._octree_of(state) is not None:
+            return
+        raise InputError("the checkpoint's block octree differs from this scene's [refinement] (levels or "
+                         "regions changed): run the scene again without --pickup")
+
+    def _octree_of(self, state: dict):
+        """The checkpoint's octree on this scene's root blocks, None if its leaves do not tile this domain."""
+        from iceresist.grid.octree import BlockOctree
+
+        lev = np.asarray(state["octree_level"], dtype=np.int64)
+        coord = np.asarray(state["octree_coord"], dtype=np.int64)
+        t = self.octree
+        if lev.ndim != 1 or coord.shape != (len(lev), 3) or len(lev) == 0 or lev.max() > t.max_level:
+            return None
+        volume = (8.0 ** -lev.astype(float)).sum()
+        if abs(volume - float(np.prod(t.root))) > 1e-9 or (coord >= (t.root[None, :] << lev[:, None])).any():
+            return None
+        return BlockOctree.from_leaves(t.root, t.max_level, t.periodic, lev, coord)
 
     def load_state(self, state: dict):
+        from iceresist.grid.levels import level_views
         from iceresist.models.fluid import _set_populations
 
         self.check_checkpoint(state)
+        if not (np.array_equal(state["octree_level"], self.octree.level)
+                and np.array_equal(state["octree_coord"], self.octree.coord)):
+            octree = self._octree_of(state)             # a regridding run picks up on its last grid
+            self._adopt(octree, self._level_bytes(level_views(octree, forest_faces(self.scene, self.units))))
+        self.regrid_count = int(state.get("regrid_count", self.regrid_count))
         f = state.get("f", {})
         for lv, s in self.lbm.solvers.items():
             arr = np.asarray(f.get(str(lv), np.zeros(0)))
@@ -278,7 +407,8 @@ class RefinedFluidModel(Model):
         return {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
                 "levels": len(per) - 1, "leaf_blocks_per_level": [int(n) for n in per],
                 "cells_per_level": {str(k): v for k, v in self.cells_per_level.items()},
-                "scheme": self.scene.refinement.scheme, "operator": self.scene.fluid.operator,
+                "scheme": self.scene.refinement.scheme, "regrid_every_steps": self.regrid_every,
+                "vorticity_1_s": self.scene.refinement.vorticity_1_s, "operator": self.scene.fluid.operator,
                 "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
                 "force_lattice": list(self.force_lattice), "unit_system": self.scene.scene.units}
 

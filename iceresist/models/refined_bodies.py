@@ -25,6 +25,8 @@ from iceresist.models.refined import RefinedFluidModel
 class RefinedBodiesModel(RefinedFluidModel):
     """Boxes, spheres and convex meshes, fixed, prescribed or free, in a fluid on refined levels (module docstring)."""
 
+    regrids = False
+
     components = ("fluid", "dem", "coupling", "refinement")
 
     #: The DEM, wall and shape builders of the uniform-grid bodies model, shared as they are.

@@ -26,6 +26,8 @@ from iceresist.models.refined import RefinedFluidModel
 class RefinedFreeSurfaceModel(RefinedFluidModel):
     """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA)."""
 
+    regrids = False
+
     components = ("fluid", "free_surface", "refinement")
 
     def _level_bytes(self, views) -> dict[int, int]:

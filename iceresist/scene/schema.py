@@ -474,6 +474,15 @@ class Refinement(_Section):
     body_band_m: float | None = Field(
         None, gt=0, description="With `[[bodies]]`: the blocks within this distance (m; cells in a lattice scene) "
         "of a body's bounding box at the start take the finest level, where the bodies and their coupling live.")
+    vorticity_1_s: float | None = Field(
+        None, gt=0, description="With `regrid_every_steps`: the blocks holding a cell whose vorticity |curl u| "
+        "(1/s; per time unit in a lattice scene), on the level-0 grid, exceeds this take the finest level: the "
+        "eddies. Regridding follows them.")
+    regrid_every_steps: int | None = Field(
+        None, ge=1, description="Regrid every this many level-0 steps: the octree is built again from the criteria "
+        "(the static regions above and `vorticity_1_s` on the current flow) and every cell's populations carried "
+        "to the new blocks (a refined cell copies its parent, a coarsened one takes the mean of its children: mass "
+        "to round-off; iceresist.grid.regrid). The fluid alone so far.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
@@ -481,9 +490,14 @@ class Refinement(_Section):
 
     @model_validator(mode="after")
     def _levels(self):
-        if not self.boxes and self.surface_band_m is None and self.wall_band_m is None and self.body_band_m is None:
+        if (self.vorticity_1_s is None) != (self.regrid_every_steps is None):
+            key = "regrid_every_steps" if self.regrid_every_steps is None else "vorticity_1_s"
+            raise ValueError(f"{key}: regridding needs both refinement.regrid_every_steps (e.g. 50) and a criterion "
+                             "that moves, refinement.vorticity_1_s (e.g. 5.0)")
+        if (not self.boxes and self.surface_band_m is None and self.wall_band_m is None and self.body_band_m is None
+                and self.vorticity_1_s is None):
             raise ValueError("boxes: give at least one [[refinement.boxes]], refinement.surface_band_m, "
-                             "refinement.wall_band_m or refinement.body_band_m")
+                             "refinement.wall_band_m, refinement.body_band_m or refinement.vorticity_1_s")
         for i, b in enumerate(self.boxes):
             if b.level > self.levels:
                 raise ValueError(f"boxes[{i}].level: {b.level} is finer than levels = {self.levels}; use a level "

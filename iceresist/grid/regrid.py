@@ -1,0 +1,126 @@
+"""Regridding: a new block octree from criteria, and per-cell state carried from the old forest to the new one
+(paper section 2.5: the blocks follow the ice, the hull, the surface and the eddies).
+
+Both octrees cover the domain with their leaves exactly once, so every cell of a block of the new forest at level L
+(a leaf or a ghost, :mod:`iceresist.grid.levels`) lies either in one leaf of the old forest at a level m <= L, or
+over old leaves of levels m > L. :func:`carry_over` gives it, per component (each population, phi, ...):
+
+* from an old leaf of level m <= L the value of the old cell that holds it (a refined cell copies its parent: the
+  constant reconstruction of the conservative level interface, Rohde et al. 2006);
+* from old leaves of level m > L the mean of the 8^(m - L) old cells inside it (the coalescence of that interface).
+
+For populations in the f - w form, rho_cell = 1 + sum_q (f - w), so the mass sum_cells rho_cell (dx_0 / 2^L)^3 over
+the leaves is carried over to round-off: a copy repeats a cell's value in 8^(L - m) cells of 1/8^(L - m) its
+volume, a mean sums 8^(m - L) cells with weights 1/8^(m - L) (powers of two, exact in binary). So is a conserved
+scalar such as phi. The non-equilibrium part is carried unscaled, as across the level interface of the conservative
+scheme (:class:`iceresist.lbm.refinement.RefinedLBM`).
+
+Everything here is integer and float NumPy on the host: a regrid runs every N steps, not every step.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from iceresist.grid.forest import BLOCK, CELLS
+from iceresist.grid.levels import LevelView
+
+_LOCAL = np.stack(np.meshgrid(np.arange(BLOCK), np.arange(BLOCK), np.arange(BLOCK), indexing="ij"),
+                  axis=-1).transpose(2, 1, 0, 3).reshape(CELLS, 3).astype(np.int64)
+"""(512, 3): the (x, y, z) of cell c = x + 8 (y + 8 z) of a block."""
+
+
+def _cells(view: LevelView, leaves_only: bool):
+    """Global cell coordinates (n, 3) at the view's level of its blocks' cells (block-major) and the block of each."""
+    nb = view.nleaves if leaves_only else view.forest.nblocks
+    origin = np.asarray(view.forest.origin[:nb], dtype=np.int64)
+    xyz = (origin[:, None, :] * BLOCK + _LOCAL[None, :, :]).reshape(-1, 3)
+    return xyz, np.repeat(np.arange(nb, dtype=np.int64), CELLS)
+
+
+def _flat_index(view: LevelView, xyz: np.ndarray, leaves_only: bool):
+    """Flat index block * 512 + cell of global cells ``xyz`` (at the view's level) in the view's forest, -1 where
+    no block (or, with ``leaves_only``, no leaf block) holds them."""
+    bm = view.block_map
+    shape = np.array(bm.shape, dtype=np.int64)
+    b3 = xyz >> 3
+    inside = ((b3 >= 0) & (b3 < shape[None, :])).all(axis=1)
+    blk = np.full(len(xyz), -1, dtype=np.int64)
+    blk[inside] = bm[b3[inside, 0], b3[inside, 1], b3[inside, 2]]
+    if leaves_only:
+        blk[blk >= view.nleaves] = -1
+    local = xyz & 7
+    c = local[:, 0] + BLOCK * (local[:, 1] + BLOCK * local[:, 2])
+    return np.where(blk >= 0, blk * CELLS + c, -1)
+
+
+def _as_cells(a: np.ndarray) -> np.ndarray:
+    """A per-block field ``[block, ..., cell]`` as ``[block * 512 + cell, component]`` (a copy)."""
+    a = np.asarray(a)
+    return np.moveaxis(a.reshape(a.shape[0], -1, a.shape[-1]), -1, 1).reshape(-1, int(np.prod(a.shape[1:-1],
+                                                                                              dtype=np.int64)))
+
+
+def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: dict) -> None:
+    """Fill ``new_fields[level]`` (``[block, ..., 512]``, every block of the new level's forest: leaves and
+    ghosts) from ``old_fields[level]`` (the same layout over the old level's forest; only its leaves are read), as
+    the module docstring says. ``old_views`` and ``new_views`` are :func:`iceresist.grid.levels.level_views` of the
+    two octrees (None for a level without leaves). Raises RuntimeError if a new cell is not covered exactly once
+    (the two octrees do not cover the same domain)."""
+    old_levels = [v.level for v in old_views if v is not None]
+    for nv in new_views:
+        if nv is None:
+            continue
+        L = nv.level
+        dst = new_fields[L]
+        xyz, _ = _cells(nv, leaves_only=False)
+        ncomp = int(np.prod(dst.shape[1:-1], dtype=np.int64))
+        acc = np.zeros((len(xyz), ncomp), dtype=np.float64)
+        weight = np.zeros(len(xyz), dtype=np.float64)
+        for m in old_levels:
+            ov = old_views[m]
+            src = _as_cells(old_fields[m])
+            if m <= L:
+                idx = _flat_index(ov, xyz >> (L - m), leaves_only=True)
+                hit = idx >= 0
+                acc[hit] += src[idx[hit]]
+                weight[hit] += 1.0
+            else:
+                oxyz, _ = _cells(ov, leaves_only=True)
+                idx = _flat_index(nv, oxyz >> (m - L), leaves_only=False)
+                hit = idx >= 0
+                w = 1.0 / 8.0 ** (m - L)
+                np.add.at(acc, idx[hit], w * src[:len(oxyz)][hit])
+                np.add.at(weight, idx[hit], w)
+        if not np.allclose(weight, 1.0, rtol=0.0, atol=1e-12):
+            bad = int(np.count_nonzero(np.abs(weight - 1.0) > 1e-12))
+            raise RuntimeError(f"regrid: {bad} cells of level {L} are not covered exactly once by the old leaves")
+        out = acc.reshape(dst.shape[0], CELLS, ncomp)
+        dst[...] = np.moveaxis(out, 1, -1).reshape(dst.shape).astype(dst.dtype, copy=False)
+
+
+def any_in_boxes(mask: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Whether any True cell of ``mask`` (a bool array on the level-0 cells) overlaps each box [lo, hi) (corners in
+    level-0 cell units, (n, 3)); a box smaller than a cell looks at the cell that holds it. By a summed-volume table:
+    O(1) per box."""
+    shape = np.array(mask.shape, dtype=np.int64)
+    s = np.zeros(tuple(shape + 1), dtype=np.int64)
+    s[1:, 1:, 1:] = mask.astype(np.int64).cumsum(0).cumsum(1).cumsum(2)
+    i0 = np.clip(np.floor(lo).astype(np.int64), 0, shape)
+    i1 = np.clip(np.ceil(hi).astype(np.int64), 0, shape)
+    i1 = np.maximum(i1, np.minimum(i0 + 1, shape))
+    a0, b0, c0 = i0.T
+    a1, b1, c1 = i1.T
+    total = (s[a1, b1, c1] - s[a0, b1, c1] - s[a1, b0, c1] - s[a1, b1, c0]
+             + s[a0, b0, c1] + s[a0, b1, c0] + s[a1, b0, c0] - s[a0, b0, c0])
+    return total > 0
+
+
+def vorticity_magnitude(u: np.ndarray, dx: float = 1.0) -> np.ndarray:
+    """|curl u| of a velocity ``u`` (3, nx, ny, nz) on a uniform grid of spacing ``dx`` (central differences,
+    one-sided at the edges): 1/s for u in m/s and dx in m."""
+    grads = [np.gradient(u[a], dx) for a in range(3)]        # grads[a][b] = d u_a / d x_b
+    wx = grads[2][1] - grads[1][2]
+    wy = grads[0][2] - grads[2][0]
+    wz = grads[1][0] - grads[0][1]
+    return np.sqrt(wx * wx + wy * wy + wz * wz)

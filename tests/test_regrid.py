@@ -336,3 +336,29 @@ def test_a_regrid_on_cuda_matches_the_cpu():
         n = cpu.lbm.views[lv].nleaves
         assert np.abs(a[:n] - b[:n]).max() < 1e-13
         assert np.abs(a[:n]).max() > 1e-3
+
+
+def test_a_pickup_rewrites_the_level_meshes_of_the_snapshots_it_dropped(tmp_path):
+    """The run file of a regridding run: level 1 on cells A at 10, B at 20; a pickup from 10 drops the snapshot at
+    20 and its mesh, then writes C at 15 and B again at 20. Every snapshot sits on a mesh of its own cells, no
+    mesh is left that no snapshot uses. Planted: the dropped snapshot's mesh kept (its name taken when B comes
+    back) fails."""
+    from iceresist.io.hdf5 import RunFile
+
+    cells = {k: np.stack(np.meshgrid(np.arange(n), np.arange(2), np.arange(2), indexing="ij"), -1).reshape(-1, 3)
+             for k, n in (("A", 2), ("B", 3), ("C", 4))}
+
+    def write(rf, it, k):
+        rf.write_level_fields(it, 0.1 * it, [{"level": 1, "dx_m": 0.5, "cells_ijk": cells[k],
+                                              "fields": {"rho": np.full(len(cells[k]), float(it))}}])
+
+    with RunFile(tmp_path / "r.h5", "w", shape_cells=(8, 8, 8)) as rf:
+        write(rf, 10, "A")
+        write(rf, 20, "B")
+        rf.truncate_after(10)
+        write(rf, 15, "C")
+        write(rf, 20, "B")
+        assert rf.level_snapshot_iterations() == [10, 15, 20]
+        for it, k in ((10, "A"), (15, "C"), (20, "B")):
+            assert len(rf.level_mesh(1, it)[1]) == len(cells[k]) == len(rf.read_level_field(it, 1, "rho"))
+        assert len(rf.h5["levels"]["mesh"]) == 3

@@ -212,10 +212,13 @@ class RunFile:
             cells = np.ascontiguousarray(lv["cells_ijk"], dtype=np.int64)
             digest = hashlib.sha1(cells.tobytes()).hexdigest()
             current = mesh.attrs.get(f"current_level_{level}")
-            if current is not None and mesh[current].attrs.get("cells_sha1", digest) == digest:
+            if current is not None and current in mesh and mesh[current].attrs.get("cells_sha1", digest) == digest:
                 names[level] = current
                 continue
             name = f"level_{level}" if f"level_{level}" not in mesh else f"level_{level}_{int(iteration):010d}"
+            k = 1
+            while name in mesh:
+                name, k = f"level_{level}_{int(iteration):010d}_{k}", k + 1
             nodes, hexes = io_levels.hexahedra(cells, lv["dx_m"], self.origin_m)
             g = mesh.create_group(name)
             g.attrs["level"] = level
@@ -267,6 +270,25 @@ class RunFile:
         ``iteration`` (a regridding run writes a new mesh when a level's cells change)."""
         g = self.h5["levels"]["mesh"][self._mesh_name(level, iteration)]
         return g["nodes"][...], g["hexahedra"][...]
+
+    def _drop_unused_meshes(self):
+        """Delete the level meshes no snapshot sits on (those of snapshots a pickup dropped), and point each level's
+        current mesh at the latest snapshot's, so that the rerun writes its meshes again where its cells differ."""
+        if "levels" not in self.h5:
+            return
+        mesh = self.h5["levels"]["mesh"]
+        used, current = set(), {}
+        for key in self.level_snapshot_iterations():
+            for lname, lg in self.h5["levels"][_SNAP_FMT.format(key)].items():
+                name = str(lg.attrs.get("mesh", lname))
+                used.add(name)
+                current[int(lname.split("_")[1])] = name
+        for name in [n for n in mesh.keys() if n not in used]:
+            del mesh[name]
+        for attr in [a for a in mesh.attrs.keys() if a.startswith("current_level_")]:
+            del mesh.attrs[attr]
+        for level, name in current.items():
+            mesh.attrs[f"current_level_{level}"] = name
 
     def write_levels_xdmf(self):
         """(Re)write the levels sidecar listing every level snapshot in the file (none without levels), each level
@@ -326,6 +348,7 @@ class RunFile:
         for key in self.level_snapshot_iterations():
             if key > iteration:
                 del self.h5["levels"][_SNAP_FMT.format(key)]
+        self._drop_unused_meshes()
         for gname in list(self.h5.keys()):
             g = self.h5[gname]
             if isinstance(g, h5py.Group) and "iteration" in g and isinstance(g["iteration"], h5py.Dataset):

@@ -30,12 +30,11 @@ _LOCAL = np.stack(np.meshgrid(np.arange(BLOCK), np.arange(BLOCK), np.arange(BLOC
 """(512, 3): the (x, y, z) of cell c = x + 8 (y + 8 z) of a block."""
 
 
-def _cells(view: LevelView, leaves_only: bool):
-    """Global cell coordinates (n, 3) at the view's level of its blocks' cells (block-major) and the block of each."""
+def _cells(view: LevelView, leaves_only: bool) -> np.ndarray:
+    """Global cell coordinates (n, 3) at the view's level of its blocks' cells, block-major."""
     nb = view.nleaves if leaves_only else view.forest.nblocks
     origin = np.asarray(view.forest.origin[:nb], dtype=np.int64)
-    xyz = (origin[:, None, :] * BLOCK + _LOCAL[None, :, :]).reshape(-1, 3)
-    return xyz, np.repeat(np.arange(nb, dtype=np.int64), CELLS)
+    return (origin[:, None, :] * BLOCK + _LOCAL[None, :, :]).reshape(-1, 3)
 
 
 def _flat_index(view: LevelView, xyz: np.ndarray, leaves_only: bool):
@@ -73,7 +72,7 @@ def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: d
             continue
         L = nv.level
         dst = new_fields[L]
-        xyz, _ = _cells(nv, leaves_only=False)
+        xyz = _cells(nv, leaves_only=False)
         ncomp = int(np.prod(dst.shape[1:-1], dtype=np.int64))
         acc = np.zeros((len(xyz), ncomp), dtype=np.float64)
         weight = np.zeros(len(xyz), dtype=np.float64)
@@ -86,7 +85,7 @@ def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: d
                 acc[hit] += src[idx[hit]]
                 weight[hit] += 1.0
             else:
-                oxyz, _ = _cells(ov, leaves_only=True)
+                oxyz = _cells(ov, leaves_only=True)
                 idx = _flat_index(nv, oxyz >> (m - L), leaves_only=False)
                 hit = idx >= 0
                 w = 1.0 / 8.0 ** (m - L)

@@ -195,7 +195,7 @@ class RefinedFluidModel(Model):
         from iceresist.grid.levels import level_views
 
         octree = build_octree(self.scene, self.hot_cells())
-        if np.array_equal(octree.level, self.octree.level) and np.array_equal(octree.coord, self.octree.coord):
+        if self._is_current(octree.level, octree.coord):
             return False
         views = level_views(octree, forest_faces(self.scene, self.units))
         level_bytes = self._level_bytes(views)
@@ -212,6 +212,10 @@ class RefinedFluidModel(Model):
         log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.iteration,
                  [int(n) for n in octree.blocks_per_level()])
         return True
+
+    def _is_current(self, level, coord) -> bool:
+        """Whether the leaves (``level``, ``coord``) are those of the current octree."""
+        return np.array_equal(level, self.octree.level) and np.array_equal(coord, self.octree.coord)
 
     def _adopt(self, octree, level_bytes: dict):
         """New levels' solvers on ``octree`` (their populations to be filled), the iteration kept."""
@@ -361,7 +365,7 @@ class RefinedFluidModel(Model):
         if lev is None or coord is None:
             raise InputError("the checkpoint holds no block octree: it belongs to a run without [refinement]; run "
                              "the scene again without --pickup")
-        if np.array_equal(lev, self.octree.level) and np.array_equal(coord, self.octree.coord):
+        if self._is_current(lev, coord):
             return
         if self.regrid_every and self._octree_of(state) is not None:
             return
@@ -387,8 +391,7 @@ class RefinedFluidModel(Model):
         from iceresist.models.fluid import _set_populations
 
         self.check_checkpoint(state)
-        if not (np.array_equal(state["octree_level"], self.octree.level)
-                and np.array_equal(state["octree_coord"], self.octree.coord)):
+        if not self._is_current(state["octree_level"], state["octree_coord"]):
             octree = self._octree_of(state)             # a regridding run picks up on its last grid
             self._adopt(octree, self._level_bytes(level_views(octree, forest_faces(self.scene, self.units))))
         self.regrid_count = int(state.get("regrid_count", self.regrid_count))

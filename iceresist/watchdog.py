@@ -5,6 +5,8 @@ Checks (the first that fails stops the run):
 * ``finite``: NaN or Inf in the state;
 * ``max_lattice_speed``: the fastest fluid cell above :data:`LATTICE_SPEED_LIMIT` (u dt/dx; the lattice sound
   speed is 0.577) -- or, for DEM models, ``max_body_speed_m_s`` above the model's own limit;
+* ``bodies_outside_finest``: on refined levels, bodies that left the finest level's leaves (the coupling lives
+  there; a regridding run's band that follows them was outrun);
 * ``density``: a fluid cell outside :data:`DENSITY_BAND` (lattice units, rho0 = 1);
 * ``kinetic_energy``: the kinetic energy grew by more than :data:`ENERGY_GROWTH` over the last
   :data:`ENERGY_WINDOW` checks, counted from at least the model's reference energy (so a flow that starts from rest
@@ -110,6 +112,12 @@ class Watchdog:
             if not v <= limit:
                 return WatchdogReport(it, t, "max_body_speed_m_s", v, limit, where,
                                       "runaway velocity: a body faster than the limit")
+        if "bodies_outside_finest" in probe:
+            v, where = probe["bodies_outside_finest"]
+            if v > 0:
+                return WatchdogReport(it, t, "bodies_outside_finest", v, 0, where,
+                                      "a body left the finest level between two regrids: widen "
+                                      "refinement.body_band_m or regrid more often")
         lo, hi = self.density_band
         if "density_min" in probe:
             v, where = probe["density_min"]

@@ -77,6 +77,8 @@ def test_the_refined_tank_writes_phi_on_every_level(tmp_path, main):  # noqa: F8
     (("water_depth_m = 20.0 ", "water_depth_m = 20.0\ncolumn_length_m = 8.0 "), "free_surface.column_length_m"),
     (("[free_surface]\nwater_depth_m = 20.0          # cells (lattice units, level 0)\nh_lattice = \"D3Q15\"", ""),
      "refinement.surface_band_m"),
+    (("surface_band_m = 6.0", "surface_band_m = 6.0\nregrid_every_steps = 10\nvorticity_1_s = 1.0"),
+     "refinement.regrid_every_steps: regridding runs for the fluid alone and the fluid with bodies so far"),
 ])
 def test_bad_refinement_of_a_free_surface_exits_2_with_one_line(tmp_path, main, edit, needle):  # noqa: F811
     assert edit[0] in TANK

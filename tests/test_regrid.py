@@ -280,8 +280,8 @@ fields_every_steps = 10
 
 
 @pytest.mark.parametrize("edit, needle", [
-    ("levels = 1\nregrid_every_steps = 10\n", "refinement.vorticity_1_s: regridding needs both"),
-    ("levels = 1\nvorticity_1_s = 0.01\n", "refinement.regrid_every_steps: regridding needs both"),
+    ("levels = 1\nregrid_every_steps = 10\n", "refinement.vorticity_1_s: regridding needs a criterion that moves"),
+    ("levels = 1\nvorticity_1_s = 0.01\n", "refinement.regrid_every_steps: refinement.vorticity_1_s moves"),
 ])
 def test_half_a_regrid_setting_exits_2_with_one_line(tmp_path, main, edit, needle):  # noqa: F811
     p = tmp_path / "v.toml"
@@ -290,8 +290,9 @@ def test_half_a_regrid_setting_exits_2_with_one_line(tmp_path, main, edit, needl
     _one_line_error(rc, err, needle)
 
 
-def test_regridding_bodies_is_refused_with_one_line(tmp_path, main):  # noqa: F811
-    """Bodies on regridded levels are AMR part 2's next step: until then such a scene exits 2 in one line."""
+def test_regridding_bodies_without_their_band_is_refused_with_one_line(tmp_path, main):  # noqa: F811
+    """The band that follows the bodies is what keeps them on the finest level: a regridding scene with bodies
+    and no refinement.body_band_m exits 2 in one line."""
     p = tmp_path / "v.toml"
     p.write_text(_vortex_text(refinement=REGRID) + """
 [[bodies]]
@@ -302,7 +303,7 @@ position_m = [16.0, 16.0, 8.0]
 motion = "fixed"
 """)
     rc, err = main(p)
-    _one_line_error(rc, err, "refinement.regrid_every_steps: regridding runs for the fluid alone so far")
+    _one_line_error(rc, err, "refinement.body_band_m: a regridding scene with bodies needs the band")
 
 
 def test_a_regrid_on_cuda_matches_the_cpu():

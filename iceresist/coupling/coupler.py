@@ -391,7 +391,8 @@ class FluidStructureCoupling:
     def state(self) -> dict:
         """What a bit-for-bit restart of the coupling needs between two steps: the covering rows of every cell
         now and a step earlier, the slabs per body (so the rows mean the same bodies), the cell boxes of the last
-        step (the active blocks), F_s and M_s of the last step (eqs. 20-21) and the step count. On several ranks
+        step (the active blocks), F_s and M_s of the last step (eqs. 20-21), the running sum of
+        :meth:`take_fluid_load_sum` and the step count. On several ranks
         the cell owners of the whole domain in global block order, on rank 0 (None on the other ranks)."""
         d, n = self._d, self.n
         now, fluid = self._read("now"), self._read("fluid")
@@ -407,6 +408,7 @@ class FluidStructureCoupling:
                 "force_prev": self._read("fprev") if self._fprev_valid else np.zeros((0, 6)),
                 "force_lattice": now[:, :3].reshape(n, 3).copy(), "torque_lattice": now[:, 3:].reshape(n, 3).copy(),
                 "fluid_force_N": fluid[:, :3].copy(), "fluid_torque_N_m": fluid[:, 3:].copy(),
+                "fluid_load_sum": self._read("fluid_sum"),
                 "placed": np.int8(self._placed), "iteration": np.int64(self.iteration)}
 
     def load_state(self, state: dict):
@@ -440,6 +442,8 @@ class FluidStructureCoupling:
         if "fluid_force_N" in state and "fluid_torque_N_m" in state:
             copy_into(d["fluid"], np.concatenate([np.asarray(state["fluid_force_N"], float),
                                                   np.asarray(state["fluid_torque_N_m"], float)], axis=1))
+        if "fluid_load_sum" in state:
+            copy_into(d["fluid_sum"], np.asarray(state["fluid_load_sum"], float).reshape(self.n, 6))
         self._placed = bool(state["placed"])
         self.iteration = int(state["iteration"])
 

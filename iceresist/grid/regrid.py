@@ -98,6 +98,18 @@ def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: d
         dst[...] = np.moveaxis(out, 1, -1).reshape(dst.shape).astype(dst.dtype, copy=False)
 
 
+def same_blocks(old_view: LevelView, new_view: LevelView) -> tuple[np.ndarray, np.ndarray]:
+    """The blocks (leaves and ghosts) of one level at the same place in two forests: index arrays (old, new) of
+    equal length, so that per-cell state that only that level holds (a body's cell owners, the cell flags a
+    coupling sets) is carried by ``new[b_new] = old[b_old]``."""
+    if old_view.level != new_view.level:
+        raise ValueError(f"same_blocks compares one level: {old_view.level} and {new_view.level}")
+    origin = np.asarray(new_view.forest.origin, dtype=np.int64)
+    old_idx = old_view.block_map[origin[:, 0], origin[:, 1], origin[:, 2]]
+    hit = old_idx >= 0
+    return old_idx[hit].astype(np.int64), np.flatnonzero(hit).astype(np.int64)
+
+
 def any_in_boxes(mask: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Whether any True cell of ``mask`` (a bool array on the level-0 cells) overlaps each box [lo, hi) (corners in
     level-0 cell units, (n, 3)); a box smaller than a cell looks at the cell that holds it. By a summed-volume table:

@@ -40,10 +40,26 @@ def available_memory_bytes() -> int:
         return 1 << 62
 
 
-def static_regions(scene: Scene) -> list:
-    """The regions of a scene's ``[refinement]`` that do not move, as (lo, hi, level) in level-0 cell units: the
-    boxes, the band around the still-water level, the bands along the solid faces, the bodies' boxes at the
-    start."""
+def body_half_extents_m(scene: Scene) -> np.ndarray:
+    """Half the extent (m) along x, y, z of each of the scene's bodies that the finest level must hold: the
+    axis-aligned half size at the start (:func:`iceresist.models.bodies.half_extent`) or, in a regridding scene,
+    where bodies turn, the radius of the bounding sphere about the centre of mass along every axis."""
+    from iceresist.models.bodies import body_mesh, half_extent
+
+    out = []
+    for i, body in enumerate(scene.bodies):
+        mesh = body_mesh(body, i, scene.source_name) if body.shape == "mesh" else None
+        h = half_extent(body, mesh)
+        if scene.refinement.regrid_every_steps is not None and body.shape != "sphere":
+            h = np.full(3, float(np.linalg.norm(h)))
+        out.append(h)
+    return np.array(out, dtype=float).reshape(-1, 3)
+
+
+def static_regions(scene: Scene, body_positions_m: np.ndarray | None = None) -> list:
+    """The regions of a scene's ``[refinement]`` as (lo, hi, level) in level-0 cell units: the boxes, the band
+    around the still-water level, the bands along the solid faces, and the band around each body's box
+    (:func:`body_half_extents_m`) at ``body_positions_m`` ((n, 3) m; default the scene's start)."""
     ref = scene.refinement
     dx = scene.domain.dx_m or 1.0
     shape = scene.domain.shape_cells()
@@ -52,13 +68,12 @@ def static_regions(scene: Scene) -> list:
         depth, band = scene.free_surface.water_depth_m / dx, ref.surface_band_m / dx
         boxes.append((np.array([-np.inf, -np.inf, depth - band]), np.array([np.inf, np.inf, depth + band]),
                       ref.levels))
-    if ref.body_band_m is not None:
-        from iceresist.models.bodies import body_mesh, half_extent
-
-        band = ref.body_band_m / dx
-        for i, body in enumerate(scene.bodies):
-            mesh = body_mesh(body, i, scene.source_name) if body.shape == "mesh" else None
-            c, h = np.asarray(body.position_m, dtype=float) / dx, half_extent(body, mesh) / dx + band
+    if ref.body_band_m is not None and scene.bodies:
+        if body_positions_m is None:
+            body_positions_m = [b.position_m for b in scene.bodies]
+        centres = np.asarray(body_positions_m, dtype=float).reshape(-1, 3) / dx
+        halves = body_half_extents_m(scene) / dx + ref.body_band_m / dx
+        for c, h in zip(centres, halves):
             boxes.append((c - h, c + h, ref.levels))
     if ref.wall_band_m is not None:
         band = ref.wall_band_m / dx
@@ -72,11 +87,11 @@ def static_regions(scene: Scene) -> list:
     return boxes
 
 
-def build_octree(scene: Scene, hot: np.ndarray | None = None):
+def build_octree(scene: Scene, hot: np.ndarray | None = None, body_positions_m: np.ndarray | None = None):
     """The octree of a scene's ``[refinement]``: level-0 blocks of ``domain.dx_m``; a block takes the highest level
-    of the regions its box overlaps (:func:`static_regions`) and, where ``hot`` (a bool array on the level-0 cells:
-    the cells a moving criterion marks, e.g. vorticity) holds a True cell in its box, the finest level; then 2:1
-    balance."""
+    of the regions its box overlaps (:func:`static_regions`, the bodies at ``body_positions_m``) and, where ``hot``
+    (a bool array on the level-0 cells: the cells a moving criterion marks, e.g. vorticity) holds a True cell in its
+    box, the finest level; then 2:1 balance."""
     from iceresist.grid.octree import BlockOctree
     from iceresist.grid.regrid import any_in_boxes
 
@@ -84,7 +99,7 @@ def build_octree(scene: Scene, hot: np.ndarray | None = None):
     shape = scene.domain.shape_cells()
     periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
     t = BlockOctree(tuple(n // 8 for n in shape), ref.levels, periodic=periodic)
-    boxes = static_regions(scene)
+    boxes = static_regions(scene, body_positions_m)
 
     def wanted(lo, hi):
         level = np.zeros(len(lo), dtype=np.int64)
@@ -104,7 +119,8 @@ class RefinedFluidModel(Model):
 
     components = ("fluid", "refinement")
 
-    #: Whether the model regrids (``refinement.regrid_every_steps``, :meth:`regrid`): the fluid alone so far.
+    #: Whether the model regrids (``refinement.regrid_every_steps``, :meth:`regrid`): the fluid, and the fluid
+    #: with bodies; not yet the free surface.
     regrids = True
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
@@ -127,8 +143,8 @@ class RefinedFluidModel(Model):
         self.precision = precision or scene.numerics.precision
         ref = scene.refinement
         if ref.regrid_every_steps is not None and not self.regrids:
-            raise InputError("refinement.regrid_every_steps: regridding runs for the fluid alone so far (no "
-                             "[free_surface], no [[bodies]]); leave refinement.regrid_every_steps and "
+            raise InputError("refinement.regrid_every_steps: regridding runs for the fluid alone and the fluid "
+                             "with bodies so far (no [free_surface]); leave refinement.regrid_every_steps and "
                              "refinement.vorticity_1_s out")
         self.regrid_every = ref.regrid_every_steps
         self.regrid_count = 0
@@ -178,23 +194,30 @@ class RefinedFluidModel(Model):
             self.lbm.initialize(1.0, u0)
 
     # -- regridding ---------------------------------------------------------------------------------------
-    def hot_cells(self) -> np.ndarray:
+    def hot_cells(self) -> np.ndarray | None:
         """The level-0 cells a moving criterion marks for the finest level: vorticity |curl u| above
         ``refinement.vorticity_1_s``, from the velocity on the level-0 grid (central differences over level-0
-        cells)."""
+        cells); None without that criterion."""
         from iceresist.grid.regrid import vorticity_magnitude
 
+        if self.scene.refinement.vorticity_1_s is None:
+            return None
         _, u_lat, _ = self._level0()
         threshold = self.scene.refinement.vorticity_1_s * self.units.dt_s      # per level-0 step
         return vorticity_magnitude(np.nan_to_num(u_lat)) > threshold
 
+    def body_positions_m(self) -> np.ndarray | None:
+        """Where the bodies are now ((n, 3) m), for the band that follows them; None: no bodies."""
+        return None
+
     def regrid(self) -> bool:
-        """Build the octree again from the criteria on the current flow (:func:`build_octree`, :meth:`hot_cells`);
-        where it changed, carry every level's populations to the new blocks (:func:`iceresist.grid.regrid.carry_over`)
-        and step on from there. Returns whether the blocks changed."""
+        """Build the octree again from the criteria on the current flow and bodies (:func:`build_octree`,
+        :meth:`hot_cells`, :meth:`body_positions_m`); where it changed, carry every level's populations to the new
+        blocks (:func:`iceresist.grid.regrid.carry_over`) and step on from there. Returns whether the blocks
+        changed."""
         from iceresist.grid.levels import level_views
 
-        octree = build_octree(self.scene, self.hot_cells())
+        octree = build_octree(self.scene, self.hot_cells(), self.body_positions_m())
         if self._is_current(octree.level, octree.coord):
             return False
         views = level_views(octree, forest_faces(self.scene, self.units))
@@ -204,14 +227,19 @@ class RefinedFluidModel(Model):
         except InputError as err:
             log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.iteration, err)
             return False
-        old_views = self.lbm.views
-        old = {lv: s.populations() for lv, s in self.lbm.solvers.items()}
-        self._adopt(octree, level_bytes)
-        self._fill(old_views, old)
+        self._rebuild(octree, level_bytes)
         self.regrid_count += 1
         log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.iteration,
                  [int(n) for n in octree.blocks_per_level()])
         return True
+
+    def _rebuild(self, octree, level_bytes: dict):
+        """The levels built on ``octree`` and every level's populations carried over from the present ones (onto
+        the same octree, a rebuild changes nothing: tests/test_regrid_bodies.py)."""
+        old_views = self.lbm.views
+        old = {lv: s.populations() for lv, s in self.lbm.solvers.items()}
+        self._adopt(octree, level_bytes)
+        self._fill(old_views, old)
 
     def _is_current(self, level, coord) -> bool:
         """Whether the leaves (``level``, ``coord``) are those of the current octree."""

@@ -5,9 +5,12 @@
 exchange, refill, eqs. 16-21) runs on that level's forest at that level's own time step
 (:meth:`~iceresist.lbm.refinement.RefinedLBM.set_stepper`), the DEM advances with it. Every body, with two cells to
 spare, must lie inside the finest level's leaves at the start (``refinement.body_band_m`` refines around them); a
-scene where one does not is refused naming ``refinement``. A body that moves out of the finest level during the run
-is not followed yet (block AMR part 2). The fluid alone (no ``[free_surface]``); gravity acts on the bodies (with
-the buoyancy), the fluid carries the body force alone, as in :class:`BodiesModel`.
+scene where one does not is refused naming ``refinement``. With ``refinement.regrid_every_steps`` the band follows
+the bodies (block AMR part 2): every N steps the octree is drawn again around each body's bounding sphere where it
+is, the populations carried to the new blocks and the coupling's cell owners copied block by block
+(:meth:`RefinedBodiesModel.regrid`); the DEM goes on as it was. The fluid alone (no
+``[free_surface]``); gravity acts on the bodies (with the buoyancy), the fluid carries the body force alone, as in
+:class:`BodiesModel`.
 """
 
 from __future__ import annotations
@@ -18,14 +21,12 @@ import math
 import numpy as np
 
 from iceresist.errors import InputError
-from iceresist.models.bodies import BodiesModel, body_mesh, check_bodies, half_extent
-from iceresist.models.refined import RefinedFluidModel
+from iceresist.models.bodies import BodiesModel, body_mesh, check_bodies
+from iceresist.models.refined import RefinedFluidModel, body_half_extents_m
 
 
 class RefinedBodiesModel(RefinedFluidModel):
     """Boxes, spheres and convex meshes, fixed, prescribed or free, in a fluid on refined levels (module docstring)."""
-
-    regrids = False
 
     components = ("fluid", "dem", "coupling", "refinement")
 
@@ -37,15 +38,47 @@ class RefinedBodiesModel(RefinedFluidModel):
     fluid_force_N = BodiesModel.fluid_force_N
     fluid_torque_N_m = BodiesModel.fluid_torque_N_m
 
-    def _build(self):
+    def _build(self, initialize: bool = True):
+        """The levels' solver, and the coupling on its finest level. The first call also builds the DEM and its
+        bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
+        cell flags and the coupling's state (:meth:`_carry_finest`)."""
         from iceresist.coupling import FluidStructureCoupling
         from iceresist.lbm.refinement import RefinedLBM
         from iceresist.models.fluid import forest_faces
 
         scene, u, fl = self.scene, self.units, self.scene.fluid
+        first = getattr(self, "coupling", None) is None
+        if first:
+            self._prepare()
+        old = None if first else self._finest_state()
+        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
+                              operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
+                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
+        if initialize:
+            self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
+        finest = self.lbm.levels[-1]
+        if not first and finest != self.finest:
+            raise RuntimeError(f"regrid: the finest level moved from {self.finest} to {finest}")
+        self.finest = finest
+        if first:
+            self._check_in_finest(np.array([b.position_m for b in scene.bodies], dtype=float), margin_cells=2.0)
+            self._make_bodies()
+        con = scene.contact
+        self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
+                                               buoyancy=True, contact_film=True if con is None else con.fluid_film)
+        self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
+        if old is not None:
+            self._carry_finest(old)
+
+    def _prepare(self):
+        """Checks and constants of the first build."""
+        scene, u, fl = self.scene, self.units, self.scene.fluid
         if scene.free_surface is not None:
             raise InputError("refinement: bodies on refined levels run in a fluid without [free_surface] so far; "
                              "remove [refinement] to run them with the free surface on a uniform grid")
+        if self.regrid_every and scene.refinement.body_band_m is None:
+            raise InputError("refinement.body_band_m: a regridding scene with bodies needs the band that follows "
+                             "them (e.g. four finest cells)")
         self.box_m = tuple(n * u.dx_m for n in self.shape_cells)
         self.meshes = {i: body_mesh(b, i, scene.source_name) for i, b in enumerate(scene.bodies) if b.shape == "mesh"}
         check_bodies(scene, self.box_m, self.meshes)
@@ -53,46 +86,94 @@ class RefinedBodiesModel(RefinedFluidModel):
         self.names = [b.name for b in scene.bodies]
         # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone
         self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
-        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
-                              operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
-                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
-        self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        self.finest = finest = self.lbm.levels[-1]
-        self._check_in_finest()
+        self._reach_m = body_half_extents_m(scene)
+
+    def _make_bodies(self):
+        """The DEM with its walls and bodies, at the finest level's scales."""
+        scene, u, fl = self.scene, self.units, self.scene.fluid
         #: the scales of the finest level: cells and time steps 2^L times smaller, tau by acoustic scaling
-        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** finest, dt_s=u.dt_s / 2 ** finest,
-                                                tau=float(self.lbm.tau[finest]))
+        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** self.finest, dt_s=u.dt_s / 2 ** self.finest,
+                                                tau=float(self.lbm.tau[self.finest]))
         self.dem = self._make_dem(fl.gravity_m_s2)
         self._add_walls(self.dem)
-        geoms = []
+        self.geoms = []
         for (geom, shape, kinematic, velocity, material), body in zip(self._shapes(), scene.bodies):
-            geoms.append(geom)
+            self.geoms.append(geom)
             self.dem.add_body(shape, position_m=tuple(float(v) for v in body.position_m), velocity_m_s=velocity,
                               kinematic=kinematic, material=material)
-        con = scene.contact
-        self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, geoms, self.units_finest,
-                                               buoyancy=True, contact_film=True if con is None else con.fluid_film)
-        self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
-        volumes = np.array([g.volume_m3() for g in geoms])
+        volumes = np.array([g.volume_m3() for g in self.geoms])
         self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, dtype=float)[None, :]
 
-    def _check_in_finest(self):
-        """Every body's bounding box, two finest cells wider, on the finest level's leaves."""
+    # -- regridding -------------------------------------------------------------------------------------
+    def body_positions_m(self) -> np.ndarray:
+        """The bodies' centres of mass now (n, 3), m."""
+        return self.dem.positions[:len(self.names)]
+
+    def bodies_outside_finest(self, positions_m: np.ndarray, margin_cells: float) -> list[int]:
+        """The bodies whose box (:func:`~iceresist.models.refined.body_half_extents_m` about ``positions_m``),
+        ``margin_cells`` finest cells wider, is not wholly on the finest level's leaves."""
         view = self.lbm.views[self.finest]
         dx = self.units.dx_m / 2 ** self.finest
         bm = view.block_map
-        for i, body in enumerate(self.scene.bodies):
-            c = np.asarray(body.position_m, dtype=float) / dx
-            h = half_extent(body, self.meshes.get(i)) / dx + 2.0
-            lo = np.floor(c - h).astype(np.int64) >> 3
-            hi = np.floor(c + h).astype(np.int64) >> 3
-            lo = np.maximum(lo, 0)
-            hi = np.minimum(hi, np.array(bm.shape) - 1)
+        out = []
+        for i, (c, h) in enumerate(zip(np.asarray(positions_m, dtype=float) / dx, self._reach_m / dx + margin_cells)):
+            lo = np.maximum(np.floor(c - h).astype(np.int64) >> 3, 0)
+            hi = np.minimum(np.floor(c + h).astype(np.int64) >> 3, np.array(bm.shape) - 1)
             blocks = bm[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1]
             if ((blocks < 0) | (blocks >= view.nleaves)).any():
-                raise InputError(f"refinement: body {body.name!r} (bodies[{i}]) reaches beyond the finest level "
-                                 f"(level {self.finest}); refine around it with refinement.body_band_m or a "
-                                 f"[[refinement.boxes]] box at level {self.finest}")
+                out.append(i)
+        return out
+
+    def _check_in_finest(self, positions_m: np.ndarray, margin_cells: float):
+        """Refuse a scene whose bodies at ``positions_m`` do not lie on the finest level's leaves."""
+        for i in self.bodies_outside_finest(positions_m, margin_cells):
+            raise InputError(f"refinement: body {self.names[i]!r} (bodies[{i}]) reaches beyond the finest level "
+                             f"(level {self.finest}); refine around it with refinement.body_band_m or a "
+                             f"[[refinement.boxes]] box at level {self.finest}")
+
+    def regrid(self) -> bool:
+        """As :meth:`RefinedFluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
+        where they are. A body that left the finest level since the last regrid (it moved further than the band)
+        stops the run with a StabilityError naming the two keys; after the regrid every body lies on the finest
+        level with two cells to spare (asserted)."""
+        from iceresist.errors import StabilityError
+
+        pos = self.body_positions_m()
+        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
+        if gone:
+            i = gone[0]
+            raise StabilityError(f"refinement.body_band_m: body {self.names[i]!r} left the finest level between "
+                                 f"two regrids (step {self.iteration}); widen refinement.body_band_m or regrid more "
+                                 f"often (refinement.regrid_every_steps = {max(1, self.regrid_every // 2)})")
+        changed = super().regrid()
+        if changed and self.bodies_outside_finest(pos, margin_cells=2.0):
+            raise RuntimeError("regrid: a body is not on the finest level of the new octree")
+        return changed
+
+    def _finest_state(self) -> dict:
+        """What the finest level holds besides its populations: its view and the coupling's state."""
+        return {"view": self.lbm.views[self.finest], "coupling": self.coupling.state()}
+
+    def _carry_finest(self, old: dict):
+        """The coupling's cell owners (now and a step earlier) copied block by block from ``old``
+        (:meth:`_finest_state` of the level before a regrid) where the two forests share a block; a block new to
+        the level has no body in it (the band keeps every body on blocks that stay), so no owner. The rest of the
+        coupling's state (boxes, forces, the record's load sum, step count) carries as it is. The cell flags are
+        not carried: the new coupling's first refill sets them from the owners on every block a body touches."""
+        from iceresist.grid.regrid import same_blocks
+
+        src, dst = same_blocks(old["view"], self.lbm.views[self.finest])
+        st = dict(old["coupling"])
+        for key in ("owner", "owner_prev"):
+            was = np.asarray(st[key])
+            kept = np.zeros(len(was), dtype=bool)
+            kept[src] = True
+            if (was[~kept] >= 0).any():
+                raise RuntimeError(f"regrid: cells a body covers ({key}) lie on finest blocks the new octree drops")
+            now = np.full((self.lbm.solvers[self.finest].forest.nblocks, was.shape[1]), -1, dtype=was.dtype)
+            now[dst] = was[src]
+            st[key] = now
+        self.coupling.load_state(st)
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def _leaf(self, lv: int):
@@ -115,9 +196,12 @@ class RefinedBodiesModel(RefinedFluidModel):
         return bodies and math.isfinite(self.lbm.mass())
 
     def watchdog_probe(self) -> dict:
-        if not np.isfinite(self.dem.positions).all():
+        """The fluid's probe, and the bodies that left the finest level (count, the first's index)."""
+        pos = self.body_positions_m()
+        if not np.isfinite(pos).all():
             return {"finite": (False, None)}
-        return super().watchdog_probe()
+        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
+        return {**super().watchdog_probe(), "bodies_outside_finest": (len(gone), gone[0] if gone else None)}
 
     def state(self) -> dict:
         """The levels' populations (:meth:`RefinedFluidModel.state`), the finest level's cell flags (the cells the

@@ -473,16 +473,19 @@ class Refinement(_Section):
         "the domain (wall, moving wall, free slip) take the finest level: the boundary layers.")
     body_band_m: float | None = Field(
         None, gt=0, description="With `[[bodies]]`: the blocks within this distance (m; cells in a lattice scene) "
-        "of a body's bounding box at the start take the finest level, where the bodies and their coupling live.")
+        "of a body's bounding box at the start take the finest level, where the bodies and their coupling live. "
+        "With `regrid_every_steps` the band follows the bodies: at every regrid it is drawn around each body's "
+        "bounding sphere where the body is then, so it must exceed the distance a body travels between regrids.")
     vorticity_1_s: float | None = Field(
         None, gt=0, description="With `regrid_every_steps`: the blocks holding a cell whose vorticity |curl u| "
         "(1/s; per time unit in a lattice scene), on the level-0 grid, exceeds this take the finest level: the "
         "eddies. Regridding follows them.")
     regrid_every_steps: int | None = Field(
         None, ge=1, description="Regrid every this many level-0 steps: the octree is built again from the criteria "
-        "(the static regions above and `vorticity_1_s` on the current flow) and every cell's populations carried "
-        "to the new blocks (a refined cell copies its parent, a coarsened one takes the mean of its children: mass "
-        "to round-off; iceresist.grid.regrid). The fluid alone so far.")
+        "(the static regions above, `vorticity_1_s` on the current flow, `body_band_m` around the bodies where "
+        "they are) and every cell's populations carried to the new blocks (a refined cell copies its parent, a "
+        "coarsened one takes the mean of its children: mass to round-off; iceresist.grid.regrid). The fluid alone or with `[[bodies]]` (their band follows them); not "
+        "yet with `[free_surface]`.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
@@ -490,10 +493,12 @@ class Refinement(_Section):
 
     @model_validator(mode="after")
     def _levels(self):
-        if (self.vorticity_1_s is None) != (self.regrid_every_steps is None):
-            key = "regrid_every_steps" if self.regrid_every_steps is None else "vorticity_1_s"
-            raise ValueError(f"{key}: regridding needs both refinement.regrid_every_steps (e.g. 50) and a criterion "
-                             "that moves, refinement.vorticity_1_s (e.g. 5.0)")
+        if self.vorticity_1_s is not None and self.regrid_every_steps is None:
+            raise ValueError("regrid_every_steps: refinement.vorticity_1_s moves the fine blocks with the eddies, "
+                             "which needs regridding: give refinement.regrid_every_steps (e.g. 50)")
+        if self.regrid_every_steps is not None and self.vorticity_1_s is None and self.body_band_m is None:
+            raise ValueError("vorticity_1_s: regridding needs a criterion that moves, refinement.vorticity_1_s "
+                             "(e.g. 5.0) or, with [[bodies]], refinement.body_band_m (e.g. two cells)")
         if (not self.boxes and self.surface_band_m is None and self.wall_band_m is None and self.body_band_m is None
                 and self.vorticity_1_s is None):
             raise ValueError("boxes: give at least one [[refinement.boxes]], refinement.surface_band_m, "

@@ -67,8 +67,8 @@ def _settle(model, steps: int, k: int = 1):
 def test_a_settling_sphere_on_regridded_levels_follows_the_uniform_fine_grid():
     """400 level-0 steps: the sphere falls 8.8 cells, the fine blocks follow it (3 regrids change them: the
     blocks below refined, those above coarsened), and its settling speed over the last 100 steps is the uniform
-    level-1 grid's within 0.2 % (measured 0.14 %), its fall within 0.05 cell (0.018), at 16 % of that grid's cell
-    updates. 2-core x86 VM, 2026-11-28. Planted: the band drawn where the sphere started (the regrid does not
+    level-1 grid's within 0.3 % (measured -0.18 %: the level interface 2 level-0 cells from the sphere), its fall
+    within 0.05 cell (0.018), at 10-12 % of that grid's cell updates. 2-core x86 VM, 2026-11-28. Planted: the band drawn where the sphere started (the regrid does not
     follow it) fails (the watchdog's probe is the guard; see below). The carries themselves change the speed by
     less than the tolerance: they are held bit for bit by the rebuild test below."""
     amr = build_model(parse_scene(_settle_text(), "settle.toml"))
@@ -80,9 +80,9 @@ def test_a_settling_sphere_on_regridded_levels_follows_the_uniform_fine_grid():
     assert amr.regrid_count >= 2
     assert not np.array_equal(first, amr.octree.coord[amr.octree.level == 1])
     assert Z0 - z[-1] > 8.0
-    assert w[-10:].mean() == pytest.approx(w_ref[-10:].mean(), rel=2e-3)
+    assert w[-10:].mean() == pytest.approx(w_ref[-10:].mean(), rel=3e-3)
     assert abs(z[-1] - z_ref[-1]) < 0.05
-    assert amr.lattice_updates_per_step / (2 * fine.cells) < 0.2
+    assert amr.lattice_updates_per_step / (2 * fine.cells) < 0.15
 
 
 def test_a_rebuild_onto_the_same_blocks_changes_nothing():

@@ -44,7 +44,7 @@ def ladder(quick: bool) -> list[dict]:
 
 
 def scene(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
-          backend: str = "cpu", precision: str = "float32"):
+          backend: str = "cpu", precision: str = "float32", levels: int = 0, band_cells: float = 2.0):
     """The scene of case ``case`` at ``d_cells`` cells per diameter: the scene file
     (iceresist/validate/scenes/settling_sphere.toml, E1 at 6 cells per diameter) with the case's oil, the cell size
     d / d_cells, the time step u_lattice dx / u_terminal, the operator, the run length int(t_end_s / dt) and the
@@ -53,19 +53,29 @@ def scene(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float 
     The box is the experiment's to the nearest cell, walls half a cell beyond the last fluid cell (half-way
     bounce-back); ``domain.pad_to_blocks`` rounds the grid up to whole blocks with solid cells, so that every rung
     of a ladder sees the same box (rounding the box itself up to blocks widened it by up to 20 %, and the wall
-    effect at d / L = 0.15 with it)."""
+    effect at d / L = 0.15 with it).
+
+    ``levels`` > 0: ``d_cells`` is the resolution of the finest of ``levels`` + 1 levels, which follow the sphere
+    (block AMR: ``refinement.body_band_m`` of ``band_cells`` level-0 cells, a regrid every 10 level-0 steps);
+    level 0 has d_cells / 2^levels cells per diameter and must tile the box with whole blocks (6 cells per diameter
+    does: 40 x 40 x 64), the time step is level 0's."""
     from iceresist.validate.rung import scene_of
     from iceresist.validate.scenes import scene_data
 
     rho_f, mu, u_ref = CASES[case]
     d = DIAMETER_M
-    dx = d / d_cells
+    dx = d / d_cells * 2 ** levels
     dt = u_lattice * dx / u_ref
     n = [int(round(L / dx)) for L in BOX_M]
+    if levels and (any(k % 8 for k in n) or not np.allclose(np.array(n) * dx, BOX_M)):
+        raise ValueError(f"settling sphere on {levels + 1} levels: level 0 at {d_cells / 2 ** levels:g} cells per "
+                         f"diameter does not tile the box with whole blocks ({n} cells); use 6 cells per diameter")
     data = scene_data(NAME)
     data["scene"].update(name=f"{NAME}-{case}-{d_cells:g}", description=f"ten Cate {case}, 15 mm nylon sphere in "
                          f"silicone oil, {d_cells:g} cells per diameter")
-    data["domain"].update(size_m=list(BOX_M), dx_m=dx, pad_to_blocks=True)
+    data["domain"].update(size_m=list(BOX_M), dx_m=dx, pad_to_blocks=not levels)
+    if levels:
+        data["refinement"] = {"levels": levels, "body_band_m": band_cells * dx, "regrid_every_steps": 10}
     data["fluid"].update(nu_m2_s=mu / rho_f, rho_kg_m3=rho_f, operator=operator)
     data["numerics"].update(dt_s=dt, u_max_m_s=u_ref, precision=precision, backend=backend)
     data["run"] = {"steps": int(t_end_s / dt)}
@@ -75,26 +85,29 @@ def scene(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float 
 
 
 def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
-           backend: str = "cpu", precision: str = "float32"):
+           backend: str = "cpu", precision: str = "float32", levels: int = 0):
     """Settling velocity history (t_s, w_m_s) of case ``case`` at ``d_cells`` cells per diameter, a value every
     step, with the cell count, the number of steps and the wall time of the stepping (first step, which compiles,
-    excluded): the model of :func:`scene` stepped here, outside the driver."""
+    excluded) and the cell updates (every level's cells times its sub-steps, summed over the steps): the model of
+    :func:`scene` (``levels``: on levels that follow the sphere) stepped here, outside the driver."""
     from iceresist.models import build_model
 
     sc = scene(case, d_cells, u_lattice=u_lattice, t_end_s=t_end_s, operator=operator, backend=backend,
-               precision=precision)
+               precision=precision, levels=levels)
     model = build_model(sc)
     steps = int(sc.run.steps)
     t, w = [], []
     wall = 0.0
+    updates = 0
     for i in range(steps):
         t0 = time.perf_counter()
+        updates += model.lattice_updates_per_step
         model.step(1)
         if i > 0:
             wall += time.perf_counter() - t0
         t.append(model.dem.time_s)
         w.append(-model.dem.velocities[0, 2])
-    return np.array(t), np.array(w), model.forest.cells, steps, wall
+    return np.array(t), np.array(w), int(model.cells), steps, wall, int(updates)
 
 
 #: Steps between time-series rows of a rung (the peak velocity is read from them).

@@ -182,7 +182,7 @@ class RefinedFreeSurface:
                                       mobility=mobility, width=width, h_lattice=h_lattice, operator=operator,
                                       precision=precision, target=self.target, f_pool_margin=None)
                 built["surface"] = fs
-                return _SurfaceLevel(fs, self._refill_ghosts)
+                return _SurfaceLevel(fs, self.refill_ghosts)
             return _LiquidLevel(forest, tau, force, operator=operator, precision=precision, target=self.target,
                                 half_width=0.5 * width)
 
@@ -218,7 +218,7 @@ class RefinedFreeSurface:
                        np.int64(v.nleaves), dev(np.ascontiguousarray(pb, np.int64)),
                        dev(np.ascontiguousarray(pc, np.int64)), real(self.g0 / 2 ** (self.finest - 1)))
 
-    def _refill_ghosts(self):
+    def refill_ghosts(self):
         if self._ghost is None:
             return
         launch, b0, pb, pc, gc = self._ghost
@@ -266,7 +266,7 @@ class RefinedFreeSurface:
             g = self.g0 / 2 ** level
             rho = np.exp(3.0 * g * np.maximum(s_cells, 0.0))
             self.lbm.solvers[level].initialize(rho, tuple(float(v) for v in u))
-        self._refill_ghosts()
+        self.refill_ghosts()
         self.lbm.iteration = 0
 
     def step(self, n: int = 1):

@@ -11,6 +11,7 @@ model                       what it holds                                       
 :class:`RefinedFluidModel`  LBM on refined levels                                   ``[refinement]`` alone
 :class:`RefinedFreeSurfaceModel` free surface on the finest of refined levels       ``[refinement]`` + ``[free_surface]``
 :class:`RefinedBodiesModel`  bodies and their coupling on the finest level            ``[refinement]`` + ``[[bodies]]``
+:class:`RefinedSurfaceBodiesModel` bodies in water with a free surface, on the finest level ``[refinement]`` + ``[free_surface]`` + ``[[bodies]]``
 ==========================  ======================================================  =============================
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
@@ -26,11 +27,12 @@ from iceresist.models.fluid import FluidModel, FreeSurfaceModel
 from iceresist.models.refined import RefinedFluidModel
 from iceresist.models.refined_bodies import RefinedBodiesModel
 from iceresist.models.refined_surface import RefinedFreeSurfaceModel
+from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
 __all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "RefinedFreeSurfaceModel",
-           "RefinedBodiesModel", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
+           "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
 
 
 def build_model(scene, *, backend: str | None = None, precision: str | None = None, comm=None) -> Model:
@@ -63,11 +65,13 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
             return RefinedFreeSurfaceModel(scene, backend=backend, precision=precision)
         if scene.bodies and set(extra) <= {"refinement", "bodies", "contact"}:
             return RefinedBodiesModel(scene, backend=backend, precision=precision)
+        if scene.bodies and set(extra) <= {"refinement", "bodies", "contact", "free_surface"}:
+            return RefinedSurfaceBodiesModel(scene, backend=backend, precision=precision)
         if extra != ["refinement"]:
             others = ", ".join("[" + s + "]" for s in extra if s not in ("refinement", "free_surface"))
             raise InputError(f"{scene.source_name}: refinement: a refined scene is the fluid alone, with a "
-                             f"[free_surface] or with [[bodies]] so far; remove [refinement] to run {others} on a "
-                             f"uniform grid")
+                             f"[free_surface], with [[bodies]] or with both so far; remove [refinement] to run "
+                             f"{others} on a uniform grid")
         return RefinedFluidModel(scene, backend=backend, precision=precision)
     wants = [f for f in scene.output.fields if f in ("phi", "surface")]
     if wants and scene.free_surface is None:

@@ -25,10 +25,11 @@ from iceresist.models.bodies import BodiesModel, body_mesh, check_bodies
 from iceresist.models.refined import RefinedFluidModel, body_half_extents_m
 
 
-class RefinedBodiesModel(RefinedFluidModel):
-    """Boxes, spheres and convex meshes, fixed, prescribed or free, in a fluid on refined levels (module docstring)."""
-
-    components = ("fluid", "dem", "coupling", "refinement")
+class FinestLevelBodies:
+    """The bodies of a refined scene on its finest level, shared by :class:`RefinedBodiesModel` and
+    :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`: their checks, the DEM built at the
+    finest level's scales, where they are against that level's leaves, the watchdog's probe and the description.
+    Mixed in before the refined model it extends."""
 
     #: The DEM, wall and shape builders of the uniform-grid bodies model, shared as they are.
     _make_dem = BodiesModel._make_dem
@@ -38,73 +39,32 @@ class RefinedBodiesModel(RefinedFluidModel):
     fluid_force_N = BodiesModel.fluid_force_N
     fluid_torque_N_m = BodiesModel.fluid_torque_N_m
 
-    def _build(self, initialize: bool = True):
-        """The levels' solver, and the coupling on its finest level. The first call also builds the DEM and its
-        bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
-        cell flags and the coupling's state (:meth:`_carry_finest`)."""
-        from iceresist.coupling import FluidStructureCoupling
-        from iceresist.lbm.refinement import RefinedLBM
-        from iceresist.models.fluid import forest_faces
-
-        scene, u, fl = self.scene, self.units, self.scene.fluid
-        first = getattr(self, "coupling", None) is None
-        if first:
-            self._prepare()
-        old = None if first else self._finest_state()
-        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
-                              operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
-                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
-        if initialize:
-            self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        finest = self.lbm.levels[-1]
-        if not first and finest != self.finest:
-            raise RuntimeError(f"regrid: the finest level moved from {self.finest} to {finest}")
-        self.finest = finest
-        if first:
-            self._check_in_finest(np.array([b.position_m for b in scene.bodies], dtype=float), margin_cells=2.0)
-            self._make_bodies()
-        con = scene.contact
-        self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
-                                               buoyancy=True, contact_film=True if con is None else con.fluid_film)
-        self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
-        if old is not None:
-            self._carry_finest(old)
-
-    def _prepare(self):
-        """Checks and constants of the first build."""
-        scene, u, fl = self.scene, self.units, self.scene.fluid
-        if scene.free_surface is not None:
-            raise InputError("refinement: bodies on refined levels run in a fluid without [free_surface] so far; "
-                             "remove [refinement] to run them with the free surface on a uniform grid")
-        if self.regrid_every and scene.refinement.body_band_m is None:
-            raise InputError("refinement.body_band_m: a regridding scene with bodies needs the band that follows "
-                             "them (e.g. four finest cells)")
+    def _check_bodies(self):
+        """The scene's bodies checked against the box (:func:`check_bodies`); names, meshes and reaches kept."""
+        scene, u = self.scene, self.units
         self.box_m = tuple(n * u.dx_m for n in self.shape_cells)
         self.meshes = {i: body_mesh(b, i, scene.source_name) for i, b in enumerate(scene.bodies) if b.shape == "mesh"}
         check_bodies(scene, self.box_m, self.meshes)
         self.dem_backend = "cuda" if self.target.is_cuda else "cpu"
         self.names = [b.name for b in scene.bodies]
-        # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone
-        self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
         self._reach_m = body_half_extents_m(scene)
 
-    def _make_bodies(self):
-        """The DEM with its walls and bodies, at the finest level's scales."""
-        scene, u, fl = self.scene, self.units, self.scene.fluid
+    def _make_bodies(self, gravity_m_s2):
+        """The DEM (gravity ``gravity_m_s2``) with its walls and the scene's bodies at the finest level's scales
+        (``units_finest``), once every body is found on that level's leaves with two cells to spare."""
+        scene, u, L = self.scene, self.units, self.finest
+        self._check_in_finest(np.array([b.position_m for b in scene.bodies], dtype=float), margin_cells=2.0)
         #: the scales of the finest level: cells and time steps 2^L times smaller, tau by acoustic scaling
-        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** self.finest, dt_s=u.dt_s / 2 ** self.finest,
-                                                tau=float(self.lbm.tau[self.finest]))
-        self.dem = self._make_dem(fl.gravity_m_s2)
+        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** L, dt_s=u.dt_s / 2 ** L,
+                                                tau=float(self.lbm.tau[L]))
+        self.dem = self._make_dem(tuple(float(g) for g in gravity_m_s2))
         self._add_walls(self.dem)
         self.geoms = []
         for (geom, shape, kinematic, velocity, material), body in zip(self._shapes(), scene.bodies):
             self.geoms.append(geom)
             self.dem.add_body(shape, position_m=tuple(float(v) for v in body.position_m), velocity_m_s=velocity,
                               kinematic=kinematic, material=material)
-        volumes = np.array([g.volume_m3() for g in self.geoms])
-        self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, dtype=float)[None, :]
 
-    # -- regridding -------------------------------------------------------------------------------------
     def body_positions_m(self) -> np.ndarray:
         """The bodies' centres of mass now (n, 3), m."""
         return self.dem.positions[:len(self.names)]
@@ -131,6 +91,73 @@ class RefinedBodiesModel(RefinedFluidModel):
                              f"(level {self.finest}); refine around it with refinement.body_band_m or a "
                              f"[[refinement.boxes]] box at level {self.finest}")
 
+    def _bodies_finite(self) -> bool:
+        return bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
+
+    def watchdog_probe(self) -> dict:
+        """The fluid's probe, and the bodies that left the finest level (count, the first's index)."""
+        pos = self.body_positions_m()
+        if not np.isfinite(pos).all():
+            return {"finite": (False, None)}
+        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
+        return {**super().watchdog_probe(), "bodies_outside_finest": (len(gone), gone[0] if gone else None)}
+
+    def describe(self) -> dict:
+        return {**super().describe(), "box_m": list(self.box_m), "bodies_level": self.finest,
+                "dem_substeps": int(self.dem.substeps_for(self.units_finest.dt_s)),
+                "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion} for b in self.scene.bodies]}
+
+
+class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
+    """Boxes, spheres and convex meshes, fixed, prescribed or free, in a fluid on refined levels (module docstring)."""
+
+    components = ("fluid", "dem", "coupling", "refinement")
+
+    def _build(self, initialize: bool = True):
+        """The levels' solver, and the coupling on its finest level. The first call also builds the DEM and its
+        bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
+        cell flags and the coupling's state (:meth:`_carry_finest`)."""
+        from iceresist.coupling import FluidStructureCoupling
+        from iceresist.lbm.refinement import RefinedLBM
+        from iceresist.models.fluid import forest_faces
+
+        scene, u, fl = self.scene, self.units, self.scene.fluid
+        first = getattr(self, "coupling", None) is None
+        if first:
+            self._prepare()
+        old = None if first else self._finest_state()
+        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
+                              operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
+                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
+        if initialize:
+            self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
+        finest = self.lbm.levels[-1]
+        if not first and finest != self.finest:
+            raise RuntimeError(f"regrid: the finest level moved from {self.finest} to {finest}")
+        self.finest = finest
+        if first:
+            self._make_bodies(fl.gravity_m_s2)
+            volumes = np.array([g.volume_m3() for g in self.geoms])
+            self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, float)[None, :]
+        con = scene.contact
+        self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
+                                               buoyancy=True, contact_film=True if con is None else con.fluid_film)
+        self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
+        if old is not None:
+            self._carry_finest(old)
+
+    def _prepare(self):
+        """Checks and constants of the first build (a scene with a free surface is
+        :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`'s)."""
+        scene, u, fl = self.scene, self.units, self.scene.fluid
+        if self.regrid_every and scene.refinement.body_band_m is None:
+            raise InputError("refinement.body_band_m: a regridding scene with bodies needs the band that follows "
+                             "them (e.g. four finest cells)")
+        self._check_bodies()
+        # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone
+        self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
+
+    # -- regridding -------------------------------------------------------------------------------------
     def regrid(self) -> bool:
         """As :meth:`RefinedFluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
         where they are. A body that left the finest level since the last regrid (it moved further than the band)
@@ -192,16 +219,7 @@ class RefinedBodiesModel(RefinedFluidModel):
         return {**self.body_columns(), **super().diagnostics()}
 
     def is_finite(self) -> bool:
-        bodies = bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
-        return bodies and math.isfinite(self.lbm.mass())
-
-    def watchdog_probe(self) -> dict:
-        """The fluid's probe, and the bodies that left the finest level (count, the first's index)."""
-        pos = self.body_positions_m()
-        if not np.isfinite(pos).all():
-            return {"finite": (False, None)}
-        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
-        return {**super().watchdog_probe(), "bodies_outside_finest": (len(gone), gone[0] if gone else None)}
+        return self._bodies_finite() and math.isfinite(self.lbm.mass())
 
     def state(self) -> dict:
         """The levels' populations (:meth:`RefinedFluidModel.state`), the finest level's cell flags (the cells the
@@ -220,8 +238,3 @@ class RefinedBodiesModel(RefinedFluidModel):
         copy_into(self.lbm.solvers[self.finest].flags, np.asarray(state["flags_finest"]).astype(np.uint8))
         self.coupling.load_state(state["coupling"])
         self.dem.load_state(state["dem"])
-
-    def describe(self) -> dict:
-        return {**super().describe(), "box_m": list(self.box_m), "bodies_level": self.finest,
-                "dem_substeps": int(self.dem.substeps_for(self.units_finest.dt_s)),
-                "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion} for b in self.scene.bodies]}

@@ -1,0 +1,108 @@
+"""Rigid bodies in water with a free surface on refined levels: a scene with ``[[bodies]]``, ``[free_surface]`` and
+``[refinement]`` (paper sections 2.2-2.5; the floating cube, and tier 2's ice and hull, on the levels of its figure 1).
+
+:class:`RefinedSurfaceBodiesModel` is :class:`~iceresist.models.refined_surface.RefinedFreeSurfaceModel` (the surface
+in the finest level, the coarser levels all water) with the bodies of :class:`~iceresist.models.bodies.BodiesModel`
+on the finest level: the coupling (interpolated bounce-back, momentum exchange, refill with h and phi, the contact
+film, eqs. 16-21) runs on that level's free-surface fluid at that level's own time step, then the level's ghost
+blocks are refilled with bulk water as without bodies (:meth:`RefinedFreeSurface.refill_ghosts`). As on a uniform
+grid the buoyancy is the hydrostatic pressure of gravity in the water, summed by the momentum exchange; the DEM
+carries gravity. Every body, with two cells to spare, must lie on the finest level's leaves (``refinement.body_band_m``
+refines around it). The water volume is the finest level's phase volume outside the bodies plus the coarser levels'
+water, in level-0 cells. Regridding comes next (block AMR part 2); such a scene is refused in one line.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from iceresist.errors import InputError
+from iceresist.grid.forest import CELLS
+from iceresist.models.refined_bodies import FinestLevelBodies
+from iceresist.models.refined_surface import RefinedFreeSurfaceModel
+
+
+class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
+    """Bodies, fixed, prescribed or free, in water with a free surface on refined levels (module docstring)."""
+
+    regrids = False
+
+    components = ("fluid", "free_surface", "dem", "coupling", "refinement")
+
+    def _build(self):
+        from iceresist.coupling import FluidStructureCoupling
+
+        super()._build()                  # the levels, the surface on the finest one, still hydrostatic water
+        self._check_bodies()
+        self._make_bodies(self.scene.fluid.gravity_m_s2)   # gravity on the bodies; the buoyancy is the pressure
+        con = self.scene.contact
+        self.coupling = FluidStructureCoupling(self.fs.surface, self.dem, self.geoms, self.units_finest,
+                                               contact_film=True if con is None else con.fluid_film)
+        self.lbm.set_stepper(self.finest, self._finest_step)
+        self.coupling.update_boundaries()       # the bodies placed in the still water (their cells leave it)
+        self._buoyancy_N = np.zeros((len(self.scene.bodies), 3))
+        self.volume0_cells = self.water_volume_cells()
+
+    def _finest_step(self):
+        """One step of the finest level: the coupled step (boundaries, free-surface step, DEM), then the ghost
+        blocks refilled from the coarser level."""
+        self.coupling.step(1)
+        self.fs.refill_ghosts()
+
+    # -- values per leaf ---------------------------------------------------------------------------------
+    def water_volume_cells(self) -> float:
+        """The water volume in level-0 cells: the finest level's phase volume over its leaves outside the bodies
+        (:meth:`PhaseField.volume_per_block`) over 8^L, plus every coarser level's leaf cells over 8^l."""
+        n = self.lbm.views[self.finest].nleaves
+        total = float(self.fs.surface.phase.volume_per_block()[:n].sum()) / 8.0 ** self.finest
+        for lv in self.lbm.levels[:-1]:
+            total += self.lbm.views[lv].nleaves * CELLS / 8.0 ** lv
+        return total
+
+    def _covered(self) -> np.ndarray:
+        """The finest level's leaf cells a body covers (nleaves, 512)."""
+        return self.coupling.owners()[:self.lbm.views[self.finest].nleaves] >= 0
+
+    def _leaf(self, lv: int):
+        """As :meth:`RefinedFreeSurfaceModel._leaf`, the cells the bodies cover at the reference state too."""
+        rho, u, xyz = super()._leaf(lv)
+        if lv == self.finest:
+            covered = self._covered()
+            rho = np.where(covered, 1.0, rho)
+            u = np.where(covered[None], 0.0, u)
+        return rho, u, xyz
+
+    def _leaf_extra(self, lv: int) -> list:
+        """phi of the leaves, 0 in the cells a body covers (no water there)."""
+        phi = super()._leaf_extra(lv)[0]
+        if lv == self.finest:
+            phi = np.where(self._covered(), 0.0, phi)
+        return [phi]
+
+    # -- protocol ------------------------------------------------------------------------------------------
+    def diagnostics(self) -> dict[str, float]:
+        """The per-body columns (:meth:`BodiesModel.body_columns`) and the water's (:meth:`RefinedFreeSurfaceModel.
+        diagnostics`) with the volume outside the bodies."""
+        out = super().diagnostics()
+        v = self.water_volume_cells()
+        out.update(water_volume_m3=float(v * self.units.dx_m ** 3),
+                   water_volume_drift=float((v - self.volume0_cells) / self.volume0_cells))
+        return {**self.body_columns(), **out}
+
+    def is_finite(self) -> bool:
+        return self._bodies_finite() and math.isfinite(self.water_volume_cells()) and math.isfinite(self.lbm.mass())
+
+    def state(self) -> dict:
+        """The water's state (:meth:`RefinedFreeSurfaceModel.state`: the finest level's flags, with the cells the
+        bodies cover, among it), the coupling and the DEM: a bit-for-bit restart."""
+        return {**super().state(), "coupling": self.coupling.state(), "dem": self.dem.state()}
+
+    def load_state(self, state: dict):
+        if "coupling" not in state or "dem" not in state:
+            raise InputError("the checkpoint holds no bodies: it belongs to another scene; run again without "
+                             "--pickup")
+        super().load_state(state)
+        self.coupling.load_state(state["coupling"])
+        self.dem.load_state(state["dem"])

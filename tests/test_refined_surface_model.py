@@ -50,12 +50,16 @@ def test_a_refined_free_surface_run_restarts_bit_for_bit():
 
 
 def assert_same_water(a, b):
-    """Two refined free-surface models hold the same state bit for bit: every coarser level's populations, the
-    finest level's f, h, phi and flags, and the diagnostics."""
+    """Two refined free-surface models hold the same state bit for bit: every level's populations on its leaves
+    (a ghost block's, which the level interface writes where its leaves read them, may differ after a rebuild), the
+    finest level's h, phi and flags, and the diagnostics."""
     for lv in a.lbm.levels[:-1]:
-        assert np.array_equal(a.lbm.solvers[lv].fluid.rows()[1], b.lbm.solvers[lv].fluid.rows()[1])
+        n = a.lbm.views[lv].nleaves
+        assert np.array_equal(a.lbm.solvers[lv].fluid.rows()[1][:n], b.lbm.solvers[lv].fluid.rows()[1][:n])
     sa, sb = a.fs.surface.state(), b.fs.surface.state()
-    for k in ("f", "h", "phi", "flags"):
+    n = a.lbm.views[a.finest].nleaves
+    assert np.array_equal(sa["f"][:n], sb["f"][:n]), "f"
+    for k in ("h", "phi", "flags"):
         assert np.array_equal(sa[k], sb[k]), k
     assert a.diagnostics() == b.diagnostics()
 
@@ -83,8 +87,6 @@ def test_the_refined_tank_writes_phi_on_every_level(tmp_path, main):  # noqa: F8
     (("water_depth_m = 20.0 ", "water_depth_m = 20.0\ncolumn_length_m = 8.0 "), "free_surface.column_length_m"),
     (("[free_surface]\nwater_depth_m = 20.0          # cells (lattice units, level 0)\nh_lattice = \"D3Q15\"", ""),
      "refinement.surface_band_m"),
-    (("surface_band_m = 6.0", "surface_band_m = 6.0\nregrid_every_steps = 10\nvorticity_1_s = 1.0"),
-     "refinement.regrid_every_steps: regridding runs for the fluid alone and the fluid with bodies so far"),
 ])
 def test_bad_refinement_of_a_free_surface_exits_2_with_one_line(tmp_path, main, edit, needle):  # noqa: F811
     assert edit[0] in TANK

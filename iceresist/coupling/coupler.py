@@ -423,6 +423,8 @@ class FluidStructureCoupling:
             owner, owner_prev = self.decomp.local_rows(owner), self.decomp.local_rows(owner_prev)
         copy_into(d["owner"], owner.astype(np.int32))
         copy_into(d["owner_prev"], owner_prev.astype(np.int32))
+        if self.surface is not None:            # the phase field's solid cells, as the last boundary pass left them
+            self.surface.phase.solid = d["owner"]
         slabs = np.asarray(state["slabs"], dtype=np.int64)
         if slabs.size not in (0, self.n):
             raise InputError(f"coupling state has slabs for {slabs.size} bodies, this scene has {self.n}: "

@@ -87,6 +87,20 @@ def build_ghost_phase_cell(target, real, lattice_name: str):
     return ghost_phase_cell
 
 
+def liquid_h(lattice_name: str, f: np.ndarray, g_lattice: float) -> np.ndarray:
+    """The host form of :func:`build_ghost_phase_cell`: h (n, q, 512) of bulk liquid (phi = 1) at the velocity of
+    populations ``f`` (n, 27, 512, f - w) whose level has gravity ``g_lattice`` (its half-force shift removed)."""
+    lat = lookup_h_lattice(lattice_name)
+    f = np.asarray(f, dtype=np.float64)
+    rho = 1.0 + f.sum(axis=1)
+    u = np.einsum("qa,nqc->anc", L.C.astype(np.float64), f) / rho[None]
+    u[2] += 0.5 * g_lattice
+    cu = np.einsum("ka,anc->nkc", lat.c.astype(np.float64), u)
+    uu = (u * u).sum(axis=0)[:, None, :]
+    w = np.asarray(lat.w, dtype=np.float64)[None, :, None]
+    return w * (1.0 + cu / lat.cs2 + (cu * cu - lat.cs2 * uu) / (2.0 * lat.cs2 ** 2))
+
+
 @lru_cache(maxsize=None)
 def ghost_phase_launcher(target, precision: str, lattice_name: str) -> CellLauncher:
     cell = build_ghost_phase_cell(target, jit.real_type(precision), lattice_name)
@@ -268,6 +282,49 @@ class RefinedFreeSurface:
             self.lbm.solvers[level].initialize(rho, tuple(float(v) for v in u))
         self.refill_ghosts()
         self.lbm.iteration = 0
+
+    # ------------------------------------------------------------------ regridding
+    def carry_from(self, f_levels: dict, surface_state: dict, old_view):
+        """Take the state of the levels before a regrid onto this octree's levels (block AMR part 2):
+        ``f_levels`` every level's populations (f - w) on this octree's blocks, as
+        :func:`iceresist.grid.regrid.carry_over` gives them; ``surface_state`` the finest level's
+        :meth:`FreeSurfaceFluid.state` before, on the forest of ``old_view`` (its :class:`LevelView`). The finest
+        level's h, phi, flags and h validity are copied block by block where both forests hold a block; a block new
+        to the level lies in the bulk water (the criteria keep the surface on the finest level), so takes phi = 1,
+        h of that water at its carried velocity (:func:`liquid_h`, as :meth:`refill_ghosts` gives a ghost block) and
+        the static flags. Raises RuntimeError where a block the level drops holds a cell less liquid than
+        1 - 1e-4."""
+        from iceresist.grid.regrid import same_blocks
+
+        for lv in self.levels[:-1]:
+            level = self.lbm.solvers[lv]
+            n = level.forest.nblocks
+            level.fluid.set_rows(np.arange(n), np.ascontiguousarray(f_levels[lv]).astype(level.fluid.real), n)
+            level.fluid.iteration = self.lbm.iteration * 2 ** lv
+        L_, fs, view = self.finest, self.surface, self.views[self.finest]
+        src, dst = same_blocks(old_view, view)
+        kept = np.zeros(old_view.forest.nblocks, dtype=bool)
+        kept[src] = True
+        gone = np.flatnonzero(~kept[:old_view.nleaves])
+        phi_old = np.asarray(surface_state["phi"])
+        if gone.size and phi_old[gone].min() < 1.0 - PHI_BULK_TOL:
+            raise RuntimeError(f"regrid: the finest level (level {L_}) would drop blocks the surface reaches "
+                               f"(phi = {phi_old[gone].min():.3g})")
+        n = fs.forest.nblocks
+        fresh = np.ones(n, dtype=bool)
+        fresh[dst] = False
+        real = jit.real_type(self.precision)
+        h = np.zeros((n,) + tuple(surface_state["h"].shape[1:]), dtype=real)
+        phi = np.ones((n, CELLS), dtype=real)
+        valid = np.ones(n, dtype=np.int8)
+        flags = np.array(self.target.to_host(fs.fluid.flags), dtype=np.uint8)
+        h[dst], phi[dst] = surface_state["h"][src], phi_old[src]
+        valid[dst], flags[dst] = surface_state["h_valid"][src], surface_state["flags"][src]
+        g_coarse = self.g0 / 2 ** max(L_ - 1, 0)     # the carried f of a fresh block is its coarse parent's
+        h[fresh] = liquid_h(self.h_lattice, f_levels[L_][fresh], g_coarse)
+        fs.load_state({"f_blocks": np.arange(n, dtype=np.int64), "f": np.ascontiguousarray(f_levels[L_]).astype(real),
+                       "f_rows": np.int64(n), "h": h, "phi": phi, "h_valid": valid, "flags": flags,
+                       "iteration": np.int64(surface_state["iteration"])})
 
     def step(self, n: int = 1):
         """Advance level 0 by ``n`` steps (the finest level by n 2^L)."""

@@ -119,10 +119,6 @@ class RefinedFluidModel(Model):
 
     components = ("fluid", "refinement")
 
-    #: Whether the model regrids (``refinement.regrid_every_steps``, :meth:`regrid`): the fluid, and the fluid
-    #: with bodies; not yet the free surface.
-    regrids = True
-
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
         from iceresist.grid.levels import level_views
         from iceresist.limits import check_fluid
@@ -141,12 +137,7 @@ class RefinedFluidModel(Model):
             raise InputError("refinement.scheme: the interpolating level interface runs on the CPU only; use "
                              "scheme = \"conservative\" with backend = \"cuda\"")
         self.precision = precision or scene.numerics.precision
-        ref = scene.refinement
-        if ref.regrid_every_steps is not None and not self.regrids:
-            raise InputError("refinement.regrid_every_steps: regridding runs for the fluid alone and the fluid "
-                             "with bodies so far (no [free_surface]); leave refinement.regrid_every_steps and "
-                             "refinement.vorticity_1_s out")
-        self.regrid_every = ref.regrid_every_steps
+        self.regrid_every = scene.refinement.regrid_every_steps
         self.regrid_count = 0
         self.octree = build_octree(scene)
         views = level_views(self.octree, forest_faces(scene, u))
@@ -414,15 +405,20 @@ class RefinedFluidModel(Model):
             return None
         return BlockOctree.from_leaves(t.root, t.max_level, t.periodic, lev, coord)
 
-    def load_state(self, state: dict):
+    def _adopt_checkpoint_octree(self, state: dict):
+        """After :meth:`check_checkpoint`: a regridding run picks up on the checkpoint's last grid."""
         from iceresist.grid.levels import level_views
+
+        if not self._is_current(state["octree_level"], state["octree_coord"]):
+            octree = self._octree_of(state)
+            self._adopt(octree, self._level_bytes(level_views(octree, forest_faces(self.scene, self.units))))
+        self.regrid_count = int(state.get("regrid_count", self.regrid_count))
+
+    def load_state(self, state: dict):
         from iceresist.models.fluid import _set_populations
 
         self.check_checkpoint(state)
-        if not self._is_current(state["octree_level"], state["octree_coord"]):
-            octree = self._octree_of(state)             # a regridding run picks up on its last grid
-            self._adopt(octree, self._level_bytes(level_views(octree, forest_faces(self.scene, self.units))))
-        self.regrid_count = int(state.get("regrid_count", self.regrid_count))
+        self._adopt_checkpoint_octree(state)
         f = state.get("f", {})
         for lv, s in self.lbm.solvers.items():
             arr = np.asarray(f.get(str(lv), np.zeros(0)))

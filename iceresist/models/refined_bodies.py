@@ -42,6 +42,9 @@ class FinestLevelBodies:
     def _check_bodies(self):
         """The scene's bodies checked against the box (:func:`check_bodies`); names, meshes and reaches kept."""
         scene, u = self.scene, self.units
+        if self.regrid_every and scene.refinement.body_band_m is None:
+            raise InputError("refinement.body_band_m: a regridding scene with bodies needs the band that follows "
+                             "them (e.g. four finest cells)")
         self.box_m = tuple(n * u.dx_m for n in self.shape_cells)
         self.meshes = {i: body_mesh(b, i, scene.source_name) for i, b in enumerate(scene.bodies) if b.shape == "mesh"}
         check_bodies(scene, self.box_m, self.meshes)
@@ -90,6 +93,51 @@ class FinestLevelBodies:
             raise InputError(f"refinement: body {self.names[i]!r} (bodies[{i}]) reaches beyond the finest level "
                              f"(level {self.finest}); refine around it with refinement.body_band_m or a "
                              f"[[refinement.boxes]] box at level {self.finest}")
+
+    # -- regridding -------------------------------------------------------------------------------------
+    def regrid(self) -> bool:
+        """As :meth:`RefinedFluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
+        where they are. A body that left the finest level since the last regrid (it moved further than the band)
+        stops the run with a StabilityError naming the two keys; after the regrid every body lies on the finest
+        level with two cells to spare (asserted)."""
+        from iceresist.errors import StabilityError
+
+        pos = self.body_positions_m()
+        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
+        if gone:
+            i = gone[0]
+            raise StabilityError(f"refinement.body_band_m: body {self.names[i]!r} left the finest level between "
+                                 f"two regrids (step {self.iteration}); widen refinement.body_band_m or regrid more "
+                                 f"often (refinement.regrid_every_steps = {max(1, self.regrid_every // 2)})")
+        changed = super().regrid()
+        if changed and self.bodies_outside_finest(pos, margin_cells=2.0):
+            raise RuntimeError("regrid: a body is not on the finest level of the new octree")
+        return changed
+
+    def _finest_state(self) -> dict:
+        """What the finest level holds besides its populations: its view and the coupling's state."""
+        return {"view": self.lbm.views[self.finest], "coupling": self.coupling.state()}
+
+    def _carry_finest(self, old: dict):
+        """The coupling's cell owners (now and a step earlier) copied block by block from ``old``
+        (:meth:`_finest_state` of the level before a regrid) where the two forests share a block; a block new to
+        the level has no body in it (the band keeps every body on blocks that stay), so no owner. The rest of the
+        coupling's state (boxes, forces, the record's load sum, step count) carries as it is. The cell flags are
+        not carried: the new coupling's first refill sets them from the owners on every block a body touches."""
+        from iceresist.grid.regrid import same_blocks
+
+        src, dst = same_blocks(old["view"], self.lbm.views[self.finest])
+        st = dict(old["coupling"])
+        for key in ("owner", "owner_prev"):
+            was = np.asarray(st[key])
+            kept = np.zeros(len(was), dtype=bool)
+            kept[src] = True
+            if (was[~kept] >= 0).any():
+                raise RuntimeError(f"regrid: cells a body covers ({key}) lie on finest blocks the new octree drops")
+            now = np.full((self.lbm.solvers[self.finest].forest.nblocks, was.shape[1]), -1, dtype=was.dtype)
+            now[dst] = was[src]
+            st[key] = now
+        self.coupling.load_state(st)
 
     def _bodies_finite(self) -> bool:
         return bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
@@ -150,57 +198,9 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         """Checks and constants of the first build (a scene with a free surface is
         :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`'s)."""
         scene, u, fl = self.scene, self.units, self.scene.fluid
-        if self.regrid_every and scene.refinement.body_band_m is None:
-            raise InputError("refinement.body_band_m: a regridding scene with bodies needs the band that follows "
-                             "them (e.g. four finest cells)")
         self._check_bodies()
         # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone
         self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
-
-    # -- regridding -------------------------------------------------------------------------------------
-    def regrid(self) -> bool:
-        """As :meth:`RefinedFluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
-        where they are. A body that left the finest level since the last regrid (it moved further than the band)
-        stops the run with a StabilityError naming the two keys; after the regrid every body lies on the finest
-        level with two cells to spare (asserted)."""
-        from iceresist.errors import StabilityError
-
-        pos = self.body_positions_m()
-        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
-        if gone:
-            i = gone[0]
-            raise StabilityError(f"refinement.body_band_m: body {self.names[i]!r} left the finest level between "
-                                 f"two regrids (step {self.iteration}); widen refinement.body_band_m or regrid more "
-                                 f"often (refinement.regrid_every_steps = {max(1, self.regrid_every // 2)})")
-        changed = super().regrid()
-        if changed and self.bodies_outside_finest(pos, margin_cells=2.0):
-            raise RuntimeError("regrid: a body is not on the finest level of the new octree")
-        return changed
-
-    def _finest_state(self) -> dict:
-        """What the finest level holds besides its populations: its view and the coupling's state."""
-        return {"view": self.lbm.views[self.finest], "coupling": self.coupling.state()}
-
-    def _carry_finest(self, old: dict):
-        """The coupling's cell owners (now and a step earlier) copied block by block from ``old``
-        (:meth:`_finest_state` of the level before a regrid) where the two forests share a block; a block new to
-        the level has no body in it (the band keeps every body on blocks that stay), so no owner. The rest of the
-        coupling's state (boxes, forces, the record's load sum, step count) carries as it is. The cell flags are
-        not carried: the new coupling's first refill sets them from the owners on every block a body touches."""
-        from iceresist.grid.regrid import same_blocks
-
-        src, dst = same_blocks(old["view"], self.lbm.views[self.finest])
-        st = dict(old["coupling"])
-        for key in ("owner", "owner_prev"):
-            was = np.asarray(st[key])
-            kept = np.zeros(len(was), dtype=bool)
-            kept[src] = True
-            if (was[~kept] >= 0).any():
-                raise RuntimeError(f"regrid: cells a body covers ({key}) lie on finest blocks the new octree drops")
-            now = np.full((self.lbm.solvers[self.finest].forest.nblocks, was.shape[1]), -1, dtype=was.dtype)
-            now[dst] = was[src]
-            st[key] = now
-        self.coupling.load_state(st)
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def _leaf(self, lv: int):

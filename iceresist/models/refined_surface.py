@@ -26,8 +26,6 @@ from iceresist.models.refined import RefinedFluidModel
 class RefinedFreeSurfaceModel(RefinedFluidModel):
     """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA)."""
 
-    regrids = False
-
     components = ("fluid", "free_surface", "refinement")
 
     def _level_bytes(self, views) -> dict[int, int]:
@@ -48,10 +46,20 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
                 out[v.level] += n * CELLS * (item * (2 * qh + 1 + 3) + 3) + n
         return out
 
-    def _build(self):
+    def _build(self, initialize: bool = True):
+        """The levels with the surface on the finest (:class:`RefinedFreeSurface`), the water still and
+        hydrostatic at ``free_surface.water_depth_m`` (or, ``initialize`` False, left for a regrid or a pickup to
+        fill)."""
         from iceresist.freesurface.refined import RefinedFreeSurface
 
         scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
+        if not initialize:
+            finest = self.finest
+            self.fs = self._levels(RefinedFreeSurface)
+            self.lbm = self.fs.lbm
+            if self.fs.finest != finest:
+                raise RuntimeError(f"regrid: the finest level moved from {finest} to {self.fs.finest}")
+            return
         if fs.column_length_m is not None:
             raise InputError("free_surface.column_length_m: a dam break's dry floor lies outside the finest level; "
                              "run it without [refinement]")
@@ -62,14 +70,36 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             raise InputError(f"free_surface.water_depth_m: {fs.water_depth_m} m is {self.depth0:g} cells, outside "
                              f"the {nz}-cell-high domain")
         self.gravity0 = float(u.acceleration_to_lattice(-fl.gravity_m_s2[2]))
-        self.fs = RefinedFreeSurface(self.octree, tau0=u.tau, gravity0=self.gravity0, depth0=self.depth0,
-                                     mobility=fs.mobility_lattice, width=fs.interface_width_cells,
-                                     h_lattice=fs.h_lattice, operator=fl.operator, precision=self.precision,
-                                     target=self.target, faces=forest_faces(scene, u))
+        self.fs = self._levels(RefinedFreeSurface)
         self.lbm = self.fs.lbm
         self.finest = self.fs.finest
         self.fs.initialize(u=tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
         self.volume0_cells = self.fs.volume()
+
+    def _levels(self, cls):
+        scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
+        return cls(self.octree, tau0=u.tau, gravity0=self.gravity0, depth0=self.depth0, mobility=fs.mobility_lattice,
+                   width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
+                   precision=self.precision, target=self.target, faces=forest_faces(scene, u))
+
+    def _rebuild(self, octree, level_bytes: dict):
+        """The levels built on ``octree``, every level's populations carried over
+        (:func:`iceresist.grid.regrid.carry_over`) and the finest level's phase field and flags with them
+        (:meth:`RefinedFreeSurface.carry_from`)."""
+        from iceresist.grid.regrid import carry_over
+
+        old_views = self.lbm.views
+        old_f = {lv: self._populations(lv) for lv in self.lbm.levels}
+        surface = self.fs.surface.state()
+        self._adopt(octree, level_bytes)
+        new_f = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
+        carry_over(old_views, old_f, self.lbm.views, new_f)
+        self.fs.carry_from(new_f, surface, old_views[self.finest])
+
+    def _populations(self, lv: int) -> np.ndarray:
+        """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""
+        level = self.lbm.solvers[lv]
+        return (level.fs.fluid if lv == self.finest else level.fluid).populations()
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def _phi_leaves(self) -> np.ndarray:
@@ -101,9 +131,6 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         return np.nanmean(h.reshape(nx, s, ny, s), axis=(1, 3))
 
     # -- protocol ------------------------------------------------------------------------------------------
-    def step(self, n: int = 1):
-        self.fs.step(n)
-
     def fields(self) -> dict[str, np.ndarray]:
         """rho (kg/m^3), u (m/s), pressure (Pa, gauge), flags (FLUID where phi >= 1/2, else GAS), phi and surface (m)
         on the level-0 grid, each cell the mean of the leaf cells in it (:meth:`FreeSurfaceModel.fields`)."""
@@ -157,12 +184,14 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         coarse = {str(lv): self.lbm.solvers[lv].fluid.rows()[1] for lv in self.lbm.levels[:-1]}
         return {"f": coarse, "surface": self.fs.surface.state(), "iteration": np.int64(self.iteration),
                 "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
-                "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy()}
+                "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
+                "regrid_count": np.int64(self.regrid_count)}
 
     def load_state(self, state: dict):
         self.check_checkpoint(state)
         if "surface" not in state:
             raise InputError("checkpoint holds no free surface on levels: it belongs to another scene")
+        self._adopt_checkpoint_octree(state)
         for lv in self.lbm.levels[:-1]:
             level = self.lbm.solvers[lv]
             f = np.asarray(state["f"].get(str(lv), np.zeros(0)))

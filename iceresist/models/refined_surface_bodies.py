@@ -9,7 +9,9 @@ blocks are refilled with bulk water as without bodies (:meth:`RefinedFreeSurface
 grid the buoyancy is the hydrostatic pressure of gravity in the water, summed by the momentum exchange; the DEM
 carries gravity. Every body, with two cells to spare, must lie on the finest level's leaves (``refinement.body_band_m``
 refines around it). The water volume is the finest level's phase volume outside the bodies plus the coarser levels'
-water, in level-0 cells. Regridding comes next (block AMR part 2); such a scene is refused in one line.
+water, in level-0 cells. With ``refinement.regrid_every_steps`` the band of ``refinement.body_band_m`` follows the
+bodies (block AMR part 2): at a regrid the populations of every level, the finest level's h, phi and flags
+(:meth:`RefinedFreeSurface.carry_from`) and the coupling's cell owners are carried to the new blocks, the DEM goes on.
 """
 
 from __future__ import annotations
@@ -27,20 +29,28 @@ from iceresist.models.refined_surface import RefinedFreeSurfaceModel
 class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
     """Bodies, fixed, prescribed or free, in water with a free surface on refined levels (module docstring)."""
 
-    regrids = False
-
     components = ("fluid", "free_surface", "dem", "coupling", "refinement")
 
-    def _build(self):
+    def _build(self, initialize: bool = True):
+        """The levels with the surface (:meth:`RefinedFreeSurfaceModel._build`) and the coupling on the finest
+        level's free-surface fluid. The first call also builds the DEM and places the bodies in the still water; a
+        later one (a regrid, a pickup onto another octree) keeps the DEM and carries the coupling's state
+        (:meth:`FinestLevelBodies._carry_finest`)."""
         from iceresist.coupling import FluidStructureCoupling
 
-        super()._build()                  # the levels, the surface on the finest one, still hydrostatic water
-        self._check_bodies()
-        self._make_bodies(self.scene.fluid.gravity_m_s2)   # gravity on the bodies; the buoyancy is the pressure
+        first = getattr(self, "coupling", None) is None
+        old = None if first else self._finest_state()
+        super()._build(initialize)
+        if first:
+            self._check_bodies()
+            self._make_bodies(self.scene.fluid.gravity_m_s2)   # gravity on the bodies; buoyancy is the pressure
         con = self.scene.contact
         self.coupling = FluidStructureCoupling(self.fs.surface, self.dem, self.geoms, self.units_finest,
                                                contact_film=True if con is None else con.fluid_film)
         self.lbm.set_stepper(self.finest, self._finest_step)
+        if old is not None:
+            self._carry_finest(old)
+            return
         self.coupling.update_boundaries()       # the bodies placed in the still water (their cells leave it)
         self._buoyancy_N = np.zeros((len(self.scene.bodies), 3))
         self.volume0_cells = self.water_volume_cells()

@@ -17,24 +17,19 @@ from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
 DX = 0.005125
 #: Level-1 time step (s): g = 1e-3 in level-1 lattice units.
 DT = (1e-3 * DX / 9.81) ** 0.5
-#: The tank in level-1 cells (4 cube widths square, 6 high) and the still water, 36 level-1 cells deep.
-TANK, DEPTH = (32, 32, 48), 36.0
-
-
-def _cube_text(refined: bool = True, steps: int = 400) -> str:
-    """The floating cube released at 80 % draft (its scene file's set-up, iceresist/validate/scenes/floating_cube.toml)
-    in a taller tank, BGK float32, tau 0.55 on level 1. ``refined``: level 0 at twice the cell (16 x 16 x 24 cells)
-    with level 1 from z = 8 level-0 cells to the lid (the surface band: the surface and its profile on level 1)
-    and around the cube; else the uniform level-1 grid. ``steps``: level-0 steps (level-1 steps twice as many)."""
+def _tank_text(name: str, tank, body: str, refinement: str, refined: bool, steps: int) -> str:
+    """A closed tank of ``tank`` level-1 cells with water 36 level-1 cells deep and one body (``body``: its TOML
+    table), BGK float32, tau 0.55 and g = 1e-3 on level 1. ``refined``: level 0 at twice the cell, the
+    ``[refinement]`` keys ``refinement`` under ``levels = 1``; else the uniform level-1 grid. ``steps``: level-0
+    steps (level-1 steps twice as many)."""
     k = 2 if refined else 1
-    depth_m = DEPTH * DX
-    ref = f"\n[refinement]\nlevels = 1\nsurface_band_m = {8 * DX}\nbody_band_m = {4 * DX}\n" if refined else ""
+    ref = f"\n[refinement]\nlevels = 1\n{refinement}" if refined else ""
     return f"""
 [scene]
-name = "floating_cube_levels"
+name = "{name}"
 
 [domain]
-cells = [{TANK[0] // k}, {TANK[1] // k}, {TANK[2] // k}]
+cells = [{tank[0] // k}, {tank[1] // k}, {tank[2] // k}]
 dx_m = {DX * k}
 faces = {{ x_min = "wall", x_max = "wall", y_min = "wall", y_max = "wall", z_min = "wall", z_max = "wall" }}
 
@@ -53,18 +48,32 @@ precision = "float32"
 steps = {steps * (2 // k)}
 
 [free_surface]
-water_depth_m = {depth_m}
+water_depth_m = {DEPTH * DX}
 mobility_lattice = 0.05
 interface_width_cells = 3.0
+{body}""" + ref
 
+
+#: The still water, 36 level-1 cells deep.
+DEPTH = 36.0
+
+
+def _cube_text(refined: bool = True, steps: int = 400) -> str:
+    """The floating cube released at 80 % draft (its scene file's set-up, iceresist/validate/scenes/floating_cube.toml)
+    in a taller tank (32 x 32 x 48 level-1 cells: 4 cube widths square, 6 high); refined: level 1 from z = 8 level-0
+    cells to the lid (the surface band: the surface and its profile on level 1) and around the cube."""
+    z = DEPTH * DX + 0.5 * 0.041 - 0.8 * 0.041
+    body = f"""
 [[bodies]]
 name = "cube"
 shape = "box"
 size_m = [0.041, 0.041, 0.041]
-position_m = [{TANK[0] * DX / 2}, {TANK[1] * DX / 2}, {depth_m + 0.5 * 0.041 - 0.8 * 0.041}]
+position_m = [{16 * DX}, {16 * DX}, {z}]
 density_kg_m3 = 950.0
 motion = "free"
-""" + ref
+"""
+    return _tank_text("floating_cube_levels", (32, 32, 48), body,
+                      f"surface_band_m = {8 * DX}\nbody_band_m = {4 * DX}\n", refined, steps)
 
 
 def _heave(model, records: int, steps_per_record: int):
@@ -123,41 +132,10 @@ def test_bad_bodies_on_levels_with_a_surface_exit_2_with_one_line(tmp_path, main
 
 
 def _sink_text(refined: bool = True, steps: int = 200, regrid: int = 10) -> str:
-    """A sphere (radius 4 level-1 cells, 2000 kg/m^3) released under the surface (its centre 26 level-1 cells up in
-    water 36 deep) of a 48^3 level-1 tank, BGK float32, tau 0.55 on level 1. ``refined``: level 0 at twice the cell
-    (24^3), the surface band (z from 8 level-0 cells to the lid) and a band of 2 level-1 cells around the sphere on
-    level 1, regridding every ``regrid`` level-0 steps; else the uniform level-1 grid."""
-    k = 2 if refined else 1
-    ref = (f"\n[refinement]\nlevels = 1\nsurface_band_m = {8 * DX}\nbody_band_m = {2 * DX}\n"
-           f"regrid_every_steps = {regrid}\n") if refined else ""
-    return f"""
-[scene]
-name = "sinking_sphere"
-
-[domain]
-cells = [{48 // k}, {48 // k}, {48 // k}]
-dx_m = {DX * k}
-faces = {{ x_min = "wall", x_max = "wall", y_min = "wall", y_max = "wall", z_min = "wall", z_max = "wall" }}
-
-[fluid]
-nu_m2_s = {0.05 * DX ** 2 / (3 * DT)}
-rho_kg_m3 = 1000.0
-gravity_m_s2 = [0.0, 0.0, -9.81]
-operator = "bgk"
-
-[numerics]
-dt_s = {DT * k}
-mach = 0.2
-precision = "float32"
-
-[run]
-steps = {steps * (2 // k)}
-
-[free_surface]
-water_depth_m = {36 * DX}
-mobility_lattice = 0.05
-interface_width_cells = 3.0
-
+    """A sphere (radius 4 level-1 cells, 2000 kg/m^3) released under the surface (its centre 26 level-1 cells up) of
+    a 48^3 level-1 tank; refined: the surface band (z from 8 level-0 cells to the lid) and a band of 2 level-1 cells
+    around the sphere on level 1, regridding every ``regrid`` level-0 steps."""
+    body = f"""
 [[bodies]]
 name = "sphere"
 shape = "sphere"
@@ -165,7 +143,9 @@ radius_m = {4 * DX}
 position_m = [{24 * DX}, {24 * DX}, {26 * DX}]
 density_kg_m3 = 2000.0
 motion = "free"
-""" + ref
+"""
+    return _tank_text("sinking_sphere", (48, 48, 48), body, f"surface_band_m = {8 * DX}\nbody_band_m = {2 * DX}\n"
+                      f"regrid_every_steps = {regrid}\n", refined, steps)
 
 
 def _sink(model, records: int, steps_per_record: int):

@@ -315,10 +315,11 @@ def test_bodies_split_into_runs_give_the_unsplit_result(backend):
     populations, forces and torques (to the order of summation) as launched whole, over 8 steps in which their
     cell boxes change and they uncover cells: the refill reads the velocity of the body that uncovered a cell
     through the row that covered it a step earlier, so the rows must keep their bodies (counting the runs anew
-    every step moves them: the populations then differ by 0.035). On the CUDA simulator 3 steps (each uncovers
-    6-9 cells): a simulated step takes 20-30 s, and 8 + 8 of them made this the longest test of the suite."""
+    every step moves them: the populations then differ by 0.035). On the CUDA simulator 2 steps (each uncovers
+    6-9 cells; the second's refill reads the rows of the first): a simulated step takes 20-30 s, and 8 + 8 of them
+    made this the longest test of the suite."""
     target = jit.cpu if backend == "cpu" else jit.cuda()
-    steps = 3 if backend == "cuda" and SIMULATED else 8
+    steps = 2 if backend == "cuda" and SIMULATED else 8
     whole, split = _two_moving_boxes(target, 10 ** 6, steps), _two_moving_boxes(target, 64, steps)
     assert whole[5] == {None} and len(split[5]) == 1 and len(next(iter(split[5]))) == 20
     assert (whole[3] == split[3]).all() and (whole[3] == 1).sum() > 40 and (whole[3] == 0).sum() > 5

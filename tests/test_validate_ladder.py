@@ -242,8 +242,8 @@ def test_standing_wave_quick_ladder_error_falls(tmp_path):
 
 
 def test_settling_sphere_quick_ladder_error_falls(tmp_path):
-    """ten Cate E1 at 5 / 6 / 8 cells per diameter in the experiment's box to the nearest cell: measured -6.9,
-    -5.7, -3.1 % (BGK, float32, 2.0 s). With the box rounded up to whole blocks (120 / 100 / 105 mm wide) the
+    """ten Cate E1 at 5 / 6 / 8 cells per diameter in the experiment's box to the nearest cell: measured -6.91,
+    -5.62, -3.11 % (BGK, float32, 2.0 s, the velocity sampled every 5 steps). With the box rounded up to whole blocks (120 / 100 / 105 mm wide) the
     wall effect changed between rungs and the error did not fall (-5.0, -7.2, -4.2 % at 0.8 s)."""
     _, e = quick_ladder("settling_sphere", tmp_path)
     assert len(e) >= 3 and np.all(np.diff(e) < 0), e

@@ -161,6 +161,7 @@ def test_a_sphere_sinking_out_of_the_surface_band_takes_the_fine_blocks_with_it(
     z, fz, drift = _sink(ref, 40, 5)
     z_u, fz_u, drift_u = _sink(uni, 40, 10)
     assert ref.regrid_count == 1 and ref.cells_per_level == {0: 8 * 512, 1: 19 * 8 * 512}
+    assert ref.diagnostics()["leaf_cells"] == 8 * 512 + 19 * 8 * 512
     assert z[0] - z[-1] > 13.0
     assert np.abs(z - z_u).max() < 0.1
     assert np.abs(drift - drift_u).max() < 3e-4 and np.abs(drift).max() < 1e-3

@@ -158,7 +158,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
     def diagnostics(self) -> dict[str, float]:
         """Water volume (m^3, :meth:`RefinedFreeSurface.volume`) and its drift, liquid mass (kg) and kinetic energy
         (J) over every level's liquid leaves with their own cell volumes, the largest speed, the mean surface
-        height (m)."""
+        height (m); a regridding run adds the leaf cells."""
         u = self.units
         mass = ke = umax = 0.0
         for lv in self.lbm.levels:
@@ -172,11 +172,14 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             if speed2.size:
                 umax = max(umax, float(np.sqrt(speed2.max())))
         v = self.fs.volume()
-        return {"water_volume_m3": float(v * u.dx_m ** 3),
-                "water_volume_drift": float((v - self.volume0_cells) / self.volume0_cells),
-                "mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
-                "max_lattice_speed": umax,
-                "surface_mean_m": float(u.length_to_physical(np.nanmean(self.surface_cells())))}
+        out = {"water_volume_m3": float(v * u.dx_m ** 3),
+               "water_volume_drift": float((v - self.volume0_cells) / self.volume0_cells),
+               "mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
+               "max_lattice_speed": umax,
+               "surface_mean_m": float(u.length_to_physical(np.nanmean(self.surface_cells())))}
+        if self.regrid_every:
+            out["leaf_cells"] = float(self.cells)
+        return out
 
     def state(self) -> dict:
         """Every coarser level's populations, the finest level's free surface (populations, h, phi, flags), the

@@ -239,7 +239,7 @@ def test_a_box_held_at_half_submergence_feels_archimedes():
     assert np.mean(fz) == pytest.approx(archimedes, rel=0.03)
 
 
-@pytest.mark.parametrize("k", [0, 1, 2])
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
 def test_the_body_examples_of_scenes_md_parse(k):
     from iceresist.scene.docs import BODY_EXAMPLES
 
@@ -260,3 +260,20 @@ def test_the_refined_sphere_example_builds_with_the_sphere_on_level_1():
     assert model.cells == (250 - 27) * 512 + 27 * 8 * 512 and model.cells < 0.23 * fine_equivalent
     model.step(1)
     assert model.diagnostics()["sphere_Fx_N"] != 0.0
+
+
+def test_the_settling_sphere_example_regrids_as_the_validation_case():
+    """The regridding example of docs/SCENES.md is ten Cate's E1 on two levels as
+    iceresist.validate.cases.settling_sphere builds it (tests/test_settling.py, slow): the same octree, and its
+    first 10 steps (a regrid at the 10th) give the sphere the same velocity to the bit."""
+    from iceresist.models import RefinedBodiesModel, build_model
+    from iceresist.scene.docs import BODY_EXAMPLES
+    from iceresist.validate.cases.settling_sphere import scene as settling
+
+    example = build_model(parse_scene(BODY_EXAMPLES[3][1], "example.toml"))
+    case = build_model(settling("E1", 12, t_end_s=2.0, operator="bgk", levels=1))
+    assert isinstance(example, RefinedBodiesModel) and example.regrid_every == 10
+    assert np.array_equal(example.octree.coord, case.octree.coord)
+    example.step(10)
+    case.step(10)
+    assert example.dem.velocities[0, 2] == case.dem.velocities[0, 2] < 0

@@ -225,12 +225,26 @@ class RefinedFluidModel(Model):
         return True
 
     def _rebuild(self, octree, level_bytes: dict):
-        """The levels built on ``octree`` and every level's populations carried over from the present ones (onto
-        the same octree, a rebuild changes nothing: tests/test_regrid_bodies.py)."""
+        """The levels built on ``octree`` and every level's populations carried over from the present ones
+        (:func:`iceresist.grid.regrid.carry_over`; onto the same octree, a rebuild changes nothing:
+        tests/test_regrid_bodies.py), then :meth:`_fill`."""
+        from iceresist.grid.regrid import carry_over
+
         old_views = self.lbm.views
-        old = {lv: s.populations() for lv, s in self.lbm.solvers.items()}
+        old = {lv: self._populations(lv) for lv in self.lbm.levels}
+        finest = self._finest_extra()
         self._adopt(octree, level_bytes)
-        self._fill(old_views, old)
+        new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
+        carry_over(old_views, old, self.lbm.views, new)
+        self._fill(new, old_views, finest)
+
+    def _populations(self, lv: int) -> np.ndarray:
+        """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""
+        return self.lbm.solvers[lv].populations()
+
+    def _finest_extra(self):
+        """What a regrid carries besides the populations, taken before the levels are rebuilt (none here)."""
+        return None
 
     def _is_current(self, level, coord) -> bool:
         """Whether the leaves (``level``, ``coord``) are those of the current octree."""
@@ -245,13 +259,11 @@ class RefinedFluidModel(Model):
         self.lbm.iteration = iteration
         self._count_cells()
 
-    def _fill(self, old_views, old: dict):
-        """The new levels' populations (leaves and ghosts) from ``old`` (per level, over ``old_views``' forests)."""
-        from iceresist.grid.regrid import carry_over
+    def _fill(self, new: dict, old_views, finest):
+        """The new levels' populations (leaves and ghosts) set from ``new`` (per level, carried over from the levels
+        of ``old_views``; ``finest``: :meth:`_finest_extra`, unused here)."""
         from iceresist.models.fluid import _set_populations
 
-        new = {lv: np.zeros((s.forest.nblocks, Q, CELLS)) for lv, s in self.lbm.solvers.items()}
-        carry_over(old_views, old, self.lbm.views, new)
         for lv, s in self.lbm.solvers.items():
             _set_populations(s, new[lv].astype(s.real))
             s.iteration = self.iteration * 2 ** lv

@@ -82,19 +82,14 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
                    width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
                    precision=self.precision, target=self.target, faces=forest_faces(scene, u))
 
-    def _rebuild(self, octree, level_bytes: dict):
-        """The levels built on ``octree``, every level's populations carried over
-        (:func:`iceresist.grid.regrid.carry_over`) and the finest level's phase field and flags with them
-        (:meth:`RefinedFreeSurface.carry_from`)."""
-        from iceresist.grid.regrid import carry_over
+    def _finest_extra(self) -> dict:
+        """The finest level's free-surface state before a regrid (:meth:`FreeSurfaceFluid.state`)."""
+        return self.fs.surface.state()
 
-        old_views = self.lbm.views
-        old_f = {lv: self._populations(lv) for lv in self.lbm.levels}
-        surface = self.fs.surface.state()
-        self._adopt(octree, level_bytes)
-        new_f = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
-        carry_over(old_views, old_f, self.lbm.views, new_f)
-        self.fs.carry_from(new_f, surface, old_views[self.finest])
+    def _fill(self, new: dict, old_views, finest: dict):
+        """The carried populations and, with them, the finest level's phase field and flags
+        (:meth:`RefinedFreeSurface.carry_from`)."""
+        self.fs.carry_from(new, finest, old_views[self.finest])
 
     def _populations(self, lv: int) -> np.ndarray:
         """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""

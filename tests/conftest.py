@@ -17,14 +17,21 @@ from iceresist.backends import jit  # noqa: E402
 SIMULATED = os.environ["NUMBA_ENABLE_CUDASIM"] == "1"
 
 
+@pytest.fixture
+def cuda_target():
+    """The CUDA target: a GPU, or the simulator (``make test``); a test that needs it is skipped where neither is
+    there (``NUMBA_ENABLE_CUDASIM=0`` on a machine without a GPU)."""
+    if not jit.cuda_available():
+        pytest.skip("no CUDA GPU and the simulator is off")
+    return jit.cuda()
+
+
 @pytest.fixture(params=["cpu", "cuda"])
 def target(request):
     """Every kernel test runs on the CPU and on CUDA (the simulator where no GPU is lent)."""
     if request.param == "cpu":
         return jit.cpu
-    if not jit.cuda_available():
-        pytest.skip("no CUDA GPU and the simulator is off")
-    return jit.cuda()
+    return request.getfixturevalue("cuda_target")
 
 
 @pytest.fixture(params=["float32", "float64"])

@@ -306,16 +306,12 @@ motion = "fixed"
     _one_line_error(rc, err, "refinement.body_band_m: a regridding scene with bodies needs the band")
 
 
-def test_a_regrid_on_cuda_matches_the_cpu():
+def test_a_regrid_on_cuda_matches_the_cpu(cuda_target):
     """The vortex in a 16^3 box (8 level-0 blocks, its core in two of them), regridding every step, with backend = "cuda" (the CUDA
     simulator in CI: the populations cross to the host and back at a regrid) against the CPU: after the regrid that
     refines the vortex's blocks from the level-0 start and a step (and the regrid after it), the same octree and every level's populations to 1e-13
     (float64; the CPU collides blocks at once, CUDA cell by cell). Planted: the carried populations not put on
     the device fails."""
-    from iceresist.backends import jit
-
-    if not jit.cuda_available():
-        pytest.skip("no CUDA GPU and the simulator is off")
     text = _vortex_text(cells=(16, 16, 16), tau=0.6, steps=1,
                         refinement="levels = 1\nvorticity_1_s = 0.006\nregrid_every_steps = 1\n")
     runs = []

@@ -354,50 +354,28 @@ levels = 1
 body_band_m = 0.01
 """
 
-SETTLING_LEVELS_EXAMPLE = """# ten Cate's sphere E1 (15 mm nylon, 1120 kg/m^3) settling in silicone oil in a 100 x 100 x 160 mm box, on two levels
-# that follow it: 2.5 mm cells (6 per diameter) on level 0, 1.25 mm (12 per diameter) within 5 mm of the sphere's
-# box. Every 10 steps the blocks are drawn again around the sphere where it is then and the flow carried over
-# (refinement.regrid_every_steps; the band must outrun the sphere between regrids). It settles at 0.0365 m/s
-# (-3.97 % against the measured 0.038) with 15.5 % of the uniform 1.25 mm grid's cell updates.
-[scene]
-name = "settling_sphere_levels"
+def _settling_levels_example() -> str:
+    """The settling sphere's scene file (iceresist/validate/scenes/settling_sphere.toml: E1 at 6 cells per diameter,
+    the box in whole blocks) on two levels that follow the sphere."""
+    from iceresist.validate.scenes import scene_path
 
-[domain]
-size_m = [0.1, 0.1, 0.16]
-dx_m = 0.0025
-faces = { x_min = "wall", x_max = "wall", y_min = "wall", y_max = "wall", z_min = "wall", z_max = "wall" }
+    text = scene_path("settling_sphere").read_text(encoding="utf-8")
+    text = text[text.index("[scene]"):]
+    for old, new in (('name = "settling_sphere"', 'name = "settling_sphere_levels"'),
+                     ("6 cells per diameter (quick ladder, middle rung)", "12 per diameter on levels that follow it"),
+                     ("pad_to_blocks = true\n", "")):
+        if old not in text:
+            raise RuntimeError(f"settling_sphere.toml no longer holds {old!r}: update the SCENES.md example")
+        text = text.replace(old, new)
+    return ("# ten Cate's sphere E1 of iceresist/validate/scenes/settling_sphere.toml on two levels that follow it: 2.5 mm\n"
+            "# cells (6 per diameter) on level 0, 1.25 mm (12 per diameter) within 5 mm of the sphere's box. Every 10\n"
+            "# steps the blocks are drawn again around the sphere where it is then and the flow carried over\n"
+            "# (refinement.regrid_every_steps; the band must outrun the sphere between regrids). It settles at\n"
+            "# 0.0365 m/s (-3.97 % against the measured 0.038) with 15.5 % of the uniform 1.25 mm grid's cell updates.\n"
+            + text.rstrip() + "\n\n[refinement]\nlevels = 1\nbody_band_m = 0.005\nregrid_every_steps = 10\n")
 
-[fluid]
-nu_m2_s = 0.0003845360824742268   # 0.373 Pa s / 970 kg/m^3
-rho_kg_m3 = 970.0
-gravity_m_s2 = [0.0, 0.0, -9.81]
-operator = "bgk"
 
-[numerics]
-dt_s = 0.0026315789473684214      # 0.04 dx / 0.038 m/s on level 0
-u_max_m_s = 0.038
-precision = "float32"
-
-[run]
-end_time_s = 2.0
-
-[output]
-fields = ["u", "pressure", "flags"]
-timeseries_every_steps = 5
-
-[[bodies]]
-name = "sphere"
-shape = "sphere"
-radius_m = 0.0075
-position_m = [0.05, 0.05, 0.1275]
-density_kg_m3 = 1120.0
-motion = "free"
-
-[refinement]
-levels = 1
-body_band_m = 0.005
-regrid_every_steps = 10
-"""
+SETTLING_LEVELS_EXAMPLE = _settling_levels_example()
 
 BODY_EXAMPLES = [("A fixed sphere in a channel (bodies, SI units)", SPHERE_EXAMPLE), ("A floating box (bodies with a free surface)", """# A 40 mm ice block (900 kg/m^3) released in still water 60 mm deep, in a closed tank: it heaves and settles
 # at 90 % of its height under the level (floe_z_m, floe_Fz_N, water_level_m of the time series).

@@ -161,7 +161,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     partial file renamed at the end, continuing a killed run of it from its checkpoint. ``checkpoint_schedule``:
     when to checkpoint (default every ``CHECKPOINT_WALL_S`` of wall time)."""
     from iceresist.driver import Outputs, Stop, run_model
-    from iceresist.models import Tier1Model, Tier2Model
+    from iceresist.models import RefinedTier2Model, Tier1Model, Tier2Model
     from iceresist.simulation import IterationInterval, WallTimeInterval
 
     if tier not in (1, 2):
@@ -173,7 +173,10 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     chk = checkpoint_path(out_dir, case)
     final.parent.mkdir(parents=True, exist_ok=True)
     earlier = _resumable(partial, chk, scene.source_text)
-    model = (Tier1Model if tier == 1 else Tier2Model)(scene, backend=backend)
+    if tier == 1:
+        model = Tier1Model(scene, backend=backend)
+    else:
+        model = (Tier2Model if scene.refinement is None else RefinedTier2Model)(scene, backend=backend)
     c = get_case(case)
 
     def on_new(rf, model):

@@ -12,6 +12,7 @@ model                       what it holds                                       
 :class:`RefinedFreeSurfaceModel` free surface on the finest of refined levels       ``[refinement]`` + ``[free_surface]``
 :class:`RefinedBodiesModel`  bodies and their coupling on the finest level            ``[refinement]`` + ``[[bodies]]``
 :class:`RefinedSurfaceBodiesModel` bodies in water with a free surface, on the finest level ``[refinement]`` + ``[free_surface]`` + ``[[bodies]]``
+:class:`RefinedTier2Model`  tier 2 with the ship, ice and surface on the finest level    ``[ship]`` tier 2, ``[ice]``, ``[refinement]``
 ==========================  ======================================================  =============================
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
@@ -28,11 +29,12 @@ from iceresist.models.refined import RefinedFluidModel
 from iceresist.models.refined_bodies import RefinedBodiesModel
 from iceresist.models.refined_surface import RefinedFreeSurfaceModel
 from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
+from iceresist.models.refined_tier2 import RefinedTier2Model
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
 __all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "RefinedFreeSurfaceModel",
-           "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
+           "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "RefinedTier2Model", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
 
 
 def build_model(scene, *, backend: str | None = None, precision: str | None = None, comm=None) -> Model:
@@ -42,6 +44,9 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     (:mod:`iceresist.parallel`: every scene but a refined one and a tier-1 ship)."""
     if comm is not None and comm.size > 1:
         extra = scene.optional_sections()
+        if "refinement" in extra:
+            raise InputError(f"mpirun -n {comm.size}: a scene with [refinement] runs on one process so far; run it "
+                             f"without mpirun")
         if scene.ship is not None and scene.ice is not None and scene.ship.tier == 2 and not scene.bodies:
             return Tier2Model(scene, backend=backend, precision=precision, comm=comm)
         if extra == ["free_surface"]:
@@ -57,6 +62,11 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
         if scene.bodies:
             raise InputError(f"{scene.source_name}: bodies: a ship scene takes no extra [[bodies]] yet; remove "
                              f"the [[bodies]] tables (or the [ship] and [ice] sections)")
+        if scene.refinement is not None:
+            if scene.ship.tier != 2:
+                raise InputError(f"{scene.source_name}: refinement: tier 1 has no lattice to refine; remove "
+                                 f"[refinement] or set ship.tier = 2")
+            return RefinedTier2Model(scene, backend=backend, precision=precision)
         model = Tier2Model if scene.ship.tier == 2 else Tier1Model
         return model(scene, backend=backend, precision=precision)
     extra = scene.optional_sections()

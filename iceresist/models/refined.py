@@ -56,10 +56,19 @@ def body_half_extents_m(scene: Scene) -> np.ndarray:
     return np.array(out, dtype=float).reshape(-1, 3)
 
 
-def static_regions(scene: Scene, body_positions_m: np.ndarray | None = None) -> list:
+def scene_body_boxes_m(scene: Scene) -> np.ndarray:
+    """The box (lo, hi; (n, 2, 3) m) each of the scene's ``[[bodies]]`` takes at the start: its position plus and
+    minus :func:`body_half_extents_m`."""
+    centres = np.array([b.position_m for b in scene.bodies], dtype=float).reshape(-1, 3)
+    h = body_half_extents_m(scene)
+    return np.stack([centres - h, centres + h], axis=1)
+
+
+def static_regions(scene: Scene, body_boxes_m: np.ndarray | None = None) -> list:
     """The regions of a scene's ``[refinement]`` as (lo, hi, level) in level-0 cell units: the boxes, the band
-    around the still-water level, the bands along the solid faces, and the band around each body's box
-    (:func:`body_half_extents_m`) at ``body_positions_m`` ((n, 3) m; default the scene's start)."""
+    around the still-water level, the bands along the solid faces, and ``refinement.body_band_m`` around each
+    body's box in ``body_boxes_m`` ((n, 2, 3): lo and hi, m; default the scene's ``[[bodies]]`` at the start,
+    :func:`scene_body_boxes_m`)."""
     ref = scene.refinement
     dx = scene.domain.dx_m or 1.0
     shape = scene.domain.shape_cells()
@@ -68,13 +77,12 @@ def static_regions(scene: Scene, body_positions_m: np.ndarray | None = None) -> 
         depth, band = scene.free_surface.water_depth_m / dx, ref.surface_band_m / dx
         boxes.append((np.array([-np.inf, -np.inf, depth - band]), np.array([np.inf, np.inf, depth + band]),
                       ref.levels))
-    if ref.body_band_m is not None and scene.bodies:
-        if body_positions_m is None:
-            body_positions_m = [b.position_m for b in scene.bodies]
-        centres = np.asarray(body_positions_m, dtype=float).reshape(-1, 3) / dx
-        halves = body_half_extents_m(scene) / dx + ref.body_band_m / dx
-        for c, h in zip(centres, halves):
-            boxes.append((c - h, c + h, ref.levels))
+    if body_boxes_m is None and scene.bodies:
+        body_boxes_m = scene_body_boxes_m(scene)
+    if ref.body_band_m is not None and body_boxes_m is not None:
+        band = ref.body_band_m / dx
+        for lo, hi in np.asarray(body_boxes_m, dtype=float).reshape(-1, 2, 3) / dx:
+            boxes.append((lo - band, hi + band, ref.levels))
     if ref.wall_band_m is not None:
         band = ref.wall_band_m / dx
         for a, axis in enumerate("xyz"):
@@ -87,9 +95,9 @@ def static_regions(scene: Scene, body_positions_m: np.ndarray | None = None) -> 
     return boxes
 
 
-def build_octree(scene: Scene, hot: np.ndarray | None = None, body_positions_m: np.ndarray | None = None):
+def build_octree(scene: Scene, hot: np.ndarray | None = None, body_boxes_m: np.ndarray | None = None):
     """The octree of a scene's ``[refinement]``: level-0 blocks of ``domain.dx_m``; a block takes the highest level
-    of the regions its box overlaps (:func:`static_regions`, the bodies at ``body_positions_m``) and, where ``hot``
+    of the regions its box overlaps (:func:`static_regions`, the bodies in ``body_boxes_m``) and, where ``hot``
     (a bool array on the level-0 cells: the cells a moving criterion marks, e.g. vorticity) holds a True cell in its
     box, the finest level; then 2:1 balance."""
     from iceresist.grid.octree import BlockOctree
@@ -99,7 +107,7 @@ def build_octree(scene: Scene, hot: np.ndarray | None = None, body_positions_m: 
     shape = scene.domain.shape_cells()
     periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
     t = BlockOctree(tuple(n // 8 for n in shape), ref.levels, periodic=periodic)
-    boxes = static_regions(scene, body_positions_m)
+    boxes = static_regions(scene, body_boxes_m)
 
     def wanted(lo, hi):
         level = np.zeros(len(lo), dtype=np.int64)
@@ -121,7 +129,6 @@ class RefinedFluidModel(Model):
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
         from iceresist.grid.levels import level_views
-        from iceresist.limits import check_fluid
 
         self.scene = scene
         self.units = u = scene.units()
@@ -130,7 +137,7 @@ class RefinedFluidModel(Model):
                              "multiples of 8 and leave pad_to_blocks out")
         self.shape_cells = scene.domain.shape_cells()
         check_block_shape(self.shape_cells)
-        check_fluid(scene, u)
+        self._check_limits(scene, u)
         self.backend = backend or scene.numerics.backend
         self.target = resolve_target(self.backend)
         if self.target.is_cuda and scene.refinement.scheme != "conservative":
@@ -139,7 +146,7 @@ class RefinedFluidModel(Model):
         self.precision = precision or scene.numerics.precision
         self.regrid_every = scene.refinement.regrid_every_steps
         self.regrid_count = 0
-        self.octree = build_octree(scene)
+        self.octree = build_octree(scene, body_boxes_m=self.body_boxes_m())
         views = level_views(self.octree, forest_faces(scene, u))
         self.level_bytes = self._level_bytes(views)
         for lv, nbytes in self.level_bytes.items():
@@ -153,6 +160,12 @@ class RefinedFluidModel(Model):
         self._build()
         self._count_cells()
         self.dt_s = u.dt_s
+
+    def _check_limits(self, scene: Scene, u):
+        """The fluid's stability limits (:func:`iceresist.limits.check_fluid`)."""
+        from iceresist.limits import check_fluid
+
+        check_fluid(scene, u)
 
     def _check_memory(self, level_bytes: dict):
         total = sum(level_bytes.values())
@@ -197,18 +210,24 @@ class RefinedFluidModel(Model):
         threshold = self.scene.refinement.vorticity_1_s * self.units.dt_s      # per level-0 step
         return vorticity_magnitude(np.nan_to_num(u_lat)) > threshold
 
-    def body_positions_m(self) -> np.ndarray | None:
-        """Where the bodies are now ((n, 3) m), for the band that follows them; None: no bodies."""
+    def body_boxes_m(self) -> np.ndarray | None:
+        """The box each body takes now ((n, 2, 3): lo and hi, m), for the band that follows them; None: the
+        scene's ``[[bodies]]`` where they start (:func:`static_regions`)."""
         return None
+
+    @property
+    def level0_steps(self) -> int:
+        """Level-0 steps taken (a model step is one; the ship's is a record of several)."""
+        return int(self.lbm.iteration)
 
     def regrid(self) -> bool:
         """Build the octree again from the criteria on the current flow and bodies (:func:`build_octree`,
-        :meth:`hot_cells`, :meth:`body_positions_m`); where it changed, carry every level's populations to the new
+        :meth:`hot_cells`, :meth:`body_boxes_m`); where it changed, carry every level's populations to the new
         blocks (:func:`iceresist.grid.regrid.carry_over`) and step on from there. Returns whether the blocks
         changed."""
         from iceresist.grid.levels import level_views
 
-        octree = build_octree(self.scene, self.hot_cells(), self.body_positions_m())
+        octree = build_octree(self.scene, self.hot_cells(), self.body_boxes_m())
         if self._is_current(octree.level, octree.coord):
             return False
         views = level_views(octree, forest_faces(self.scene, self.units))
@@ -216,11 +235,11 @@ class RefinedFluidModel(Model):
         try:
             self._check_memory(level_bytes)
         except InputError as err:
-            log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.iteration, err)
+            log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.level0_steps, err)
             return False
         self._rebuild(octree, level_bytes)
         self.regrid_count += 1
-        log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.iteration,
+        log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.level0_steps,
                  [int(n) for n in octree.blocks_per_level()])
         return True
 
@@ -252,7 +271,7 @@ class RefinedFluidModel(Model):
 
     def _adopt(self, octree, level_bytes: dict):
         """New levels' solvers on ``octree`` (their populations to be filled), the iteration kept."""
-        iteration = self.iteration
+        iteration = self.level0_steps
         self.octree = octree
         self.level_bytes = level_bytes
         self._build(initialize=False)
@@ -266,7 +285,7 @@ class RefinedFluidModel(Model):
 
         for lv, s in self.lbm.solvers.items():
             _set_populations(s, new[lv].astype(s.real))
-            s.iteration = self.iteration * 2 ** lv
+            s.iteration = self.level0_steps * 2 ** lv
 
     # -- protocol -------------------------------------------------------------------------------------
     @property
@@ -281,10 +300,10 @@ class RefinedFluidModel(Model):
             self.lbm.step(n)
             return
         while n > 0:
-            k = min(n, self.regrid_every - self.iteration % self.regrid_every)
+            k = min(n, self.regrid_every - self.level0_steps % self.regrid_every)
             self.lbm.step(k)
             n -= k
-            if self.iteration % self.regrid_every == 0:
+            if self.level0_steps % self.regrid_every == 0:
                 self.regrid()
 
     @property
@@ -382,7 +401,7 @@ class RefinedFluidModel(Model):
         """Every level's populations in storage precision (bit for bit), the iteration and the block octree
         (the level and coordinates of every leaf)."""
         return {"f": {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()},
-                "iteration": np.int64(self.iteration), "precision": self.precision,
+                "iteration": np.int64(self.level0_steps), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
                 "regrid_count": np.int64(self.regrid_count)}
 

@@ -50,7 +50,9 @@ class FinestLevelBodies:
         check_bodies(scene, self.box_m, self.meshes)
         self.dem_backend = "cuda" if self.target.is_cuda else "cpu"
         self.names = [b.name for b in scene.bodies]
-        self._reach_m = body_half_extents_m(scene)
+        h = body_half_extents_m(scene)
+        #: the box the finest level must hold about each body's centre of mass: (n, 2, 3) offsets lo, hi (m)
+        self._reach_m = np.stack([-h, h], axis=1)
 
     def _make_bodies(self, gravity_m_s2):
         """The DEM (gravity ``gravity_m_s2``) with its walls and the scene's bodies at the finest level's scales
@@ -72,16 +74,25 @@ class FinestLevelBodies:
         """The bodies' centres of mass now (n, 3), m."""
         return self.dem.positions[:len(self.names)]
 
+    def body_boxes_m(self, positions_m: np.ndarray | None = None) -> np.ndarray | None:
+        """The box each body takes (n, 2, 3: lo, hi, m) with its centre of mass at ``positions_m`` (default where
+        it is now); None before the DEM is built (the octree of the scene's start)."""
+        if positions_m is None:
+            if getattr(self, "dem", None) is None:
+                return None
+            positions_m = self.body_positions_m()
+        return np.asarray(positions_m, dtype=float)[:, None, :] + self._reach_m
+
     def bodies_outside_finest(self, positions_m: np.ndarray, margin_cells: float) -> list[int]:
-        """The bodies whose box (:func:`~iceresist.models.refined.body_half_extents_m` about ``positions_m``),
-        ``margin_cells`` finest cells wider, is not wholly on the finest level's leaves."""
+        """The bodies whose box (:meth:`body_boxes_m` at ``positions_m``), ``margin_cells`` finest cells wider, is
+        not wholly on the finest level's leaves."""
         view = self.lbm.views[self.finest]
         dx = self.units.dx_m / 2 ** self.finest
         bm = view.block_map
         out = []
-        for i, (c, h) in enumerate(zip(np.asarray(positions_m, dtype=float) / dx, self._reach_m / dx + margin_cells)):
-            lo = np.maximum(np.floor(c - h).astype(np.int64) >> 3, 0)
-            hi = np.minimum(np.floor(c + h).astype(np.int64) >> 3, np.array(bm.shape) - 1)
+        for i, (blo, bhi) in enumerate(self.body_boxes_m(positions_m) / dx):
+            lo = np.maximum(np.floor(blo - margin_cells).astype(np.int64) >> 3, 0)
+            hi = np.minimum(np.floor(bhi + margin_cells).astype(np.int64) >> 3, np.array(bm.shape) - 1)
             blocks = bm[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1]
             if ((blocks < 0) | (blocks >= view.nleaves)).any():
                 out.append(i)
@@ -107,7 +118,7 @@ class FinestLevelBodies:
         if gone:
             i = gone[0]
             raise StabilityError(f"refinement.body_band_m: body {self.names[i]!r} left the finest level between "
-                                 f"two regrids (step {self.iteration}); widen refinement.body_band_m or regrid more "
+                                 f"two regrids (step {self.level0_steps}); widen refinement.body_band_m or regrid more "
                                  f"often (refinement.regrid_every_steps = {max(1, self.regrid_every // 2)})")
         changed = super().regrid()
         if changed and self.bodies_outside_finest(pos, margin_cells=2.0):

@@ -180,7 +180,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """Every coarser level's populations, the finest level's free surface (populations, h, phi, flags), the
         iteration, the initial volume and the block octree: a bit-for-bit restart."""
         coarse = {str(lv): self.lbm.solvers[lv].fluid.rows()[1] for lv in self.lbm.levels[:-1]}
-        return {"f": coarse, "surface": self.fs.surface.state(), "iteration": np.int64(self.iteration),
+        return {"f": coarse, "surface": self.fs.surface.state(), "iteration": np.int64(self.level0_steps),
                 "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
                 "regrid_count": np.int64(self.regrid_count)}

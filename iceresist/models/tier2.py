@@ -57,21 +57,18 @@ def start_wave_of_scene(scene, geometry, layout) -> tuple:
     return wave, window_s
 
 
-class Tier2Model(ShipModel):
-    """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
-
-    ``backend``, ``precision`` override the scene's ``[numerics]``; ``tau_floor`` raises tau to at least this
-    value (module docstring); ``comm``: the MPI communicator of a run on several ranks (the tank split over them,
-    :class:`~iceresist.coupling.floating.FloatingBodies`; records, fields and checkpoints the whole tank's)."""
+class Tier2Ship(ShipModel):
+    """What both tier-2 models share (the uniform grid's :class:`Tier2Model` and the refined levels'
+    :class:`~iceresist.models.refined_tier2.RefinedTier2Model`): the scene's checks, the ship, ice and tank, the
+    bodies the coupling moves, and the tank's water motion read from the surface heights."""
 
     components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice")
     tier = 2
 
-    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
-                 tau_floor: float | None = None, comm=None):
-        from iceresist.coupling.floating import FloatingBodies
-        from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
-
+    def _set_up_tier2(self, scene) -> np.ndarray:
+        """Checks (physical units, gravity, whole blocks), the ship and ice in the scene's tank
+        (:meth:`ShipModel._set_up_ship`), the tank's blockage and the start wave, each with its warning; the target
+        of ``self.backend`` (or ``[numerics]``'s) and ``self.precision`` (or its). Returns gravity (m/s^2)."""
         self._check_sections(scene)
         if scene.is_lattice:
             raise InputError(f"{scene.source_name}: a ship scene is written in physical units ([scene] units)")
@@ -81,11 +78,8 @@ class Tier2Model(ShipModel):
                              f"(got {list(gvec)})")
         self.shape_cells = tuple(int(n) for n in scene.shape_cells())
         check_block_shape(self.shape_cells)
-        lu = scene.units()
-        dx = lu.dx_m
-        self._set_up_ship(scene, tuple(n * dx for n in self.shape_cells))
-        sh, ice, con, g = scene.ship, scene.ice, self.contact, self.geometry
-        pieces = g.fluid_pieces() if isinstance(g, MeshHull) else None
+        self._set_up_ship(scene, tuple(n * scene.units().dx_m for n in self.shape_cells))
+        sh, g = scene.ship, self.geometry
         self.tank = tank_flow(g.midship_area_m2, self.domain_m[1], self.level_m, float(sh.speed_m_s))
         if not self.tank.subcritical:
             log.warning("tier 2: %.3g m/s is above the limiting speed of this tank (depth Froude number %.3g, "
@@ -96,9 +90,102 @@ class Tier2Model(ShipModel):
         warning = self.start_wave.warning(*self.window_s)
         if warning:
             log.warning("tier 2: %s", warning)
-        self.backend = backend or scene.numerics.backend
-        self.precision = precision or scene.numerics.precision
+        self.backend = self.backend or scene.numerics.backend
+        self.precision = self.precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
+        return gvec
+
+    def coupled_bodies(self) -> list[tuple]:
+        """The bodies the coupling moves, the hull first: (geometry for the fluid, DEM shape, keywords of
+        ``add_body``) each. The hull is kinematic at the ship's speed; its geometry is the convex hull of its
+        vertices or, for a mesh hull that is not convex, a union of convex slabs. Every ice piece is a box."""
+        from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
+
+        g = self.geometry
+        pieces = g.fluid_pieces() if isinstance(g, MeshHull) else None
+        if pieces is not None and len(pieces[0]) > 1:
+            log.info("tier 2: the hull %r is not convex: %d convex slabs for the fluid, %.2f %% more volume than "
+                     "the mesh", g.name, len(pieces[0]), 100 * pieces[1])
+            hull_geometry = ConvexUnion.of_shape(pieces[0], g.mesh.volume_m3, self.hull)
+        else:
+            hull_geometry = ConvexPolyhedron.of_shape(g.vertices(), self.hull)
+        out = [(hull_geometry, self.hull,
+                {"position_m": (self.start_x_m, self.centre_y_m, self.level_m - g.draught_m),
+                 "velocity_m_s": (self.speed_m_s, 0.0, 0.0), "kinematic": True, "material": "ship"})]
+        floes = self.floes_record()
+        for shape, c, q, size, thick in zip(self.floe_shapes, self.layout.centres_m, self.floe_orientations,
+                                            floes["floe_sizes_m"], floes["floe_thickness_m"]):
+            out.append((Box((size, size, thick)), shape, {"position_m": c, "orientation": q, "material": "ice"}))
+        return out
+
+    def record_columns(self, water_volume_m3: float) -> dict:
+        """A record's columns (both tier-2 models): the mean ice (contact) force on the hull over the record (N),
+        the last one's x, the mean fluid force on it (N), stem position (m), contacts, ice kinetic energy (J), the
+        water volume (m^3, outside the bodies) and the tank's water motion (:meth:`tank_motion`)."""
+        f, w = self._force_mean, self._fluid_mean
+        return {"Fx_N": f[0], "Fy_N": f[1], "Fz_N": f[2], "Fx_last_N": self._force_last[0],
+                "Fx_fluid_N": w[0], "Fy_fluid_N": w[1], "Fz_fluid_N": w[2], "x_bow_m": self.x_bow_m,
+                "contacts": self.dem.contact_count(), "ice_kinetic_energy_J": self.dem.kinetic_energy(),
+                "water_volume_m3": water_volume_m3, **self.tank_motion()}
+
+    #: Length (m) of the bands along the tank over which :meth:`tank_motion` reads the water level.
+    level_band_m = 0.32
+
+    def _surface_height_m(self) -> np.ndarray | None:
+        """Height (m from the bottom) of the free surface over each level-0 column (nx, ny), a floe counted as water
+        (:meth:`FreeSurfaceFluid.surface_height`); None on an MPI rank other than 0."""
+        raise NotImplementedError
+
+    def tank_motion(self) -> dict:
+        """How the tank's water moves (docs/SHIP.md, "The start wave"): the median height of the surface above
+        the still level (m) in the side strips of the tank (outside the hull's beam, so the bow's overhang
+        is not read as water) over the band of :attr:`level_band_m` at the fore wall (``level_fore_wall_m``)
+        and the band from 0.05 m ahead of the stem (``level_ahead_m``), a floe counted as water
+        (:meth:`_surface_height_m`); and the mean x-velocity (m/s) of the cubes whose centres lie ahead of the
+        stem (``ice_drift_ahead_m_s``; positive: moving away from the bow). NaN where a band lies outside the tank
+        or no cube is ahead."""
+        h = self._surface_height_m()
+        ice = self.ice_state()
+        ahead = ice["positions_m"][:, 0] > self.x_bow_m
+        drift = float(ice["velocities_m_s"][ahead, 0].mean()) if ahead.any() else math.nan
+        levels = None if h is None else self._level_bands(h - self.level_m)
+        if getattr(self, "decomp", None) is not None:
+            levels = self.decomp.bcast(levels)
+        return {**levels, "ice_drift_ahead_m_s": drift}
+
+    def _level_bands(self, h) -> dict:
+        """The bands of :meth:`tank_motion` on the surface heights ``h`` (nx, ny; m above the still level)."""
+        dx = self.units.dx_m
+        nx, ny = self.shape_cells[:2]
+        x = (np.arange(nx) + 0.5) * dx
+        y = (np.arange(ny) + 0.5) * dx
+        side = np.abs(y - self.centre_y_m) > 0.5 * self.geometry.beam_m
+
+        def band(x0):
+            vals = h[np.ix_((x >= x0) & (x < x0 + self.level_band_m), side)]
+            vals = vals[np.isfinite(vals)]  # a column with no surface (all water or all gas) is left out
+            return float(np.median(vals)) if vals.size else math.nan
+
+        return {"level_fore_wall_m": band(self.domain_m[0] - self.level_band_m),
+                "level_ahead_m": band(self.x_bow_m + 0.05)}
+
+
+class Tier2Model(Tier2Ship):
+    """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
+
+    ``backend``, ``precision`` override the scene's ``[numerics]``; ``tau_floor`` raises tau to at least this
+    value (module docstring); ``comm``: the MPI communicator of a run on several ranks (the tank split over them,
+    :class:`~iceresist.coupling.floating.FloatingBodies`; records, fields and checkpoints the whole tank's)."""
+
+    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
+                 tau_floor: float | None = None, comm=None):
+        from iceresist.coupling.floating import FloatingBodies
+
+        self.backend, self.precision = backend, precision
+        gvec = self._set_up_tier2(scene)
+        lu = scene.units()
+        dx = lu.dx_m
+        con = self.contact
         dem_backend = "cuda" if self.target.is_cuda else "cpu"
 
         # lattice units: dt from the Mach rule, gravity from dt, tau from the viscosity (or the floor)
@@ -117,20 +204,9 @@ class Tier2Model(ShipModel):
         self.decomp = self.fb.decomp
         self.comm = None if self.decomp is None else comm
         self.dem = dem
-        if pieces is not None and len(pieces[0]) > 1:
-            log.info("tier 2: the hull %r is not convex: %d convex slabs for the fluid, %.2f %% more volume than "
-                     "the mesh", g.name, len(pieces[0]), 100 * pieces[1])
-            hull_geometry = ConvexUnion.of_shape(pieces[0], g.mesh.volume_m3, self.hull)
-        else:
-            hull_geometry = ConvexPolyhedron.of_shape(g.vertices(), self.hull)
-        self.hull_body = self.fb.add_body(
-            hull_geometry, self.hull,
-            position_m=(self.start_x_m, self.centre_y_m, self.level_m - g.draught_m),
-            velocity_m_s=(self.speed_m_s, 0.0, 0.0), kinematic=True, material="ship")
-        floes = self.floes_record()
-        for shape, c, q, size, thick in zip(self.floe_shapes, self.layout.centres_m, self.floe_orientations,
-                                            floes["floe_sizes_m"], floes["floe_thickness_m"]):
-            self.fb.add_body(Box((size, size, thick)), shape, position_m=c, orientation=q, material="ice")
+        self.hull_body = 0                      # the hull first (:meth:`coupled_bodies`)
+        for geometry, shape, kw in self.coupled_bodies():
+            self.fb.add_body(geometry, shape, **kw)
         self.fb.start()
         self.lbm_dt_s = self.fb.dt_s
         self.lbm_steps_per_record = max(1, int(math.ceil(con.sample_interval_s / self.lbm_dt_s - 1e-9)))
@@ -244,49 +320,11 @@ class Tier2Model(ShipModel):
         """One record: mean ice (contact) force on the hull (N), the mean fluid force on it (N), stem position (m),
         contacts, ice kinetic energy (J), water volume (m^3, outside the bodies), and the tank's water motion
         (:meth:`tank_motion`)."""
-        f, w = self._force_mean, self._fluid_mean
-        return {"Fx_N": f[0], "Fy_N": f[1], "Fz_N": f[2], "Fx_last_N": self._force_last[0],
-                "Fx_fluid_N": w[0], "Fy_fluid_N": w[1], "Fz_fluid_N": w[2], "x_bow_m": self.x_bow_m,
-                "contacts": self.dem.contact_count(), "ice_kinetic_energy_J": self.dem.kinetic_energy(),
-                "water_volume_m3": self.fb.water_volume_m3(), **self.tank_motion()}
+        return self.record_columns(self.fb.water_volume_m3())
 
-    #: Length (m) of the bands along the tank over which :meth:`tank_motion` reads the water level.
-    level_band_m = 0.32
-
-    def tank_motion(self) -> dict:
-        """How the tank's water moves (docs/SHIP.md, "The start wave"): the median height of the surface above
-        the still level (m) in the side strips of the tank (outside the hull's beam, so the bow's overhang
-        is not read as water) over the band of :attr:`level_band_m` at the fore wall (``level_fore_wall_m``)
-        and the band from 0.05 m ahead of the stem (``level_ahead_m``), a floe counted as water
-        (:meth:`FreeSurfaceFluid.surface_height`); and the mean x-velocity (m/s) of the cubes whose centres
-        lie ahead of the stem (``ice_drift_ahead_m_s``; positive: moving away from the bow). NaN where a band
-        lies outside the tank or no cube is ahead."""
+    def _surface_height_m(self) -> np.ndarray | None:
         h = self.fb.fluid.surface_height(covered_as_water=True)
-        ice = self.ice_state()
-        ahead = ice["positions_m"][:, 0] > self.x_bow_m
-        drift = float(ice["velocities_m_s"][ahead, 0].mean()) if ahead.any() else math.nan
-        levels = None
-        if h is not None:
-            levels = self._levels(h * self.units.dx_m - self.level_m)
-        if self.decomp is not None:
-            levels = self.decomp.bcast(levels)
-        return {**levels, "ice_drift_ahead_m_s": drift}
-
-    def _levels(self, h) -> dict:
-        """The bands of :meth:`tank_motion` on the surface heights ``h`` (nx, ny; m above the still level)."""
-        dx = self.units.dx_m
-        nx, ny = self.shape_cells[:2]
-        x = (np.arange(nx) + 0.5) * dx
-        y = (np.arange(ny) + 0.5) * dx
-        side = np.abs(y - self.centre_y_m) > 0.5 * self.geometry.beam_m
-
-        def band(x0):
-            vals = h[np.ix_((x >= x0) & (x < x0 + self.level_band_m), side)]
-            vals = vals[np.isfinite(vals)]  # a column with no surface (all water or all gas) is left out
-            return float(np.median(vals)) if vals.size else math.nan
-
-        return {"level_fore_wall_m": band(self.domain_m[0] - self.level_band_m),
-                "level_ahead_m": band(self.x_bow_m + 0.05)}
+        return None if h is None else h * self.units.dx_m
 
     def state(self) -> dict:
         """Everything a bit-for-bit restart needs: the record count and the last forces, the fluid (population

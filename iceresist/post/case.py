@@ -146,6 +146,8 @@ def analyse_case(path) -> dict:
         "floes_under_hull": floes_under_hull(final, geom.waterline_polygon(), x_bow, model["centre_y_m"],
                                              model["water_level_m"], model["cube_m"]),
         "resolution_m": float(model["resolution_m"]), "cells": int(model["cells"]),
+        # tier 2: the ice's edge over the finest cell, and the refinement levels above level 0 (0: a uniform grid)
+        "cells_per_cube": float(model.get("cells_per_cube", float("nan"))), "levels": int(model.get("levels", 0)),
         "spheres": int(model["spheres"]), "steps": int(meta["steps"]), "dem_substeps": int(meta["dem_substeps"]),
         "simulated_s": float(meta["time_s"]), "wall_time_s": float(meta["wall_time_s"]),
         "backend": model["backend"], "file": f"cases/{Path(path).name}",

@@ -472,8 +472,9 @@ class Refinement(_Section):
         None, gt=0, description="The blocks within this distance (m; cells in a lattice scene) of a solid face of "
         "the domain (wall, moving wall, free slip) take the finest level: the boundary layers.")
     body_band_m: float | None = Field(
-        None, gt=0, description="With `[[bodies]]`: the blocks within this distance (m; cells in a lattice scene) "
-        "of a body's bounding box at the start take the finest level, where the bodies and their coupling live. "
+        None, gt=0, description="With `[[bodies]]` (or a tier-2 ship in `[ice]`: the hull and every ice piece): the "
+        "blocks within this distance (m; cells in a lattice scene) of a body's bounding box at the start take the "
+        "finest level, where the bodies and their coupling live. "
         "With `regrid_every_steps` the band follows the bodies: at every regrid it is drawn around each body's "
         "bounding sphere where the body is then, so it must exceed the distance a body travels between regrids.")
     vorticity_1_s: float | None = Field(
@@ -568,9 +569,9 @@ class Scene(_Section):
             if self.refinement.surface_band_m is not None and self.free_surface is None:
                 raise ValueError("refinement.surface_band_m: a band around the water surface needs a "
                                  "[free_surface] section; refine with [[refinement.boxes]] instead")
-            if self.refinement.body_band_m is not None and not self.bodies:
-                raise ValueError("refinement.body_band_m: a band around the bodies needs [[bodies]]; refine with "
-                                 "[[refinement.boxes]] instead")
+            if self.refinement.body_band_m is not None and not self.bodies and self.ice is None:
+                raise ValueError("refinement.body_band_m: a band around the bodies needs [[bodies]] or a ship in "
+                                 "[ice]; refine with [[refinement.boxes]] instead")
         return self
 
     # -- derived values --------------------------------------------------------------------------------

@@ -42,7 +42,7 @@ from iceresist.freesurface.layout import HALO1_SIDE, HAS_GAS, HAS_LIQUID, build_
 from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
 from iceresist.grid import flags as FL
-from iceresist.grid.forest import CELLS
+from iceresist.grid.forest import BLOCK, CELLS
 from iceresist.lbm.stream import TANH_CLIP
 
 log = logging.getLogger(__name__)
@@ -589,21 +589,46 @@ class FreeSurfaceFluid:
         top-most crossing); NaN in a column with no crossing (all water or all gas). ``covered_as_water``: a cell
         a body covers (GHOST) counts as phi = 1, so the surface runs over the top of a floating body (within half
         a cell) rather than through the phi that the coupling mirrors into it; a column through a body that
-        stands out of the water then reads the body's top."""
-        phi = self.phi()
+        stands out of the water then reads the body's top. Only the layers of blocks that can hold the crossing
+        are made dense (:func:`surface_window`)."""
+        phi = self.phase.phi_host().astype(np.float64)
         if covered_as_water:
-            covered = self.dense(((self._host(self.fluid.flags) & FL.GHOST) != 0).astype(np.float64))
-            if phi is not None:
-                phi[np.nan_to_num(covered, nan=0.0) > 0.5] = 1.0
+            phi[(np.asarray(self._host(self.fluid.flags)) & FL.GHOST) != 0] = 1.0
+        forest = self.forest
+        if self.decomp is not None:     # the whole domain's blocks on rank 0
+            phi = self.decomp.gather_rows(phi)
+            forest = self.decomp.forest
         if phi is None:         # an MPI rank other than 0
             return None
-        nz = phi.shape[2]
-        z = np.arange(nz) + 0.5
-        below = phi[:, :, :-1] >= 0.5
-        above = phi[:, :, 1:] < 0.5
-        cross = below & above
-        k = nz - 2 - np.argmax(cross[:, :, ::-1], axis=2)
-        p0 = np.take_along_axis(phi, k[..., None], axis=2)[..., 0]
-        p1 = np.take_along_axis(phi, (k + 1)[..., None], axis=2)[..., 0]
-        found = cross.any(axis=2)  # there p0 >= 1/2 > p1
-        return np.where(found, z[k] + (p0 - 0.5) / np.where(found, p0 - p1, 1.0), np.nan)
+        lo, hi = surface_window(forest, phi)
+        return column_crossing(forest.to_dense(phi, z_blocks=(lo, hi))) + lo * BLOCK
+
+
+def surface_window(forest, phi: np.ndarray) -> tuple[int, int]:
+    """The layers of blocks (lo, hi: lo <= bz < hi) that hold every column's top-most phi = 1/2 crossing: in each
+    column of blocks the top-most block holding a cell with phi >= 1/2 and the block above it (the crossing is
+    inside the one or on the face between them). ``phi``: (nblocks, 512)."""
+    liquid = np.nan_to_num(phi, nan=0.0).max(axis=1) >= 0.5
+    if not liquid.any():
+        return 0, 1
+    o = forest.origin[liquid]
+    nbx, nby, _ = forest.shape_blocks
+    top = np.full(nbx * nby, -1, dtype=np.int64)
+    np.maximum.at(top, o[:, 0] * nby + o[:, 1], o[:, 2])
+    top = top[top >= 0]
+    return int(top.min()), int(top.max()) + 2
+
+
+def column_crossing(phi: np.ndarray) -> np.ndarray:
+    """Height z (cells from the array's bottom) where the dense ``phi`` (nx, ny, nz) crosses 1/2 in each column,
+    the top-most crossing, by linear interpolation; NaN where a column has none."""
+    nz = phi.shape[2]
+    z = np.arange(nz) + 0.5
+    below = phi[:, :, :-1] >= 0.5
+    above = phi[:, :, 1:] < 0.5
+    cross = below & above
+    k = nz - 2 - np.argmax(cross[:, :, ::-1], axis=2)
+    p0 = np.take_along_axis(phi, k[..., None], axis=2)[..., 0]
+    p1 = np.take_along_axis(phi, (k + 1)[..., None], axis=2)[..., 0]
+    found = cross.any(axis=2)  # there p0 >= 1/2 > p1
+    return np.where(found, z[k] + (p0 - 0.5) / np.where(found, p0 - p1, 1.0), np.nan)

@@ -227,9 +227,10 @@ class BlockForest:
         self.cells = int(fluid.sum())
 
     # ------------------------------------------------------------------ dense views
-    def to_dense(self, values):
+    def to_dense(self, values, z_blocks: tuple[int, int] | None = None):
         """Per-block values (nblocks, 512) or (k, nblocks, 512) -> dense (nx, ny, nz) or (k, nx, ny, nz),
-        float64, NaN where no block is allocated."""
+        float64, NaN where no block is allocated; ``z_blocks`` (lo, hi): only the layers of blocks lo <= bz < hi,
+        (nx, ny, 8 (hi - lo)) cells from z = 8 lo."""
         v = np.asarray(values, dtype=np.float64)
         single = v.ndim == 2
         if single:
@@ -239,10 +240,14 @@ class BlockForest:
                              f"or (k, {self.nblocks}, {CELLS}), got {np.shape(values)}")
         k = v.shape[0]
         nbx, nby, nbz = self.shape_blocks
-        dense = np.full((k, nbx, nby, nbz, BLOCK, BLOCK, BLOCK), np.nan)
         o = self.origin
-        dense[:, o[:, 0], o[:, 1], o[:, 2]] = v.reshape(k, self.nblocks, BLOCK, BLOCK, BLOCK).transpose(0, 1, 4, 3, 2)
-        dense = dense.transpose(0, 1, 4, 2, 5, 3, 6).reshape(k, *self.shape_cells)
+        lo, hi = (0, nbz) if z_blocks is None else (max(int(z_blocks[0]), 0), min(int(z_blocks[1]), nbz))
+        pick = slice(None) if z_blocks is None else np.flatnonzero((o[:, 2] >= lo) & (o[:, 2] < hi))
+        dense = np.full((k, nbx, nby, hi - lo, BLOCK, BLOCK, BLOCK), np.nan)
+        o = o[pick]
+        dense[:, o[:, 0], o[:, 1], o[:, 2] - lo] = v[:, pick].reshape(k, len(o), BLOCK, BLOCK, BLOCK).transpose(
+            0, 1, 4, 3, 2)
+        dense = dense.transpose(0, 1, 4, 2, 5, 3, 6).reshape(k, nbx * BLOCK, nby * BLOCK, (hi - lo) * BLOCK)
         return dense[0] if single else dense
 
     def from_dense(self, array):

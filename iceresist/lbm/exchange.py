@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from functools import lru_cache
+
 from iceresist.backends import cache
 from iceresist.backends.launch import ItemLauncher
 
@@ -83,3 +85,30 @@ def pack_table(table, real) -> dict:
     as_int = {k: np.ascontiguousarray(v, dtype=np.int64) for k, v in
               dict(db=db, dq=q, dc=dc, tag=tag, sb=sb, sc=sc, nb=nb, nc=nc).items()}
     return {**as_int, "nok": np.ascontiguousarray(nok, dtype=np.int8), "off": np.ascontiguousarray(off, dtype=real)}
+
+
+def _copy_block_item(i, blocks, dst, src):
+    b = blocks[i]
+    for r in range(dst.shape[1]):
+        dst[b, r] = src[b, r]
+
+
+@lru_cache(maxsize=None)
+def _block_copier(target):
+    return ItemLauncher(target, target.device(_copy_block_item), ("blocks", "dst", "src"), label="copy_blocks")
+
+
+def copy_blocks(target, dst, src, blocks, nblocks: int):
+    """dst[b] = src[b] for the ``nblocks`` blocks listed in ``blocks`` (a target int64 array) of two contiguous
+    target arrays of the same shape (blocks first): the snapshot of a level that the transfer tables read, a block
+    per item on the CPU (13 824 floats each, faster than NumPy's whole-array copy even for every block); on CUDA the
+    whole array, one device-to-device copy at the memory's full bandwidth (a gather would cost more than it
+    saves)."""
+    if target.is_cuda:
+        target.copy(dst, src)
+        return
+    if nblocks == 0:
+        return
+    d = dst.reshape(dst.shape[0], dst.size // dst.shape[0])
+    s = src.reshape(src.shape[0], src.size // src.shape[0])
+    _block_copier(target)(int(nblocks), blocks, d, s)

@@ -298,6 +298,22 @@ def _apply(table, dst, src, neq_scale: float = 1.0):
     dst[gb[have], :, gc[have]] = acc[have].astype(dst.dtype)
 
 
+def _source_blocks(table, tag: int) -> np.ndarray:
+    """The blocks a transfer table reads from the source array of ``tag`` (0: the coarse level at t, with its
+    packets' neighbours; 1: the fine level at t; 2: the fine level at t + 1/2)."""
+    _, _, _, tags, sb, _, (_, nbrs) = table
+    tags, sb = np.asarray(tags), np.asarray(sb)
+    if tags.ndim == 1:
+        tags, sb = tags[:, None], sb[:, None]
+        nbrs = [(np.asarray(b)[:, None], c, ok) for b, c, ok in nbrs]
+    mine = tags == tag
+    parts = [sb[mine]]
+    if tag == 0:
+        parts += [np.asarray(b)[mine] for b, _, _ in nbrs]
+    out = np.concatenate([p.ravel() for p in parts]).astype(np.int64)
+    return out[out >= 0]
+
+
 class RefinedLBM:
     """The LBM on every level of ``octree`` (leaves of all levels fluid; walls and periodic faces as ``faces``).
 
@@ -419,6 +435,30 @@ class RefinedLBM:
         self._k_restrict = {lv: packed(restriction_as_transfer(t)) for lv, t in self.restrict.items()}
         shape = {lv: (self.views[lv].forest.nblocks, 27, 512) for lv in self.levels}
         self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv in self.levels for k in ("t", "half")}
+        # the blocks each scratch copy must hold: those some table reads from it (a coarse packet's neighbours
+        # included); a level's "t" copy serves both as the coarse level of the interface below it and the fine
+        # level of the one above, so it holds both sets at either copy
+        reads = {key: [] for key in self._scratch}
+        for lv in self.levels[:-1]:
+            finer = lv + 1
+            tables = [self.coalesce[lv], *(self.explode[finer] or ())]
+            for table in tables:
+                if table is None:
+                    continue
+                for tag, key in ((0, (lv, "t")), (1, (finer, "t")), (2, (finer, "half"))):
+                    reads[key].append(_source_blocks(table, tag))
+        self._scratch_blocks = {}
+        for key, parts in reads.items():
+            blocks = np.unique(np.concatenate(parts)) if parts else np.zeros(0, dtype=np.int64)
+            self._scratch_blocks[key] = (dev(blocks.astype(np.int64)), len(blocks))
+
+    def _snapshot(self, scratch, state, key):
+        """Copy into ``scratch`` the blocks of ``state`` that the transfer tables read from it (the rest of the
+        scratch copy is never read)."""
+        from iceresist.lbm.exchange import copy_blocks
+
+        blocks, n = self._scratch_blocks[key]
+        copy_blocks(self.target, scratch, state, blocks, n)
 
     def _launch(self, packed, dst, sources, weight=1.0, linear=False):
         if packed is None or packed[0] == 0:
@@ -438,14 +478,14 @@ class RefinedLBM:
             if linear:     # the gradient across the interface sees the fine level
                 self._launch(self._k_restrict[lv], s.state, (sf.state, sf.state, sf.state), weight=0.125)
             c_t, f_t, f_half = self._scratch[(lv, "t")], self._scratch[(finer, "t")], self._scratch[(finer, "half")]
-            self.target.copy(c_t, s.state)
-            self.target.copy(f_t, sf.state)
+            self._snapshot(c_t, s.state, (lv, "t"))
+            self._snapshot(f_t, sf.state, (finer, "t"))
             tables = self._k_explode[finer]
             for sub in (0, 1):
                 if tables is not None:
                     self._launch(tables[sub], sf.state, (c_t, f_t, f_t), linear=linear)
                 if sub == 1:
-                    self.target.copy(f_half, sf.state)
+                    self._snapshot(f_half, sf.state, (finer, "half"))
                 self._advance_conservative(finer)
             self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
         self.steppers[lv]()

@@ -372,6 +372,8 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="auto")
     p.add_argument("--threads", type=int, help="CPU threads of the DEM kernels (numba)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--amr", action="store_true", help="tier 2 on the preset's refined levels: the hull, the ice and "
+                   "the surface on the finest level (docs/SHIP.md)")
     m = p.add_argument_group("your own hull (Bow A cases; the hull replaces B-063)")
     m.add_argument("--mesh", metavar="HULL.stl", help="closed hull surface, STL or OBJ, at the preset's model "
                    "scale (draught 0.44 m), or a built-in mesh (b063)")
@@ -420,8 +422,16 @@ def mesh_overrides(args) -> tuple[dict, str]:
 
 
 def cmd_sweep(args) -> int:
+    from iceresist.ship.cases import amr_overrides
+
     overrides, cases = mesh_overrides(args)
     suffix = f"-{Path(args.mesh).stem}" if overrides else ""
+    if args.amr:
+        if args.tier != 2:
+            raise InputError("--amr: refined levels are a tier-2 tank; add --tier 2")
+        for section, values in amr_overrides(args.preset).items():
+            overrides.setdefault(section, {}).update(values)
+        suffix += "-amr"
     out = args.output or f"runs/sweep-{args.preset}-t{args.tier}{suffix}"
     set_threads(args.threads)
     table = run_sweep(args.preset, args.tier, out, cases, backend=args.backend,

@@ -147,3 +147,33 @@ def test_bad_refined_ship_scenes_exit_2_with_one_line(tmp_path, main, edit, need
     rc, err = main(p, "--output", tmp_path / "out")
     _one_line_error(rc, err, needle)
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_the_quick_preset_on_levels_is_the_case_with_its_refinement(tmp_path):
+    """``amr``: the quick tier-2 case in its refined tank (cases.toml ``[tier2.quick.amr]``), the same from the
+    preset, from ``[case] amr = true`` and from the sweep's overrides; refused for tier 1."""
+    from iceresist.errors import InputError
+    from iceresist.scene import load_scene
+    from iceresist.ship.cases import amr_overrides
+
+    s = case_scene(CASE, "quick", 2, amr=True)
+    assert s.refinement.levels == 1 and s.refinement.regrid_every_steps == 10
+    assert s.shape_cells() == (384, 104, 72) and s.free_surface.water_depth_m == 0.93
+    assert 0.041 / (s.domain.dx_m / 2) > 6.0                     # cells per cube on the finest level
+    p = tmp_path / "amr.toml"
+    p.write_text('[case]\nname = "A-c68-v1.0"\ntier = 2\namr = true\n')
+    assert load_scene(p).model_dump(exclude={"case"}) == s.model_dump(exclude={"case"})
+    assert case_scene(CASE, "quick", 2, **amr_overrides("quick")).refinement == s.refinement
+    with pytest.raises(InputError, match="amr: refined levels are a tier-2 tank"):
+        case_scene(CASE, "quick", 1, amr=True)
+
+
+@pytest.mark.slow
+def test_the_quick_preset_on_levels_builds_its_levels_and_steps():
+    """The quick case on two levels (90 s to build, 3.4 GB): 6.1 cells per cube on level 1, the hull, the floes
+    and the surface there, 2.07e6 level-0 and 6.46e6 level-1 leaf cells (2026-11-28); one record finite."""
+    m = build_model(case_scene(CASE, "quick", 2, amr=True), backend="cpu")
+    assert m.cells_per_cube == pytest.approx(6.135, abs=1e-3)
+    assert m.cells_per_level == {0: 2068480, 1: 6455296}
+    m.step(1)
+    assert m.is_finite() and m.watchdog_probe()["bodies_outside_finest"][0] == 0

@@ -44,6 +44,9 @@ def add_arguments(parser):
                         help="time the coupled step part by part beside the pure fused LBM step on as many cells")
     parser.add_argument("--by-label", action="store_true",
                         help="with --compare-pure: one row per launcher label, not the parts of docs/PERFORMANCE.md")
+    parser.add_argument("--amr", action="store_true",
+                        help="the preset's tank on refined levels (its [tier2.<preset>.amr]): cells per level, "
+                             "the rate and the projected time of the case")
 
 
 def scaled_scene(case: str, preset: str, across: int, **overrides):
@@ -82,25 +85,31 @@ def measure(scene, backend: str, records: int) -> dict:
     """Build the tier-2 model of ``scene``, step one record of warm-up and ``records`` timed ones."""
     from iceresist.models.tier2 import Tier2Model
 
+    from iceresist.models.refined_tier2 import RefinedTier2Model
+
     t0 = time.perf_counter()
-    model = Tier2Model(scene, backend=backend)
+    model = (Tier2Model if scene.refinement is None else RefinedTier2Model)(scene, backend=backend)
     build_s = time.perf_counter() - t0
     model.step(1)
-    model.fb.fluid.fluid.synchronize()
+    model.target.synchronize()
     t0 = time.perf_counter()
     model.step(records)
-    model.fb.fluid.fluid.synchronize()
+    model.target.synchronize()
     seconds = time.perf_counter() - t0
     per_record = seconds / records
     total = int(math.ceil(scene.run.end_time_s / model.dt_s - 1e-9))
     lbm = records * model.lbm_steps_per_record
-    return {"name": f"ship {scene.scene.name}", "backend": model.target.name, "precision": model.precision,
-            "cells": model.cells, "shape": "x".join(str(n) for n in model.shape_cells),
-            "dx_mm": 1e3 * model.units.dx_m, "steps": lbm, "seconds": seconds,
-            "mlups": model.cells * lbm / seconds / 1e6, "s_per_record": per_record,
-            "records_total": total, "projected_h": total * per_record / 3600.0,
-            "allocated_GiB": model.allocated_bytes() / GIB, "build_s": build_s,
-            "finite": bool(model.is_finite())}
+    row = {"name": f"ship {scene.scene.name}", "backend": model.target.name, "precision": model.precision,
+           "cells": model.cells, "shape": "x".join(str(n) for n in model.shape_cells),
+           "dx_mm": 1e3 * model.units.dx_m, "steps": lbm, "seconds": seconds,
+           "mlups": records * model.lattice_updates_per_step / seconds / 1e6, "s_per_record": per_record,
+           "records_total": total, "projected_h": total * per_record / 3600.0,
+           "allocated_GiB": model.allocated_bytes() / GIB, "build_s": build_s,
+           "finite": bool(model.is_finite())}
+    if scene.refinement is not None:   # cells of every level, the finest's resolution; updates per level-0 step
+        row.update(cells_per_level=model.cells_per_level, cells_per_cube=model.cells_per_cube,
+                   updates_per_step=model.lattice_updates_per_step // model.lbm_steps_per_record)
+    return row
 
 
 #: The parts of a coupled step in the words of docs/PERFORMANCE.md, by launcher label.
@@ -199,7 +208,7 @@ def compare_pure(scene, backend: str, records: int, by_label: bool = False) -> l
 
 def run(args):
     from iceresist.errors import InputError
-    from iceresist.ship.presets import FIDELITIES, TIER2
+    from iceresist.ship.presets import FIDELITIES, TIER2, case_scene
     from iceresist.models.tier2 import Tier2Model
 
     if args.preset not in FIDELITIES:
@@ -226,6 +235,12 @@ def run(args):
                 acrosses.append(n)
     if not acrosses and not args.fit_gib:
         acrosses = [TIER2[args.preset]["cells"][1]]
+    if args.amr:        # the preset's refined tank as it is (no --across, --fit-gib or --compare-pure)
+        if args.across or args.fit_gib or args.compare_pure:
+            raise InputError("--amr: times the preset's refined tank as the preset gives it; leave out --across, "
+                             "--fit-gib and --compare-pure")
+        scene = case_scene(args.case, args.preset, 2, amr=True)
+        return [measure(scene, args.backend, args.records)] if args.records else []
     for n in acrosses if args.records else []:
         scene = scaled_scene(args.case, args.preset, n)
         if args.compare_pure:

@@ -137,7 +137,7 @@ def _with_case(data: dict) -> dict:
     if "case" not in data:
         return data
     case = _CaseOnly.model_validate(data).case
-    merged = scene_data(case.name, case.fidelity, case.tier)
+    merged = scene_data(case.name, case.fidelity, case.tier, case.amr)
     for section, values in data.items():
         if isinstance(values, dict) and isinstance(merged.get(section), dict):
             merged[section] = {**merged[section], **values}

@@ -51,6 +51,9 @@ class CaseBase(_Section):
                                        + ", ".join(f"`{c}`" for c in CASES) + ".")
     fidelity: Literal[tuple(FIDELITIES)] = Field("quick", description="Preset fidelity (docs/SHIP.md).")
     tier: Literal[1, 2] = Field(1, description="1 = DEM with water models; 2 = the coupled LBM-DEM.")
+    amr: bool = Field(False, description="Tier 2 on the preset's refined levels (its `[tier2.<fidelity>.amr]` "
+                      "in iceresist/ship/cases.toml: the hull, the ice and the surface on the finest level, the deep "
+                      "water coarser; docs/SHIP.md).")
 
     @field_validator("name")
     @classmethod

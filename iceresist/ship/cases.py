@@ -49,6 +49,15 @@ class _Fidelity(_Data):
     dx_m: float = Field(gt=0)
 
 
+class _Amr(_Data):
+    levels: int = Field(ge=1)
+    cells: tuple[int, int, int]
+    water_depth_m: float = Field(gt=0)
+    surface_band_m: float = Field(gt=0)
+    body_band_m: float = Field(gt=0)
+    regrid_every_steps: int = Field(ge=1)
+
+
 class _Tier2(_Data):
     cells: tuple[int, int, int]
     dx_m: float = Field(gt=0)
@@ -56,6 +65,7 @@ class _Tier2(_Data):
     channel_start_x_m: float = Field(gt=0)
     mach: float = Field(gt=0)
     nu_m2_s: float = Field(gt=0)
+    amr: _Amr | None = None
 
 
 class _Notes(_Data):
@@ -140,13 +150,33 @@ def get_case(name: str) -> Case:
     return CASES[name]
 
 
-def scene_data(case: str, fidelity: str, tier: int = 1) -> dict:
-    """The scene of one case as a dict of TOML sections (validated by :class:`~iceresist.scene.schema.Scene`)."""
+def amr_fidelities() -> list[str]:
+    """The presets whose tier-2 tank also runs on refined levels."""
+    return [name for name, t in TIER2.items() if t.get("amr")]
+
+
+def amr_overrides(fidelity: str) -> dict:
+    """The sections that put a preset's tier-2 tank on refined levels (its ``[tier2.<fidelity>.amr]``): the level-0
+    tank's cells, the water depth and ``[refinement]``; merged over a tier-2 case's own (:func:`scene_data`, or
+    the ``overrides`` of a sweep)."""
+    a = TIER2.get(fidelity, {}).get("amr")
+    if not a:
+        raise InputError(f"--amr: refined levels are a tier-2 tank of the presets "
+                         f"{', '.join(amr_fidelities()) or '(none)'}; use one of them with --tier 2")
+    return {"domain": {"cells": list(a["cells"])}, "free_surface": {"water_depth_m": a["water_depth_m"]},
+            "refinement": {k: a[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}}
+
+
+def scene_data(case: str, fidelity: str, tier: int = 1, amr: bool = False) -> dict:
+    """The scene of one case as a dict of TOML sections (validated by :class:`~iceresist.scene.schema.Scene`);
+    ``amr``: tier 2 on the refined levels of the preset's ``[tier2.<fidelity>.amr]`` (:func:`amr_overrides`)."""
     c = get_case(case)
     if fidelity not in FIDELITIES:
         raise InputError(f"--preset: unknown preset {fidelity!r}; use one of {', '.join(FIDELITIES)}")
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
+    if amr and tier != 2:
+        raise InputError("amr: refined levels are a tier-2 tank; set tier = 2 (--tier 2)")
     f = FIDELITIES[fidelity]
     t2 = TIER2[fidelity] if tier == 2 else None
     channel_start = CHANNEL_START_X_M if t2 is None else t2["channel_start_x_m"]
@@ -163,8 +193,8 @@ def scene_data(case: str, fidelity: str, tier: int = 1) -> dict:
                  "operator": "cumulant"}
         numerics = {"precision": "float32", "backend": "auto", "mach": t2["mach"]}
         depth = t2["water_depth_m"]
-    return {
-        "scene": {"name": f"ship_{fidelity}_t{tier}_{c.name}",
+    out = {
+        "scene": {"name": f"ship_{fidelity}_t{tier}{'_amr' if amr else ''}_{c.name}",
                   "description": f"B-063 Bow {c.bow}, {100 * c.concentration:g} % brash ice, {c.knots:g} knots "
                                  f"({c.speed_m_s:.3f} m/s), {fidelity} fidelity, tier {tier}"},
         "domain": {**domain,
@@ -183,3 +213,8 @@ def scene_data(case: str, fidelity: str, tier: int = 1) -> dict:
                     **({"dashpot": f["dashpot"]} if f["dashpot"] != "sphere_pair" else {}),
                     "sample_interval_s": f["sample_interval_s"]},
     }
+    if amr:
+        for section, values in amr_overrides(fidelity).items():
+            out.setdefault(section, {}).update(values)
+        out["scene"]["description"] += f", on {out['refinement']['levels'] + 1} refined levels"
+    return out

@@ -227,7 +227,7 @@ def test_case_section_starts_from_a_ship_case_and_changes_only_the_keys_given():
     (('name = "B-c68-v1.0"', 'name = "B-c60-v1.0"'), "case.name: unknown case 'B-c60-v1.0'; known cases: A-c50-v1.0"),
     (("tier = 2", "tier = 3"), "case.tier: must be one of 1 or 2 (got 3)"),
     (('fidelity = "quick"', 'fidelity = "fast"'), "case.fidelity: must be one of 'paper' or 'quick' (got \"fast\")"),
-    (("tier = 2", "tier = 2\nbow = \"B\""), "case.bow: unknown key (allowed: name, fidelity, tier)"),
+    (("tier = 2", "tier = 2\nbow = \"B\""), "case.bow: unknown key (allowed: name, fidelity, tier, amr)"),
     (('name = "B-c68-v1.0"\n', ""), "case.name: required key is missing"),
     (("[ice]\nchannel_length_m = 2.78", "[ice]\nchannel_length_m = -1"), "ice.channel_length_m: must be > 0 (got -1)"),
 ])

@@ -73,18 +73,23 @@ def transfer_launcher(target, real) -> ItemLauncher:
 
 
 def pack_table(table, real) -> dict:
-    """A transfer table (tuple of NumPy columns) as the flat arrays of :data:`TRANSFER_ARGS` (host)."""
+    """A transfer table (tuple of NumPy columns) as the flat arrays of :data:`TRANSFER_ARGS` (host), indices as
+    int32. A table without coarse packets (a coalescence) never reads the offsets and neighbours of the linear
+    reconstruction: they are packed as one row each (the kernel reads them for coarse packets only), which keeps a
+    large interface's tables a tenth of the size."""
     db, q, dc, tag, sb, sc, (off, nbrs) = table
     if tag.ndim == 1:
         tag, sb, sc = tag[:, None], sb[:, None], sc[:, None]
         off = off[:, None, :]
         nbrs = [(b[:, None], c[:, None], ok[:, None]) for b, c, ok in nbrs]
-    nb = np.stack([b for b, _, _ in nbrs], axis=-1)
-    nc = np.stack([c for _, c, _ in nbrs], axis=-1)
-    nok = np.stack([ok for _, _, ok in nbrs], axis=-1)
-    as_int = {k: np.ascontiguousarray(v, dtype=np.int64) for k, v in
+    rows = slice(None) if (np.asarray(tag) == 0).any() else slice(0, 1)
+    nb = np.stack([b[rows] for b, _, _ in nbrs], axis=-1)
+    nc = np.stack([c[rows] for _, c, _ in nbrs], axis=-1)
+    nok = np.stack([ok[rows] for _, _, ok in nbrs], axis=-1)
+    as_int = {k: np.ascontiguousarray(v, dtype=np.int32) for k, v in
               dict(db=db, dq=q, dc=dc, tag=tag, sb=sb, sc=sc, nb=nb, nc=nc).items()}
-    return {**as_int, "nok": np.ascontiguousarray(nok, dtype=np.int8), "off": np.ascontiguousarray(off, dtype=real)}
+    return {**as_int, "nok": np.ascontiguousarray(nok, dtype=np.int8),
+            "off": np.ascontiguousarray(np.asarray(off)[rows], dtype=real)}
 
 
 def _copy_block_item(i, blocks, dst, src):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import logging
 import math
+from abc import abstractmethod
 
 import numpy as np
 
@@ -131,10 +132,10 @@ class Tier2Ship(ShipModel):
     #: Length (m) of the bands along the tank over which :meth:`tank_motion` reads the water level.
     level_band_m = 0.32
 
+    @abstractmethod
     def _surface_height_m(self) -> np.ndarray | None:
         """Height (m from the bottom) of the free surface over each level-0 column (nx, ny), a floe counted as water
         (:meth:`FreeSurfaceFluid.surface_height`); None on an MPI rank other than 0."""
-        raise NotImplementedError
 
     def tank_motion(self) -> dict:
         """How the tank's water moves (docs/SHIP.md, "The start wave"): the median height of the surface above

@@ -117,13 +117,18 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             return [self._phi_leaves()]
         return [np.ones((self.lbm.views[lv].nleaves, CELLS))]
 
-    def surface_cells(self) -> np.ndarray:
+    def surface_cells(self, covered_as_water: bool = False) -> np.ndarray:
         """Height of phi = 1/2 over each level-0 column (nx, ny), level-0 cells: the mean of the finest level's
-        columns in it."""
-        h = self.fs.surface_height() / 2 ** self.finest
+        columns in it (NaN where none has a surface); ``covered_as_water``: a body's cells count as water
+        (:meth:`FreeSurfaceFluid.surface_height`)."""
+        import warnings
+
+        h = self.fs.surface.surface_height(covered_as_water) / 2 ** self.finest
         s = 2 ** self.finest
         nx, ny = h.shape[0] // s, h.shape[1] // s
-        return np.nanmean(h.reshape(nx, s, ny, s), axis=(1, 3))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)     # a column of columns without a surface
+            return np.nanmean(h.reshape(nx, s, ny, s), axis=(1, 3))
 
     # -- protocol ------------------------------------------------------------------------------------------
     def fields(self) -> dict[str, np.ndarray]:

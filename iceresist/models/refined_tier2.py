@@ -173,18 +173,9 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         self._force_last = self.dem.ice_force_on(hb)
 
     def _surface_height_m(self) -> np.ndarray:
-        """The free surface over each level-0 column (m from the bottom): the mean of the finest level's columns in
-        it, a floe counted as water."""
-        s = 2 ** self.finest
-        h = self.fs.surface.surface_height(covered_as_water=True) / s
-        nx, ny = h.shape[0] // s, h.shape[1] // s
-        with np.errstate(invalid="ignore"):
-            import warnings
-
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
-                cols = np.nanmean(h.reshape(nx, s, ny, s), axis=(1, 3))
-        return cols * self.units.dx_m
+        """The free surface over each level-0 column (m from the bottom), a floe counted as water
+        (:meth:`RefinedFreeSurfaceModel.surface_cells`)."""
+        return self.surface_cells(covered_as_water=True) * self.units.dx_m
 
     def is_finite(self) -> bool:
         return bool(np.isfinite(self._force_mean).all() and np.isfinite(self._fluid_mean).all()

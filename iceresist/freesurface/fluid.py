@@ -605,16 +605,18 @@ class FreeSurfaceFluid:
 
 
 def surface_window(forest, phi: np.ndarray) -> tuple[int, int]:
-    """The layers of blocks (lo, hi: lo <= bz < hi) that hold every column's top-most phi = 1/2 crossing: in each
-    column of blocks the top-most block holding a cell with phi >= 1/2 and the block above it (the crossing is
+    """The layers of blocks (lo, hi: lo <= bz < hi) that hold every column's top-most phi = 1/2 crossing: for each
+    column of cells the block holding its top-most cell with phi >= 1/2 and the block above it (the crossing is
     inside the one or on the face between them). ``phi``: (nblocks, 512)."""
-    liquid = np.nan_to_num(phi, nan=0.0).max(axis=1) >= 0.5
-    if not liquid.any():
+    n = len(phi)
+    wet = (np.nan_to_num(phi, nan=0.0).reshape(n, BLOCK, BLOCK, BLOCK) >= 0.5).any(axis=1)   # (n, y, x)
+    b, y, x = np.nonzero(wet)
+    if not len(b):
         return 0, 1
-    o = forest.origin[liquid]
+    o = forest.origin[b]
     nbx, nby, _ = forest.shape_blocks
-    top = np.full(nbx * nby, -1, dtype=np.int64)
-    np.maximum.at(top, o[:, 0] * nby + o[:, 1], o[:, 2])
+    top = np.full((nbx * BLOCK, nby * BLOCK), -1, dtype=np.int64)
+    np.maximum.at(top, (o[:, 0] * BLOCK + x, o[:, 1] * BLOCK + y), o[:, 2])
     top = top[top >= 0]
     return int(top.min()), int(top.max()) + 2
 

@@ -167,28 +167,32 @@ class BlockForest:
         self.bc_density = np.array(rho, dtype=np.float64)
 
     def _build_neighbours(self):
-        """nbr[b, q] from the (level, bx, by, bz) dictionary; periodic faces wrap, others give -1."""
-        n = np.array(self.shape_blocks)
+        """nbr[b, q]: the block at origin + c_q of the same level (-1: none); periodic faces wrap, and where c_q
+        leaves the domain through closed faces, link_bc[b, q] is 1 + the face (of the crossed ones, the first by
+        :data:`~iceresist.grid.flags.FACE_PRIORITY`, then by name)."""
+        n = np.array(self.shape_blocks, dtype=np.int64)
+        periodic = np.array([self.faces[a + "-"].kind == "periodic" for a in "xyz"])
+        t = self.origin[:, None, :] + C[None, :, :].astype(np.int64)             # (nblocks, Q, 3)
+        above = t >= n
+        out = ((t < 0) | above) & ~periodic
+        t = np.where(periodic & (n > 0), t % np.maximum(n, 1), t)
+        face = 2 * np.arange(3) + above                                          # the face crossed on each axis
+        rank = np.array([FL.FACE_PRIORITY.get(self.faces[name].kind, 99) for name in FACE_NAMES]) * 8
+        key = np.where(out, rank[face] + face, 1 << 20)
+        crossed = out.any(axis=2)
+        first = np.take_along_axis(face, key.argmin(axis=2)[..., None], axis=2)[..., 0]
+        link_bc = np.where(crossed, 1 + first, 0).astype(np.int32)
         nbr = np.full((self.nblocks, Q), -1, dtype=np.int32)
-        link_bc = np.zeros((self.nblocks, Q), dtype=np.int32)
-        periodic = [self.faces[a + "-"].kind == "periodic" for a in "xyz"]
-        for i in range(self.nblocks):
-            level, o = int(self.levels[i]), self.origin[i]
-            for q in range(Q):
-                t = o + C[q]
-                crossed = []
-                for a in range(3):
-                    if 0 <= t[a] < n[a]:
-                        continue
-                    if periodic[a]:
-                        t[a] %= n[a]
-                    else:
-                        crossed.append(2 * a + (1 if t[a] >= n[a] else 0))
-                if crossed:
-                    face = min(crossed, key=lambda k: (FL.FACE_PRIORITY[self.faces[FACE_NAMES[k]].kind], k))
-                    link_bc[i, q] = 1 + face
-                else:
-                    nbr[i, q] = self.index.get((level, int(t[0]), int(t[1]), int(t[2])), -1)
+        inside = ~crossed
+        if self.nblocks and (self.levels == self.levels[0]).all() and (self.origin >= 0).all() \
+                and (self.origin < n).all():
+            bmap = np.full(tuple(int(v) for v in n), -1, dtype=np.int32)         # one level: a dense block map
+            bmap[tuple(self.origin.T)] = np.arange(self.nblocks, dtype=np.int32)
+            ti = t[inside]
+            nbr[inside] = bmap[ti[:, 0], ti[:, 1], ti[:, 2]]
+        else:
+            for i, q in zip(*np.nonzero(inside)):
+                nbr[i, q] = self.index.get((int(self.levels[i]), *(int(v) for v in t[i, q])), -1)
         self.nbr = nbr
         self.nbr_key = np.ascontiguousarray(nbr[:, Q_OF_KEY])
         self.link_bc = np.ascontiguousarray(link_bc[:, Q_OF_KEY])
@@ -209,19 +213,31 @@ class BlockForest:
         return nb, np.broadcast_to(sc, nb.shape), bc
 
     def _build_flags(self, fluid):
+        """FLUID or SOLID per cell, NEAR_WALL on a fluid cell that pulls from a solid cell or through a closed face
+        (not an outlet), NEAR_OUTLET on one that pulls through an outlet. Only the blocks that are not wholly fluid
+        with 26 wholly fluid neighbours are looked at cell by cell (the others are FLUID throughout)."""
         flags = np.where(fluid, FL.FLUID, FL.SOLID).astype(np.uint8)
-        near_wall = np.zeros(fluid.shape, dtype=bool)
-        near_outlet = np.zeros(fluid.shape, dtype=bool)
-        for q in range(1, Q):
-            nb, sc, bc = self.pull_source(q)
-            inside = nb >= 0
-            src_fluid = np.zeros(fluid.shape, dtype=bool)
-            src_fluid[inside] = fluid[nb[inside], sc[inside]]
-            outlet = ~inside & (self.bc_kind[bc] == FL.BC_OUTLET)
-            near_outlet |= outlet
-            near_wall |= ~src_fluid & ~outlet
-        flags[fluid & near_wall] |= FL.NEAR_WALL
-        flags[fluid & near_outlet] |= FL.NEAR_OUTLET
+        full = fluid.all(axis=1)
+        inner = full & (self.nbr_key >= 0).all(axis=1)
+        inner[inner] = full[self.nbr_key[inner]].all(axis=1)
+        rest = np.flatnonzero(~inner)
+        if len(rest):
+            own = fluid[rest]
+            near_wall = np.zeros(own.shape, dtype=bool)
+            near_outlet = np.zeros(own.shape, dtype=bool)
+            for q in range(1, Q):
+                nb, sc, bc = self.pull_source(q)
+                nb, sc, bc = nb[rest], sc[rest], bc[rest]
+                inside = nb >= 0
+                src_fluid = np.zeros(own.shape, dtype=bool)
+                src_fluid[inside] = fluid[nb[inside], sc[inside]]
+                outlet = ~inside & (self.bc_kind[bc] == FL.BC_OUTLET)
+                near_outlet |= outlet
+                near_wall |= ~src_fluid & ~outlet
+            sub = flags[rest]
+            sub[own & near_wall] |= FL.NEAR_WALL
+            sub[own & near_outlet] |= FL.NEAR_OUTLET
+            flags[rest] = sub
         self.flags = flags
         self.fluid = fluid
         self.cells = int(fluid.sum())

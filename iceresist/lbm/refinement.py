@@ -137,6 +137,21 @@ SCHEMES = ("conservative", "interpolate")
 COARSE_T, FINE_T, FINE_HALF = 0, 1, 2
 
 
+def _side_cells() -> np.ndarray:
+    """(27, 512) bool: for each neighbour key (ox + 3 oy + 9 oz, offsets -1..1 as 0..2, the order of
+    ``nbr_key``), the cells of a block on the side facing that neighbour (every cell for the offset 0 of an axis)."""
+    out = np.ones((27, 512), dtype=bool)
+    for k in range(27):
+        for a, local in enumerate((LX, LY, LZ)):
+            o = (k // 3 ** a) % 3 - 1
+            if o:
+                out[k] &= local == (0 if o < 0 else 7)
+    return out
+
+
+_SIDE_CELLS = _side_cells()
+
+
 def _coarse_stencil(coarse: LevelView, pos, periodic):
     """For packets at fine cells ``pos`` (..., 3) taken from their coarse cells: the offset of the sub-cell from
     its coarse cell's centre (coarse units, +-1/4 per axis) and the (block, cell) of the coarse neighbours at -1
@@ -168,9 +183,15 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic):
     g = np.flatnonzero(fine.ghost_source == FROM_COARSER) + fine.nleaves
     if len(g) == 0:
         return None
-    h = _cells_of(fine, g).reshape(-1, 3)
-    hb = np.repeat(g, 512)
-    hc = np.tile(np.arange(512), len(g))
+    # only the ghost cells next to a leaf are read by one: the cells on the sides of each ghost block that face a
+    # leaf block (ghost blocks lie in the fine level's block grid, so the leaf a cell's link reaches is in one of
+    # its block's 26 neighbours)
+    nbr = fine.forest.nbr_key[g]
+    faces_leaf = (nbr >= 0) & (nbr < fine.nleaves)
+    read = (faces_leaf[:, :, None] & _SIDE_CELLS[None, :, :]).any(axis=1)         # (len(g), 512)
+    gi, hc = np.nonzero(read)
+    hb = g[gi]
+    h = _cells_of(fine, g)[gi, hc]
     tables = ([], [])
     for q in range(1, 27):
         cq = C[q].astype(np.int64)
@@ -205,10 +226,19 @@ def coalescence_table(coarse: LevelView, fine: LevelView, periodic):
     coarse cell X - c_q (read only by X), for every coarse leaf cell and q whose packets touch the fine level.
 
     Returns (dst block, q, dst cell, tags (n, 8), src blocks (n, 8), src cells (n, 8))."""
-    near = np.flatnonzero([(coarse.forest.nbr_key[b] >= coarse.nleaves).any() for b in range(coarse.nleaves)])
+    near = np.flatnonzero((coarse.forest.nbr_key[:coarse.nleaves] >= coarse.nleaves).any(axis=1))
     if len(near) == 0:
         return None
     X = _cells_of(coarse, near).reshape(-1, 3)
+    # only a cell next to the finer level has packets that touch it: every sub-cell m or o lies in X's coarse cell
+    # or one of its 26 neighbours, and the finer level's leaves lie under the coarse ghost blocks from the finer level
+    from_finer = np.zeros(coarse.forest.nblocks, dtype=bool)
+    from_finer[coarse.nleaves + np.flatnonzero(coarse.ghost_source == FROM_FINER)] = True
+    next_to_finer = np.zeros(len(X), dtype=bool)
+    for e in C[1:]:
+        b, _, inside = _locate(coarse, X + e.astype(np.int64), periodic)
+        next_to_finer |= inside & (b >= 0) & from_finer[np.maximum(b, 0)]
+    X = X[next_to_finer]
     rows = []
     for q in range(1, 27):
         cq = C[q].astype(np.int64)

@@ -70,3 +70,37 @@ def test_compare_pure_splits_the_coupled_step_into_its_kernels():
     assert pure["cells"] == coupled["cells"] == 64 * 16 * 16
     by_label = {r["name"] for r in compare_pure(scene, "cpu", 1, by_label=True)}
     assert {"part: links", "part: mark", "part: dem_contact", "part: dem_sort", "part: f_update"} <= by_label
+
+
+def test_amr_counts_the_quick_tank_on_levels_without_building_it(capsys):
+    """``--amr --records 0``: one row of the refined tank counted without building it (7 s): the leaf cells of the
+    built model (``test_the_quick_preset_on_levels_builds_its_levels_and_steps``), the arrays' GiB and whether
+    they fit, and the case's updates projected at ``--rate-mlups``."""
+    import json
+
+    from validation import bench
+
+    argv = ["ship", "--preset", "quick", "--amr", "--records", "0", "--fit-gib", "3", "--fit-gib", "4",
+            "--rate-mlups", "9", "--json"]
+    assert bench.main(argv) in (0, None)
+    (row,) = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
+    assert row["cells_per_level"] == {"0": 2068480, "1": 6455296} and row["cells"] == 2068480 + 6455296
+    assert row["cells_per_cube"] == pytest.approx(6.135, abs=1e-3)
+    assert row["arrays_GiB"] == pytest.approx(3.30, abs=0.01)
+    assert (row["fits_3_GiB"], row["fits_4_GiB"]) == (False, True)
+    assert row["updates_per_step"] == 2068480 + 2 * 6455296
+    assert row["projected_h_at_9_mlups"] == pytest.approx(row["updates_total"] / 9e6 / 3600, rel=1e-12)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--preset", "quick", "--amr", "--rate-mlups", "0"], "--rate-mlups: a rate > 0 with --amr"),
+    (["--preset", "quick", "--rate-mlups", "9"], "--rate-mlups: a rate > 0 with --amr, e.g. --rate-mlups 514 "
+                                                  "(got 9.0 without --amr)"),
+    (["--preset", "quick", "--amr", "--across", "64"], "--amr: times the preset's refined tank"),
+])
+def test_bad_amr_bench_flags_exit_2_with_one_line(argv, needle, capsys):
+    from validation import bench
+
+    assert bench.main(["ship", *argv, "--records", "0"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]

@@ -94,6 +94,24 @@ def test_a_ship_over_coarse_deep_water_follows_the_uniform_fine_grid():
     assert np.abs(drift_a - drift_b).max() < 3e-5
 
 
+def test_the_plan_of_a_refined_ship_is_what_its_build_allocates():
+    """:meth:`RefinedTier2Model.plan` (the levels counted without building them: the bench's ``--amr`` row) gives
+    the leaf and ghost cells of every level, the bytes the build checks against the memory, the finest resolution
+    and the case's level-0 steps of the built model of the same scene."""
+    o = _deep(True)
+    o["ship"]["start_x_m"] = o["ice"]["channel_start_x_m"] = 0.44
+    scene = case_scene(CASE, "quick", 2, **o)
+    p = RefinedTier2Model.plan(scene)
+    m = build_model(scene, backend="cpu")
+    assert p["cells_per_level"] == m.cells_per_level and len(m.cells_per_level) == 2
+    assert p["ghost_cells_per_level"] == {lv: m.lbm.views[lv].nghosts * 512 for lv in m.lbm.levels}
+    assert p["ghost_cells_per_level"][1] > 0
+    assert p["level_bytes"] == m.level_bytes
+    assert p["cells_per_cube"] == m.cells_per_cube == pytest.approx(6.0)
+    assert p["updates_per_step"] * m.lbm_steps_per_record == m.lattice_updates_per_step
+    assert p["level0_steps"] == int(np.ceil(scene.run.end_time_s / m.lbm_dt_s - 1e-9))
+
+
 def test_a_ship_on_levels_picks_up_bit_for_bit_across_a_regrid():
     """A checkpoint before the first regrid that changes the blocks and one after it: the rest of the run equals
     both pickups bit for bit (forces, the bodies, the octree)."""
@@ -166,6 +184,32 @@ def test_the_quick_preset_on_levels_is_the_case_with_its_refinement(tmp_path):
     assert case_scene(CASE, "quick", 2, **amr_overrides("quick")).refinement == s.refinement
     with pytest.raises(InputError, match="amr: refined levels are a tier-2 tank"):
         case_scene(CASE, "quick", 1, amr=True)
+    with pytest.raises(InputError, match="--amr: refined levels are a tier-2 tank of the presets paper, quick"):
+        amr_overrides("tiny")
+
+
+def test_the_paper_preset_on_levels_is_the_papers_grid():
+    """``[tier2.paper.amr]``: the paper's finest cell (2.72 mm, 15 per 41 mm cube) and coarsest (43.4 mm, five
+    levels) in its tank's length and width; the lid at 1.042 m over 1.0 m of water (docs/SHIP.md)."""
+    s = case_scene(CASE, "paper", 2, amr=True)
+    dx = s.domain.dx_m
+    assert s.refinement.levels == 4 and dx == pytest.approx(0.0434, abs=1e-4)
+    assert dx / 16 == pytest.approx(0.00272, abs=1e-5) and 0.041 / (dx / 16) == pytest.approx(15.1, abs=0.05)
+    assert s.shape_cells() == (256, 32, 24)
+    assert np.array(s.shape_cells()) * dx == pytest.approx([11.12, 1.39, 1.0425], abs=5e-3)
+    assert s.free_surface.water_depth_m == 1.0
+
+
+@pytest.mark.slow
+def test_the_paper_preset_on_levels_starts_near_the_papers_cell_count():
+    """The paper starts its AMR at about 160 million grid points (section 3); the ``paper`` preset on levels,
+    counted without building it (4 min, 5 GB on the 2-core x86 VM), starts at 1.54e8 leaf cells, 1.44e8 of them on
+    the finest level (2026-11-28): within the factor 2 the issue asks."""
+    p = RefinedTier2Model.plan(case_scene(CASE, "paper", 2, amr=True))
+    cells = sum(p["cells_per_level"].values())
+    assert 0.5 < cells / 160e6 < 2.0
+    assert cells == pytest.approx(1.544e8, rel=1e-3)
+    assert p["cells_per_level"][4] == pytest.approx(1.441e8, rel=1e-3)
 
 
 @pytest.mark.slow

@@ -384,8 +384,6 @@ def test_report_refuses_missing_folder(tmp_path):
     (["--cases", ","], "--cases: no case named"),
     (["--cases", "A-c68-v1.0", "--output", "FILE"], "--output: FILE is a file, not a folder"),
     (["--cases", "A-c68-v1.0", "--amr"], "--amr: refined levels are a tier-2 tank; add --tier 2"),
-    (["--cases", "A-c68-v1.0", "--amr", "--tier", "2", "--preset", "paper"],
-     "--amr: refined levels are a tier-2 tank of the presets quick"),
 ])
 def test_sweep_command_refusals_are_one_line_exit_2(tmp_path, capsys, monkeypatch, argv, needle):
     from iceresist import cli

@@ -62,7 +62,13 @@ def main(argv=None):
     mod.add_arguments(parser)
     args = parser.parse_args(argv)
     args.precision = args.precision or ["float32", "float64"]
-    rows = mod.run(args)
+    from iceresist.errors import InputError
+
+    try:
+        rows = mod.run(args)
+    except InputError as exc:       # bad input: one line, exit status 2 (as the iceresist command)
+        print(f"validation.bench {name}: error: {exc}", file=sys.stderr)
+        return 2
     if args.json:
         for r in rows:
             print(json.dumps(r))

@@ -14,6 +14,13 @@ the projected hours to finish it at the measured rate. ``--records 0`` prints th
 (a machine without the memory can say what a device with it would hold). The preset's precision (float32) is used; the common
 ``--precision`` flag is ignored.
 
+``--amr``: the preset's tank on refined levels (``[tier2.<preset>.amr]`` of ``iceresist/ship/cases.toml``). A first
+row counts its levels without building them (:meth:`~iceresist.models.refined_tier2.RefinedTier2Model.plan`): leaf
+and ghost cells per level, cells per cube at the finest, against the paper's 160 M start, the arrays' GiB (and
+whether they fit each ``--fit-gib``), the case's cell updates and, at ``--rate-mlups R``, its hours at R MLUPS;
+then ``--records`` builds and times it as above: ``python -m validation.bench ship --preset paper --amr --records 0
+--fit-gib 70 --rate-mlups 514`` (2 min on a 2-core x86 VM, 5 GB).
+
 ``--compare-pure`` (what the coupling costs; target: the coupled step at most 3x the pure one): in the same process,
 the coupled LBM step of the case timed part by part (every kernel launch under its label,
 :func:`iceresist.backends.launch.profiling`; what is left is host NumPy and Python between launches), then the
@@ -45,8 +52,11 @@ def add_arguments(parser):
     parser.add_argument("--by-label", action="store_true",
                         help="with --compare-pure: one row per launcher label, not the parts of docs/PERFORMANCE.md")
     parser.add_argument("--amr", action="store_true",
-                        help="the preset's tank on refined levels (its [tier2.<preset>.amr]): cells per level, "
-                             "the rate and the projected time of the case")
+                        help="the preset's tank on refined levels (its [tier2.<preset>.amr]): its cells per level "
+                             "counted without building it, then (--records) the measured rate and the projected "
+                             "time of the case")
+    parser.add_argument("--rate-mlups", type=float,
+                        help="with --amr: also project the case's time at this rate of cell updates (MLUPS)")
 
 
 def scaled_scene(case: str, preset: str, across: int, **overrides):
@@ -109,6 +119,32 @@ def measure(scene, backend: str, records: int) -> dict:
     if scene.refinement is not None:   # cells of every level, the finest's resolution; updates per level-0 step
         row.update(cells_per_level=model.cells_per_level, cells_per_cube=model.cells_per_cube,
                    updates_per_step=model.lattice_updates_per_step // model.lbm_steps_per_record)
+    return row
+
+
+#: Grid points the paper's AMR starts with (section 3: "about 160 million", 15 % of a uniform mesh).
+PAPER_START_CELLS = 160e6
+
+
+def amr_plan(scene, fit_gib, rate_mlups: float | None) -> dict:
+    """The refined tank of ``scene`` counted without building it (:meth:`RefinedTier2Model.plan`): leaf and ghost
+    cells per level, the finest resolution, the arrays' GiB (whether they fit each of ``fit_gib``), the cell updates
+    of the case and, at ``rate_mlups``, its projected hours."""
+    from iceresist.models.refined_tier2 import RefinedTier2Model
+
+    t0 = time.perf_counter()
+    p = RefinedTier2Model.plan(scene)
+    cells = sum(p["cells_per_level"].values())
+    gib = sum(p["level_bytes"].values()) / GIB
+    updates = p["updates_per_step"] * p["level0_steps"]
+    row = {"name": f"plan {scene.scene.name}", "cells": cells, "cells_per_level": p["cells_per_level"],
+           "ghost_cells_per_level": p["ghost_cells_per_level"], "cells_per_cube": p["cells_per_cube"],
+           "cells_vs_paper": cells / PAPER_START_CELLS, "arrays_GiB": gib,
+           **{f"fits_{g:g}_GiB": gib <= g for g in fit_gib},
+           "updates_per_step": p["updates_per_step"], "level0_steps": p["level0_steps"], "updates_total": updates,
+           "plan_s": time.perf_counter() - t0}
+    if rate_mlups:
+        row[f"projected_h_at_{rate_mlups:g}_mlups"] = updates / (rate_mlups * 1e6) / 3600.0
     return row
 
 
@@ -216,7 +252,10 @@ def run(args):
     if args.records < 0:
         raise InputError(f"--records: 0 (the --fit-gib row only) or more (got {args.records})")
     rows, acrosses = [], list(args.across or [])
-    if args.fit_gib:
+    if args.rate_mlups is not None and not (args.amr and args.rate_mlups > 0):
+        raise InputError(f"--rate-mlups: a rate > 0 with --amr, e.g. --rate-mlups 514 (got {args.rate_mlups}"
+                         f"{'' if args.amr else ' without --amr'})")
+    if args.fit_gib and not args.amr:
         probe = scaled_scene(args.case, args.preset, args.probe_across)
         model = Tier2Model(probe, backend=args.backend)
         per, fixed = bytes_per_cell(model.allocation(), model.cells)
@@ -235,12 +274,13 @@ def run(args):
                 acrosses.append(n)
     if not acrosses and not args.fit_gib:
         acrosses = [TIER2[args.preset]["cells"][1]]
-    if args.amr:        # the preset's refined tank as it is (no --across, --fit-gib or --compare-pure)
-        if args.across or args.fit_gib or args.compare_pure:
-            raise InputError("--amr: times the preset's refined tank as the preset gives it; leave out --across, "
-                             "--fit-gib and --compare-pure")
+    if args.amr:        # the preset's refined tank as it is (no --across or --compare-pure)
+        if args.across or args.compare_pure:
+            raise InputError("--amr: times the preset's refined tank as the preset gives it; leave out --across "
+                             "and --compare-pure")
         scene = case_scene(args.case, args.preset, 2, amr=True)
-        return [measure(scene, args.backend, args.records)] if args.records else []
+        rows = [amr_plan(scene, args.fit_gib or [], args.rate_mlups)]
+        return rows + ([measure(scene, args.backend, args.records)] if args.records else [])
     for n in acrosses if args.records else []:
         scene = scaled_scene(args.case, args.preset, n)
         if args.compare_pure:

@@ -49,19 +49,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         self.decomp = None
         self.dem = None
         self._gravity = gvec
-        bodies = self.coupled_bodies()
-        self.hull_body = 0
-        self.names = ["hull"] + [f"ice{i}" for i in range(len(bodies) - 1)]
-        #: the box the finest level holds about each body's centre of mass (n, 2, 3: lo, hi offsets, m): the hull's
-        #: own (it translates), each ice piece's bounding sphere (it turns)
-        self._reach_m = np.zeros((len(bodies), 2, 3))
-        hull = np.asarray(self.geometry.vertices(), dtype=float) - np.asarray(self.hull.model_com_m, dtype=float)
-        self._reach_m[0] = (hull.min(axis=0), hull.max(axis=0))
-        for i, (geometry, _, _) in enumerate(bodies[1:], start=1):
-            r = float(np.linalg.norm(geometry.half_extent_m()))
-            self._reach_m[i] = (np.full(3, -r), np.full(3, r))
-        self._bodies = bodies
-        self._start_positions = self._centres_of_mass(bodies)
+        self._place_bodies()
         self._records = 0
         self._probes = 0
         self._subs = 0
@@ -79,6 +67,53 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
                  "%d), dt %.4g s (%d per record), tau %.6g; %s, %d hull spheres", self.finest + 1,
                  [self.cells_per_level[lv] for lv in self.lbm.levels], u.dx_m, self.cells_per_cube, self.finest,
                  u.dt_s, self.lbm_steps_per_record, u.tau, self.ice_summary(), self.hull.n_spheres)
+
+    def _place_bodies(self):
+        """The coupled bodies (:meth:`Tier2Ship.coupled_bodies`), where each starts, and the box the finest level
+        holds about each centre of mass (``_reach_m``, (n, 2, 3): lo, hi offsets, m): the hull's own (it translates),
+        each ice piece's bounding sphere (it turns)."""
+        bodies = self.coupled_bodies()
+        self.hull_body = 0
+        self.names = ["hull"] + [f"ice{i}" for i in range(len(bodies) - 1)]
+        self._reach_m = np.zeros((len(bodies), 2, 3))
+        hull = np.asarray(self.geometry.vertices(), dtype=float) - np.asarray(self.hull.model_com_m, dtype=float)
+        self._reach_m[0] = (hull.min(axis=0), hull.max(axis=0))
+        for i, (geometry, _, _) in enumerate(bodies[1:], start=1):
+            r = float(np.linalg.norm(geometry.half_extent_m()))
+            self._reach_m[i] = (np.full(3, -r), np.full(3, r))
+        self._bodies = bodies
+        self._start_positions = self._centres_of_mass(bodies)
+
+    @classmethod
+    def plan(cls, scene) -> dict:
+        """The levels a scene would start on, without building them (no populations allocated): the ship and ice
+        placed as :meth:`__init__` places them, the octree of the scene's criteria about them
+        (:func:`~iceresist.models.refined.build_octree`) and the ghost blocks of every level. Returns
+        ``cells_per_level`` (leaf cells), ``ghost_cells_per_level``, ``cells_per_cube`` (at the finest level),
+        ``updates_per_step`` (cell updates per level-0 step), ``dt_s`` (level 0's step), ``level0_steps`` (the
+        case's) and ``level_bytes`` (what :meth:`__init__` checks against the memory: every level's populations, the
+        finest level's free surface; the coupling, the DEM and the level-transfer tables come on top)."""
+        from iceresist.grid.levels import level_views
+        from iceresist.models.fluid import forest_faces
+        from iceresist.models.refined import build_octree
+
+        self = cls.__new__(cls)
+        self.backend, self.precision = "cpu", None
+        self._set_up_tier2(scene)
+        self.scene, self.dem = scene, None
+        self._place_bodies()
+        octree = build_octree(scene, body_boxes_m=self.body_boxes_m())
+        u = scene.units()
+        views = level_views(octree, forest_faces(scene, u))
+        per = octree.blocks_per_level()
+        finest = int(np.flatnonzero(per)[-1])
+        cells = {lv: int(n) * 512 for lv, n in enumerate(per) if n}
+        return {"cells_per_level": cells,
+                "ghost_cells_per_level": {v.level: int(v.nghosts) * 512 for v in views if v is not None},
+                "cells_per_cube": self.layout.cube_m / (u.dx_m / 2 ** finest),
+                "updates_per_step": int(sum(n * 2 ** lv for lv, n in cells.items())), "dt_s": u.dt_s,
+                "level0_steps": int(math.ceil(scene.run.end_time_s / u.dt_s - 1e-9)),
+                "level_bytes": self._level_bytes(views)}
 
     @staticmethod
     def _centres_of_mass(bodies) -> np.ndarray:

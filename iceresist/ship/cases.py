@@ -52,6 +52,8 @@ class _Fidelity(_Data):
 class _Amr(_Data):
     levels: int = Field(ge=1)
     cells: tuple[int, int, int]
+    #: level 0's cell (m); default the preset's tier-2 cell
+    dx_m: float | None = Field(default=None, gt=0)
     water_depth_m: float = Field(gt=0)
     surface_band_m: float = Field(gt=0)
     body_band_m: float = Field(gt=0)
@@ -163,7 +165,8 @@ def amr_overrides(fidelity: str) -> dict:
     if not a:
         raise InputError(f"--amr: refined levels are a tier-2 tank of the presets "
                          f"{', '.join(amr_fidelities()) or '(none)'}; use one of them with --tier 2")
-    return {"domain": {"cells": list(a["cells"])}, "free_surface": {"water_depth_m": a["water_depth_m"]},
+    domain = {"cells": list(a["cells"]), **({"dx_m": a["dx_m"]} if a.get("dx_m") else {})}
+    return {"domain": domain, "free_surface": {"water_depth_m": a["water_depth_m"]},
             "refinement": {k: a[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}}
 
 

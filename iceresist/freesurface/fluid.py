@@ -424,7 +424,7 @@ class FreeSurfaceFluid:
     def _velocity_pass(self):
         """The liquid's velocity ``_u`` from the populations by a pass of its own (0 outside the liquid)."""
         g, zero = self.real(self.g), self.real(0.0)
-        self._vel(self.nblocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
+        self._vel(self.fluid.active_blocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
 
     def _extend(self):
         """The liquid's velocity ``_u`` extended into the gas near the surface (:mod:`~iceresist.freesurface.extension`)."""

@@ -233,6 +233,9 @@ class PooledLBM:
         self.iteration = 0
         self.cells = forest.cells
         self.pool = FPool(forest.nbr, margin)
+        #: Blocks the step updates, the forest's first ones (on refined levels the leaves, not the ghost blocks,
+        #: whose update no one reads: :class:`~iceresist.lbm.refinement.RefinedLBM`).
+        self.active_blocks = forest.nblocks
         self._launch = pooled_fused_launcher(target, precision, operator)
         self._wet_cells, self._fill = pool_launchers(target, precision)
         real = self.real
@@ -331,7 +334,7 @@ class PooledLBM:
         (``[block, 3, cell]``, optional): written with each cell's velocity j / rho - F / 2 of the new populations,
         0 outside the liquid (the CPU block form only)."""
         t = self._tables
-        nb = self.forest.nblocks
+        nb = self.active_blocks
         launch = self._launch if u is None else pooled_fused_launcher(self.target, self.precision, self.operator,
                                                                        velocity=True)
         extra = () if u is None else (u,)

@@ -9,9 +9,10 @@ conservative scheme of :class:`~iceresist.lbm.refinement.RefinedLBM` (mass to ro
 
 The phase field needs values in the finest level's ghost blocks (they lie inside coarse leaves): the bulk liquid,
 phi = 1 and h = h^eq(1, u) = w_k (1 + c_k.u / c_s^2 + ...) with u the velocity of the coarse cell under the ghost
-cell (its populations at the coarse step's start, the half-force shift removed), refilled after every fine step
-(:func:`build_ghost_phase_cell`). The phi flux the leaves pull from the ghosts is then the liquid's own flux u: the
-volume of the finest level changes only by the liquid's compressibility.
+cell (its populations now, the half-force shift removed), refilled before every fine step
+(:func:`build_ghost_phase_cell`); u is the ghost cell's velocity for the phase field too (the fused update skips the
+ghost blocks: no one reads their populations). The phi flux the leaves pull from the ghosts is then the liquid's own
+flux u: the volume of the finest level changes only by the liquid's compressibility.
 
 Where that picture does not hold the scene is refused: a coarser level (or a ghost of the finest) holding cells
 with phi < 1 - 1e-4 at the start (the surface, its tanh profile's tail about 2.3 interface widths deep, or the gas
@@ -44,11 +45,12 @@ PHI_BULK_TOL = 1e-4
 
 
 def build_ghost_phase_cell(target, real, lattice_name: str):
-    """``ghost_phase_cell(i, c, b0, pb, pc, fc, gc, h, phi)``: cell c of ghost block b0 + i of the finest level
-    takes phi = 1 and h_k = w_k (1 + c_k.u / c_s^2 + ((c_k.u)^2 - c_s^2 u.u) / (2 c_s^4)) (h^eq of eqs. 7-8 at
-    phi = 1, where theta = 0), u the velocity of the coarse cell (``pb[i, c]``, ``pc[i, c]``) from its
-    populations ``fc`` (f - w) with the half-force shift of the coarse level's gravity ``gc`` (lattice units of
-    that level, acting along -z) removed: u = sum c f / rho + (0, 0, gc / 2)."""
+    """``ghost_phase_cell(i, c, b0, pb, pc, fc, gc, h, phi, u)``: cell c of ghost block b0 + i of the finest level
+    takes phi = 1, the velocity u (``u[b, :, c]``) of the coarse cell under it (``pb[i, c]``, ``pc[i, c]``) from
+    its populations ``fc`` (f - w) with the half-force shift of the coarse level's gravity ``gc`` (lattice units of
+    that level, acting along -z) removed, u = sum c f / rho + (0, 0, gc / 2) (lattice velocities are the same on
+    every level), and h_k = w_k (1 + c_k.u / c_s^2 + ((c_k.u)^2 - c_s^2 u.u) / (2 c_s^4)) (h^eq of eqs. 7-8 at
+    phi = 1, where theta = 0)."""
     lat = lookup_h_lattice(lattice_name)
     nq = lat.q
     hc = np.asarray(lat.c, dtype=np.float64)
@@ -60,7 +62,7 @@ def build_ghost_phase_cell(target, real, lattice_name: str):
     int64 = np.int64
 
     @target.device
-    def ghost_phase_cell(i, c, b0, pb, pc, fc, gc, h, phi):
+    def ghost_phase_cell(i, c, b0, pb, pc, fc, gc, h, phi, u):
         i = int64(i)
         b = int64(b0) + i
         sb = int64(pb[i, c])
@@ -80,6 +82,9 @@ def build_ghost_phase_cell(target, real, lattice_name: str):
         uz = jz / rho + half * gc
         uu = ux * ux + uy * uy + uz * uz
         phi[b, c] = one
+        u[b, 0, c] = ux
+        u[b, 1, c] = uy
+        u[b, 2, c] = uz
         for k in range(nq):
             cu = hx[k] * ux + hy[k] * uy + hz[k] * uz
             h[b, k, c] = hw[k] * (one + ics2 * cu + half_ics4 * (cu * cu - cs2 * uu))
@@ -104,7 +109,7 @@ def liquid_h(lattice_name: str, f: np.ndarray, g_lattice: float) -> np.ndarray:
 @lru_cache(maxsize=None)
 def ghost_phase_launcher(target, precision: str, lattice_name: str) -> CellLauncher:
     cell = build_ghost_phase_cell(target, jit.real_type(precision), lattice_name)
-    return CellLauncher(target, cell, ("b0", "pb", "pc", "fc", "gc", "h", "phi"), label="ghost_phase",
+    return CellLauncher(target, cell, ("b0", "pb", "pc", "fc", "gc", "h", "phi", "u"), label="ghost_phase",
                         cache_key=kernel_key(target, f"ghost_phase|{precision}|{lattice_name}",
                                              ("iceresist.freesurface.refined",)))
 
@@ -126,6 +131,14 @@ class _LiquidLevel:
     def state(self):
         return self.fluid.state
 
+    @property
+    def active_blocks(self) -> int:
+        return self.fluid.active_blocks
+
+    @active_blocks.setter
+    def active_blocks(self, n: int):
+        self.fluid.active_blocks = int(n)
+
     def step(self):
         self.fluid.step(1, self._phi, self._half_width)
 
@@ -141,7 +154,8 @@ class _LiquidLevel:
 
 
 class _SurfaceLevel:
-    """The finest level: the whole free-surface step, then the ghost blocks refilled with bulk liquid."""
+    """The finest level: the ghost blocks refilled with bulk liquid (:meth:`RefinedFreeSurface.refill_ghosts`), then
+    the whole free-surface step."""
 
     def __init__(self, fs: FreeSurfaceFluid, refill):
         self.fs = fs
@@ -152,9 +166,17 @@ class _SurfaceLevel:
     def state(self):
         return self.fs.fluid.state
 
+    @property
+    def active_blocks(self) -> int:
+        return self.fs.fluid.active_blocks
+
+    @active_blocks.setter
+    def active_blocks(self, n: int):
+        self.fs.fluid.active_blocks = int(n)
+
     def step(self):
-        self.fs.step()
         self.refill()
+        self.fs.step()
 
     def macroscopic_blocks(self):
         f = self.fs.fluid.populations()
@@ -237,7 +259,8 @@ class RefinedFreeSurface:
             return
         launch, b0, pb, pc, gc = self._ghost
         coarse = self.lbm.solvers[self.finest - 1]
-        launch(self._nghosts, b0, pb, pc, coarse.state, gc, self.surface.phase.h, self.surface.phase.phi)
+        launch(self._nghosts, b0, pb, pc, coarse.state, gc, self.surface.phase.h, self.surface.phase.phi,
+               self.surface._u)
 
     # ------------------------------------------------------------------ state
     def initialize(self, surface=None, u=(0.0, 0.0, 0.0)):

@@ -24,8 +24,9 @@ Level interfaces, through the ghost blocks of each level (:mod:`iceresist.grid.l
   leaves out.
 
 Every level's leaves are then stepped by the fused stream-collide kernel of the uniform grid
-(:class:`~iceresist.lbm.solver.LBMSolver`), which also steps the ghost blocks (their values are refilled before
-they are read). The conservative transfers run as one kernel on the target (:mod:`iceresist.lbm.exchange`, CPU or
+(:class:`~iceresist.lbm.solver.LBMSolver`); with the conservative interface its ghost blocks are not stepped (what a
+leaf pulls from them is written by the transfers before the step, and no transfer reads their update: bit for bit
+the same leaves as stepping them), with the interpolating one they are. The conservative transfers run as one kernel on the target (:mod:`iceresist.lbm.exchange`, CPU or
 CUDA, the state never leaves the device); the interpolating scheme runs in NumPy on the CPU.
 """
 
@@ -399,6 +400,12 @@ class RefinedLBM:
                                              precision=precision, target=self.target)
             else:
                 self.solvers[lv] = solver_factory(lv, self.views[lv].forest, tau, g)
+            if scheme == "conservative":
+                # no one reads a ghost block's update: before a level's step the transfers write every slot of its
+                # ghost cells that a leaf pulls, and they read the leaves and the snapshots taken before the
+                # step; so each level updates its leaves alone (the forest's first blocks). The interpolating
+                # scheme reads the coarse ghosts' update (the half-step mean of the coarse state).
+                self.solvers[lv].active_blocks = self.views[lv].nleaves
         if scheme == "interpolate":
             self.prolong = {lv: prolongation_table(self.views[lv], self.views[lv - 1], self.periodic)
                             for lv in self.levels[1:]}

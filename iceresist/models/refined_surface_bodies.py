@@ -4,7 +4,7 @@
 :class:`RefinedSurfaceBodiesModel` is :class:`~iceresist.models.refined_surface.RefinedFreeSurfaceModel` (the surface
 in the finest level, the coarser levels all water) with the bodies of :class:`~iceresist.models.bodies.BodiesModel`
 on the finest level: the coupling (interpolated bounce-back, momentum exchange, refill with h and phi, the contact
-film, eqs. 16-21) runs on that level's free-surface fluid at that level's own time step, then the level's ghost
+film, eqs. 16-21) runs on that level's free-surface fluid at that level's own time step, after the level's ghost
 blocks are refilled with bulk water as without bodies (:meth:`RefinedFreeSurface.refill_ghosts`). As on a uniform
 grid the buoyancy is the hydrostatic pressure of gravity in the water, summed by the momentum exchange; the DEM
 carries gravity. Every body, with two cells to spare, must lie on the finest level's leaves (``refinement.body_band_m``
@@ -56,10 +56,10 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         self.volume0_cells = self.water_volume_cells()
 
     def _finest_step(self):
-        """One step of the finest level: the coupled step (boundaries, free-surface step, DEM), then the ghost
-        blocks refilled from the coarser level."""
-        self.coupling.step(1)
+        """One step of the finest level: the ghost blocks refilled from the coarser level, then the coupled step
+        (boundaries, free-surface step, DEM)."""
         self.fs.refill_ghosts()
+        self.coupling.step(1)
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def water_volume_cells(self) -> float:

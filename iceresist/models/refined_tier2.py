@@ -158,11 +158,11 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         return super().body_boxes_m(positions_m)
 
     def _finest_step(self):
-        """One finest-level step: the coupled step with the contact loads summed for the record, then the ghost
-        blocks refilled from the coarser level."""
+        """One finest-level step: the ghost blocks refilled from the coarser level, then the coupled step with the
+        contact loads summed for the record."""
+        self.fs.refill_ghosts()
         self.coupling.step(1, accumulate_contacts=True)
         self._subs += self.dem.last_substeps
-        self.fs.refill_ghosts()
 
     # -- protocol ------------------------------------------------------------------------------------------
     @property

@@ -196,7 +196,8 @@ TABLE2_COLUMNS = {"case": "case", "mean_force_N": "model mean [N]", "ci95_N": "Â
 TREND_COLUMNS = {"trend": "trend of the paper", "values": "mean ice force +- 95 % (model scale)",
                  "verdict": "on this sweep"}
 RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "cubes", "spheres": "DEM spheres",
-               "resolution_m": "resolution [m]", "cells": "cells", "steps": "records",
+               "resolution_m": "resolution [m]", "cells_per_cube": "cells per cube (finest)", "levels": "levels",
+               "converged": "grid-converged", "cells": "cells", "steps": "records",
                "dem_substeps": "DEM sub-steps", "simulated_s": "simulated [s]", "wall_time_s": "wall time [s]",
                "backend": "backend", "half_ratio": "2nd / 1st half", "window_steady": "steady window",
                "tank_froude_fraction": "F_h / F_L",

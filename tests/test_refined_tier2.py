@@ -143,7 +143,8 @@ def test_the_refined_case_runs_through_the_sweep_to_the_file_the_report_reads(tm
         assert (h5["timeseries/leaf_cells"][...] > 0).all()
     row = analyse_case(path)
     assert row["tier"] == 2 and row["cubes"] == 4
-    assert row["cells_per_cube"] == pytest.approx(6.0)
+    assert row["cells_per_cube"] == pytest.approx(6.0) and row["levels"] == 1
+    assert row["converged"] == "no ladder run"          # the report's run table: no tier-2 ladder says so yet
 
 
 @pytest.mark.parametrize("edit, needle", [

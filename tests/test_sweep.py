@@ -316,6 +316,7 @@ def test_report_is_self_contained(tiny_sweep):
     assert text.count("data:image/png;base64,") == 4
     assert "src=\"http" not in text and "A-c68-v1.0" in text and "FSICR" in text
     assert "Bow B above Bow A" in text and "rises with ship speed" in text and "not run (" in text
+    assert "cells per cube (finest)" in text and "grid-converged" in text       # the run table's resolution
     assert pdf.read_bytes()[:5] == b"%PDF-" and pdf.stat().st_size > 10_000
 
 

@@ -148,6 +148,8 @@ def analyse_case(path) -> dict:
         "resolution_m": float(model["resolution_m"]), "cells": int(model["cells"]),
         # tier 2: the ice's edge over the finest cell, and the refinement levels above level 0 (0: a uniform grid)
         "cells_per_cube": float(model.get("cells_per_cube", float("nan"))), "levels": int(model.get("levels", 0)),
+        # whether a resolution ladder of the case says its mean force is grid-converged (tier 2; tier 1 has no grid)
+        "converged": "no ladder run" if int(meta["tier"]) == 2 else "",
         "spheres": int(model["spheres"]), "steps": int(meta["steps"]), "dem_substeps": int(meta["dem_substeps"]),
         "simulated_s": float(meta["time_s"]), "wall_time_s": float(meta["wall_time_s"]),
         "backend": model["backend"], "file": f"cases/{Path(path).name}",

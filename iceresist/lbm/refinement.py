@@ -295,14 +295,27 @@ def _apply_slots(table, dst, sources, weight: float = 1.0, linear: bool = False)
     dst[db, q, dc] = (weight * acc).astype(dst.dtype)
 
 
-def restriction_as_transfer(table):
+def next_to_leaves(view: LevelView, blocks, cells, periodic) -> np.ndarray:
+    """Whether each cell (``blocks``, ``cells``: arrays of one shape) of ``view``'s level has a leaf cell of that
+    level among its 26 neighbours."""
+    xyz = view.forest.origin[blocks] * 8 + np.stack([LX[cells], LY[cells], LZ[cells]], axis=-1)
+    out = np.zeros(np.shape(blocks), dtype=bool)
+    for e in C[1:]:
+        b, _, inside = _locate(view, xyz + e.astype(np.int64), periodic)
+        out |= inside & (b >= 0) & (b < view.nleaves)
+    return out
+
+
+def restriction_as_transfer(table, keep=None):
     """A :func:`restriction_table` in the form of the transfer kernel: every slot of every coarse ghost cell whose
-    eight children are fine leaves, eight packets of the fine level (tag 1) at weight 1/8 each (the kernel's
-    ``weight``)."""
+    eight children are fine leaves (and, given ``keep``, a bool per ghost cell of the table, where it holds),
+    eight packets of the fine level (tag 1) at weight 1/8 each (the kernel's ``weight``)."""
     if table is None:
         return None
     gb, gc, b, c, w = table
     full = (w > 0).all(axis=-1)
+    if keep is not None:
+        full &= keep
     gb, gc, b, c = gb[full], gc[full], b[full], c[full]
     n = len(gb)
     q = np.tile(np.arange(27), n)
@@ -469,7 +482,13 @@ class RefinedLBM:
         self._real = real
         self._k_explode = {lv: None if t is None else (packed(t[0]), packed(t[1])) for lv, t in self.explode.items()}
         self._k_coalesce = {lv: packed(t) for lv, t in self.coalesce.items()}
-        self._k_restrict = {lv: packed(restriction_as_transfer(t)) for lv, t in self.restrict.items()}
+        # the restricted values are read only next to the coarse leaves (a leaf pulls from its neighbours; the linear
+        # reconstruction reads the neighbours of the coarse cells the packets come from, which are leaves): the
+        # one-cell layer of the ghost blocks along the leaves (an eighth of their cells on the quick ship case)
+        self._k_restrict = {}
+        for lv, t in self.restrict.items():
+            keep = None if t is None else next_to_leaves(self.views[lv], t[0], t[1], self.periodic)
+            self._k_restrict[lv] = packed(restriction_as_transfer(t, keep))
         shape = {lv: (self.views[lv].forest.nblocks, 27, 512) for lv in self.levels}
         self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv in self.levels for k in ("t", "half")}
         # the blocks each scratch copy must hold: those some table reads from it (a coarse packet's neighbours

@@ -182,17 +182,16 @@ class BlockForest:
         crossed = out.any(axis=2)
         first = np.take_along_axis(face, key.argmin(axis=2)[..., None], axis=2)[..., 0]
         link_bc = np.where(crossed, 1 + first, 0).astype(np.int32)
+        if self.nblocks and ((self.levels != self.levels[0]).any() or (self.origin < 0).any()
+                             or (self.origin >= n).any()):
+            raise ValueError("a BlockForest holds blocks of one level inside its domain")
+        # one level: the neighbours from a dense map of the blocks
+        bmap = np.full(tuple(int(v) for v in n), -1, dtype=np.int32)
+        bmap[tuple(self.origin.T)] = np.arange(self.nblocks, dtype=np.int32)
         nbr = np.full((self.nblocks, Q), -1, dtype=np.int32)
         inside = ~crossed
-        if self.nblocks and (self.levels == self.levels[0]).all() and (self.origin >= 0).all() \
-                and (self.origin < n).all():
-            bmap = np.full(tuple(int(v) for v in n), -1, dtype=np.int32)         # one level: a dense block map
-            bmap[tuple(self.origin.T)] = np.arange(self.nblocks, dtype=np.int32)
-            ti = t[inside]
-            nbr[inside] = bmap[ti[:, 0], ti[:, 1], ti[:, 2]]
-        else:
-            for i, q in zip(*np.nonzero(inside)):
-                nbr[i, q] = self.index.get((int(self.levels[i]), *(int(v) for v in t[i, q])), -1)
+        ti = t[inside]
+        nbr[inside] = bmap[ti[:, 0], ti[:, 1], ti[:, 2]]
         self.nbr = nbr
         self.nbr_key = np.ascontiguousarray(nbr[:, Q_OF_KEY])
         self.link_bc = np.ascontiguousarray(link_bc[:, Q_OF_KEY])

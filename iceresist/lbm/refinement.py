@@ -26,8 +26,9 @@ Level interfaces, through the ghost blocks of each level (:mod:`iceresist.grid.l
 Every level's leaves are then stepped by the fused stream-collide kernel of the uniform grid
 (:class:`~iceresist.lbm.solver.LBMSolver`); with the conservative interface its ghost blocks are not stepped (what a
 leaf pulls from them is written by the transfers before the step, and no transfer reads their update: bit for bit
-the same leaves as stepping them), with the interpolating one they are. The conservative transfers run as one kernel on the target (:mod:`iceresist.lbm.exchange`, CPU or
-CUDA, the state never leaves the device); the interpolating scheme runs in NumPy on the CPU.
+the same leaves as stepping them), with the interpolating one they are. The conservative transfers run as one
+kernel on the target (:mod:`iceresist.lbm.exchange`, CPU or CUDA, the state never leaves the device); the
+interpolating scheme runs in NumPy on the CPU.
 """
 
 from __future__ import annotations
@@ -153,6 +154,15 @@ def _side_cells() -> np.ndarray:
 _SIDE_CELLS = _side_cells()
 
 
+def next_to_leaves(view: LevelView, blocks) -> np.ndarray:
+    """(len(blocks), 512) bool: the cells of ``blocks`` of ``view``'s level that have a leaf cell of that level
+    among their 26 neighbours (those on a block's side that faces a leaf block; the forest's neighbour table wraps
+    periodic axes and has none beyond closed faces)."""
+    nbr = view.forest.nbr_key[blocks]
+    leaf = (nbr >= 0) & (nbr < view.nleaves)
+    return (leaf[:, :, None] & _SIDE_CELLS[None, :, :]).any(axis=1)
+
+
 def _coarse_stencil(coarse: LevelView, pos, periodic):
     """For packets at fine cells ``pos`` (..., 3) taken from their coarse cells: the offset of the sub-cell from
     its coarse cell's centre (coarse units, +-1/4 per axis) and the (block, cell) of the coarse neighbours at -1
@@ -187,10 +197,7 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic):
     # only the ghost cells next to a leaf are read by one: the cells on the sides of each ghost block that face a
     # leaf block (ghost blocks lie in the fine level's block grid, so the leaf a cell's link reaches is in one of
     # its block's 26 neighbours)
-    nbr = fine.forest.nbr_key[g]
-    faces_leaf = (nbr >= 0) & (nbr < fine.nleaves)
-    read = (faces_leaf[:, :, None] & _SIDE_CELLS[None, :, :]).any(axis=1)         # (len(g), 512)
-    gi, hc = np.nonzero(read)
+    gi, hc = np.nonzero(next_to_leaves(fine, g))
     hb = g[gi]
     h = _cells_of(fine, g)[gi, hc]
     tables = ([], [])
@@ -293,17 +300,6 @@ def _apply_slots(table, dst, sources, weight: float = 1.0, linear: bool = False)
                 vals[sel] += off[..., a][sel] * grad
         acc += vals.sum(axis=1)
     dst[db, q, dc] = (weight * acc).astype(dst.dtype)
-
-
-def next_to_leaves(view: LevelView, blocks, cells, periodic) -> np.ndarray:
-    """Whether each cell (``blocks``, ``cells``: arrays of one shape) of ``view``'s level has a leaf cell of that
-    level among its 26 neighbours."""
-    xyz = view.forest.origin[blocks] * 8 + np.stack([LX[cells], LY[cells], LZ[cells]], axis=-1)
-    out = np.zeros(np.shape(blocks), dtype=bool)
-    for e in C[1:]:
-        b, _, inside = _locate(view, xyz + e.astype(np.int64), periodic)
-        out |= inside & (b >= 0) & (b < view.nleaves)
-    return out
 
 
 def restriction_as_transfer(table, keep=None):
@@ -487,7 +483,7 @@ class RefinedLBM:
         # one-cell layer of the ghost blocks along the leaves (an eighth of their cells on the quick ship case)
         self._k_restrict = {}
         for lv, t in self.restrict.items():
-            keep = None if t is None else next_to_leaves(self.views[lv], t[0], t[1], self.periodic)
+            keep = None if t is None else next_to_leaves(self.views[lv], t[0][:, 0])
             self._k_restrict[lv] = packed(restriction_as_transfer(t, keep))
         shape = {lv: (self.views[lv].forest.nblocks, 27, 512) for lv in self.levels}
         self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv in self.levels for k in ("t", "half")}

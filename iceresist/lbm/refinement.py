@@ -533,13 +533,23 @@ class RefinedLBM:
             self._snapshot(c_t, s.state, (lv, "t"))
             self._snapshot(f_t, sf.state, (finer, "t"))
             tables = self._k_explode[finer]
+            # the finer level's "t" copy is also the coarse side of the interface below it: where the finer level
+            # has a finer level of its own, its second sub-step snapshots itself at t + 1/2 into that copy, so the
+            # coalescence (which reads the finer level at t there) runs before it; it writes level lv alone, which
+            # that sub-step does not read. With two levels it runs last, after the finest level's ghost refill has
+            # read level lv.
+            early = finer + 1 in self.solvers
             for sub in (0, 1):
                 if tables is not None:
                     self._launch(tables[sub], sf.state, (c_t, f_t, f_t), linear=linear)
                 if sub == 1:
                     self._snapshot(f_half, sf.state, (finer, "half"))
+                    if early:
+                        self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125,
+                                     linear=linear)
                 self._advance_conservative(finer)
-            self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
+            if not early:
+                self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
         self.steppers[lv]()
 
     def _advance(self, lv: int):

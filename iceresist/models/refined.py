@@ -19,6 +19,8 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import Q
+from iceresist.limits import available_memory_bytes as mem_available
+from iceresist.limits import release_freed_memory
 from iceresist.models.base import Model
 from iceresist.models.fluid import FluidModel, check_block_shape, forest_faces, resolve_target
 from iceresist.scene.schema import Scene
@@ -33,7 +35,11 @@ MEMORY_SHARE = 0.8
 
 
 def available_memory_bytes() -> int:
-    """Memory the machine has available now (bytes), from the OS."""
+    """Memory the machine has available now (bytes): ``MemAvailable`` (free pages and the page cache it can drop;
+    free pages alone fall after every checkpoint written), else the free pages, from the OS."""
+    free = mem_available()
+    if free is not None:
+        return free
     try:
         return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
     except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
@@ -256,6 +262,8 @@ class RefinedFluidModel(Model):
         new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
         carry_over(old_views, old, self.lbm.views, new)
         self._fill(new, old_views, finest)
+        del old, new, finest, old_views
+        release_freed_memory()      # the old levels, which reference cycles hold (iceresist.limits)
 
     def _populations(self, lv: int) -> np.ndarray:
         """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""

@@ -112,29 +112,45 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     """One tier-2 run through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder
     without ``out_dir``; a killed rung continues from its checkpoint) (the LBM in ``precision``,
     the DEM in float64), after :func:`warm_up` (its seconds in ``extra["compile_s"]``)."""
-    from iceresist.io.hdf5 import RunFile
-    from iceresist.post.case import analyse_case
+    compile_s = warm_up(backend, precision)
+    return run_rung(NAME, params, overrides(params), backend=backend, precision=precision, out_dir=out_dir,
+                    compile_s=compile_s)
+
+
+def run_rung(name: str, params: dict, ov: dict, *, backend: str, precision: str, out_dir, **extra) -> CaseResult:
+    """Case A-c68-v1.0 at the quick fidelity, tier 2, with the scene overrides ``ov`` (the LBM in ``precision``),
+    through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder without ``out_dir``),
+    as a :class:`CaseResult` (:func:`case_result`, ``extra`` added)."""
     from iceresist.sweep import run_case
 
-    compile_s = warm_up(backend, precision)
-    ov = overrides(params)
     ov.setdefault("numerics", {})["precision"] = precision
-    with rung_folder(out_dir, NAME, params["label"]) as tmp:
+    with rung_folder(out_dir, name, params["label"]) as tmp:
         t0 = time.perf_counter()
         path = run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
-        total = time.perf_counter() - t0
-        row = analyse_case(path)
-        with RunFile(path, "r") as rf:
-            fluid_x = rf.h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step
-            model = rf.meta_object("model")
+        return case_result(name, params, path, backend=backend, precision=precision,
+                           total_s=time.perf_counter() - t0, **extra)
+
+
+def case_result(name: str, params: dict, path, *, backend: str, precision: str, total_s: float,
+                **extra) -> CaseResult:
+    """The :class:`CaseResult` of one finished tier-2 run file ``path`` (:func:`iceresist.post.case.analyse_case`):
+    the mean ice force in the steady window, its interval, the records and steps (LBM steps: level-0 steps on
+    levels), the mean fluid force on the hull; ``extra`` added."""
+    from iceresist.io.hdf5 import RunFile
+    from iceresist.post.case import analyse_case
+
+    row = analyse_case(path)
+    with RunFile(path, "r") as rf:
+        fluid_x = rf.h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step
+        model = rf.meta_object("model")
     lbm_steps = int(row["steps"]) * int(model["lbm_steps_per_record"])
-    return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]),
+    return CaseResult(case=name, label=params["label"], resolution=float(params["resolution"]),
                       cells=int(row["cells"]), steps=lbm_steps, wall_s=float(row["wall_time_s"]),
                       quantity="mean ice (contact) force on the hull in the steady window (N, model scale)",
                       value=float(row["mean_force_N"]), reference=float("nan"), error=float("nan"),
                       backend=backend, precision=precision,
                       extra={"dem_precision": "float64", "ci95_N": float(row["ci95_N"]), "records": int(row["steps"]),
-                             "lbm_steps_per_record": int(model["lbm_steps_per_record"]), "total_s": total,
-                             "compile_s": compile_s,
+                             "lbm_steps_per_record": int(model["lbm_steps_per_record"]), "total_s": total_s,
                              "dx_m": float(row["resolution_m"]), "R_sim_kN": float(row["R_sim_kN"]),
-                             "mean_fluid_Fx_N": float(np.mean(fluid_x)) if len(fluid_x) else float("nan")})
+                             "mean_fluid_Fx_N": float(np.mean(fluid_x)) if len(fluid_x) else float("nan"),
+                             **extra})

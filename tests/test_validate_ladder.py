@@ -164,6 +164,18 @@ def test_cli_rejects_bad_flags_with_one_line_and_status_2(capsys, tmp_path):
     assert len(err) == 3 and "unknown case 'nosuch'" in err[-1]
 
 
+def test_a_case_without_rungs_on_the_ladder_asked_for_is_refused_before_anything_is_written(capsys, tmp_path):
+    """The tier-2 ship on levels is a GPU ladder (no quick rungs): asked for alone on the quick one, one line
+    naming --full, exit 2, and no output folder."""
+    from iceresist.validate.cli import main
+
+    out = tmp_path / "v"
+    assert main(["--quick", "--cases", "ship_tier2_amr", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "ship_tier2_amr has no rungs on the quick ladder" in err[0] and "--full" in err[0]
+    assert not out.exists()
+
+
 def test_iceresist_validate_runs_the_ladders_then_draws_the_report_from_their_files(tmp_path, monkeypatch, capsys):
     """``iceresist validate`` composes engine -> files -> report: the ladders write ladder.csv (stood in for by a
     table here), the command line prints their Markdown table and writes the report with each case's reference."""

@@ -104,13 +104,19 @@ def run_ladders(out_dir, *, quick: bool = True, cases=None, backend: str = "cpu"
     from tqdm import tqdm
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     if modules is None:
         available, missing = discover_cases()
     else:
         available, missing = dict(modules), {}
     names = select_cases(cases, available, missing)
     ladder = "quick" if quick else "full"
+    bare = [n for n in names if not available[n].ladder(quick)]
+    if bare and len(bare) == len(names):
+        raise InputError(f"--cases: {', '.join(bare)} {'has' if len(bare) == 1 else 'have'} no rungs on the {ladder} "
+                         f"ladder; run {'it' if len(bare) == 1 else 'them'} with --{'full' if quick else 'quick'}")
+    for n in bare:
+        log.info("validate: %s has no rungs on the %s ladder", n, ladder)
+    out.mkdir(parents=True, exist_ok=True)
     table = load_table(out)
     todo = [(n, p) for n in names for p in available[n].ladder(quick)
             if not finished(table, n, p["label"], ladder, backend, precision)]

@@ -6,8 +6,8 @@ every ice piece on level 1, the deep water on level 0, the band following the bo
 cells per 41 mm cube on the finest level (the issue's 3, 4.5 and 6, and 9 where time allows), level 0 twice as
 coarse. One tank on every rung: 128 x 32 cubes (5.248 x 1.312 m, against the preset's 5.13 x 1.39 m), the smallest
 in whole level-0 blocks at all four (a block is 16 / n cubes at n cells per cube), water 0.93 m deep (the preset's on
-levels); only the lid moves, to the first level-0 block face at least the surface band above the water, so the gas
-above the surface (0.05 to 0.16 m) differs between rungs. The DEM (hull spheres, cube clumps, contact law) is the
+levels); only the lid moves, to the first level-0 block face at least 30 mm (the preset's surface band) above the
+water, so the gas above the surface (0.05 to 0.16 m) differs between rungs. The DEM (hull spheres, cube clumps, contact law) is the
 same on every rung, the record interval fixed in seconds to whole level-0 steps (2, 3, 4, 6 steps of 1.81 ms to
 0.60 ms: 3.6 ms), the bands at least 2.5 finest cells about the bodies and 8 about the surface (what the start's
 checks ask for), so the finest level also holds one more level-0 layer under the surface at 3 and 4.5 cells per

@@ -39,8 +39,9 @@ def test_the_full_ladder_refines_the_finest_level_in_one_tank():
 
 @pytest.mark.parametrize("index, leaves", [(0, 1.64e6), (1, 4.79e6)])
 def test_a_rung_starts_with_the_surface_and_the_bodies_on_the_finest_level(index, leaves):
-    """The plan of the two cheapest rungs (a second each): the finest level at the rung's cells per cube, the leaf
-    cells as measured (2-core x86 VM, 2026-11-28; rung 6: 9.03e6, rung 9: 3.26e7)."""
+    """The plan of the two cheapest rungs (a second each): the finest level at the rung's cells per cube; the leaf
+    cell counts are regression pins of the measured plans (2-core x86 VM, 2026-11-28; rung 6: 9.03e6, rung 9:
+    3.26e7)."""
     p = L.ladder(False)[index]
     plan = RefinedTier2Model.plan(L.scene(p))
     assert plan["cells_per_cube"] == pytest.approx(p["resolution"], rel=1e-12)

@@ -544,13 +544,18 @@ class RefinedLBM:
                     self._launch(tables[sub], sf.state, (c_t, f_t, f_t), linear=linear)
                 if sub == 1:
                     self._snapshot(f_half, sf.state, (finer, "half"))
-                    if early:
-                        self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125,
-                                     linear=linear)
+                if sub == 1 and early:
+                    self._coalesce(lv, linear)
                 self._advance_conservative(finer)
             if not early:
-                self._launch(self._k_coalesce[lv], s.state, (c_t, f_t, f_half), weight=0.125, linear=linear)
+                self._coalesce(lv, linear)
         self.steppers[lv]()
+
+    def _coalesce(self, lv: int, linear: bool):
+        """Level lv's slots that the finer level's packets fill (:func:`coalescence_table`), from the copies of
+        level lv at t and of the finer level at t and t + 1/2."""
+        sources = (self._scratch[(lv, "t")], self._scratch[(lv + 1, "t")], self._scratch[(lv + 1, "half")])
+        self._launch(self._k_coalesce[lv], self.solvers[lv].state, sources, weight=0.125, linear=linear)
 
     def _advance(self, lv: int):
         if self.scheme == "conservative":

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 
 import numpy as np
 
@@ -35,15 +34,11 @@ MEMORY_SHARE = 0.8
 
 
 def available_memory_bytes() -> int:
-    """Memory the machine has available now (bytes): ``MemAvailable`` (free pages and the page cache it can drop;
-    free pages alone fall after every checkpoint written), else the free pages, from the OS."""
+    """Memory the machine has available now (bytes): ``MemAvailable`` (:func:`iceresist.limits.available_memory_bytes`:
+    free pages and the page cache the OS can drop; free pages alone fall after every checkpoint written); where the
+    OS does not say, no limit."""
     free = mem_available()
-    if free is not None:
-        return free
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not POSIX
-        return 1 << 62
+    return (1 << 62) if free is None else free
 
 
 def body_half_extents_m(scene: Scene) -> np.ndarray:

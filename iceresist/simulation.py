@@ -144,6 +144,8 @@ class FieldWriter:
     def write(self, sim):
         model = sim.model
         data = model.fields()
+        level_fields = getattr(model, "level_fields", None)     # a refined model: every level's leaf cells too
+        levels = None if level_fields is None else level_fields(self.fields)    # gathered on rank 0 with MPI
         if data is None:            # an MPI rank other than 0: the fields were gathered there
             self.last_iteration = model.iteration
             return
@@ -153,9 +155,8 @@ class FieldWriter:
             sim.diverge()
             return
         self.runfile.write_fields(model.iteration, model.time_s, data, units=self.units)
-        level_fields = getattr(model, "level_fields", None)     # a refined model: every level's leaf cells too
-        if level_fields is not None:
-            self.runfile.write_level_fields(model.iteration, model.time_s, level_fields(self.fields), units=self.units)
+        if levels is not None:
+            self.runfile.write_level_fields(model.iteration, model.time_s, levels, units=self.units)
         self.last_iteration = model.iteration
 
     def pickup(self, sim):

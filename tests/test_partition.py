@@ -80,3 +80,67 @@ def test_each_rank_on_a_node_takes_its_own_gpu(monkeypatch):
     assert chosen == [0, 1, 2, 3, 0, 1]
     monkeypatch.setattr(jit, "device_count", lambda: 1)
     assert parallel.use_local_gpu(Node(3)) is None and len(chosen) == 6
+
+
+def _two_level_channel():
+    """A 64 x 8 x 16 channel (8 x 1 x 2 level-0 trees, periodic along x and y, walls in z) whose trees at x 16-48,
+    z 0-8 are refined to level 1 (8 level-1 blocks each), with its level views."""
+    from iceresist.grid.levels import level_views
+    from iceresist.grid.octree import BlockOctree
+
+    t = BlockOctree((8, 1, 2), 1, periodic=(True, True, False))
+    t = t.refine(lambda lo, hi: ((lo[:, 0] >= 16) & (hi[:, 0] <= 48) & (hi[:, 2] <= 8)).astype(np.int64))
+    faces = {"x-": Face("periodic"), "x+": Face("periodic"), "y-": Face("periodic"), "y+": Face("periodic"),
+             "z-": Face("wall"), "z+": Face("wall")}
+    return t, level_views(t, faces)
+
+
+def test_whole_trees_are_dealt_out_along_the_morton_curve_in_equal_work():
+    """The two-level channel on 2 ranks: each rank takes 8 of the 16 trees, a contiguous run of the Morton curve, and
+    half the cells x sub-steps (the four refined trees weigh 16 level-0 blocks' work each); more ranks than trees is
+    refused in one line."""
+    from iceresist.parallel.levels import tree_partition, tree_weights
+
+    t, _ = _two_level_channel()
+    w = tree_weights(t)
+    assert sorted(w.tolist()) == [512.0] * 12 + [8 * 512.0 * 2] * 4
+    owner = tree_partition(t, 2)
+    x, y, z = np.unravel_index(np.arange(16), (8, 1, 2), order="F")
+    from iceresist.grid.forest import morton_key
+
+    along = owner[np.argsort(morton_key(x, y, z), kind="stable")]
+    assert np.all(np.diff(along) >= 0) and np.bincount(owner).tolist() == [8, 8]
+    assert np.bincount(owner, weights=w).tolist() == [w.sum() / 2] * 2
+    with pytest.raises(InputError, match="mpirun -n 17: the refined scene has 16 level-0 blocks"):
+        tree_partition(t, 17)
+
+
+def test_each_rank_holds_its_trees_and_the_ring_around_them_and_swaps_its_halo_leaves():
+    """The two-level channel on 2 ranks: on every level each leaf is one rank's own; a rank holds its own leaves
+    first, then the level's leaves within one block of its trees (across the periodic face too), then the ghost
+    blocks among them; what rank 1 sends rank 0 after a step of a level is, block for block, rank 0's halo leaves
+    of that level from rank 1."""
+    from iceresist.parallel.levels import LevelDecomposition
+
+    t, views = _two_level_channel()
+    d = [LevelDecomposition(t, views, _Comm(r, 2)) for r in range(2)]
+    for lv in (0, 1):
+        v = views[lv]
+        own = [dr.global_ids[lv][:dr.nown[lv]] for dr in d]
+        assert sorted(np.concatenate(own).tolist()) == list(range(v.nleaves))
+        for r, dr in enumerate(d):
+            ids = dr.global_ids[lv]
+            local = dr.views[lv]
+            assert (ids[:local.nleaves] < v.nleaves).all() and (ids[local.nleaves:] >= v.nleaves).all()
+            assert np.array_equal(local.forest.origin, v.forest.origin[ids])
+            # held: the blocks of the level within one block of the rank's trees (x only: one block row in y,
+            # trees of 2^lv blocks along x, periodic over 8 trees)
+            n = 8 << lv
+            mine = {int(x) >> lv for x in v.forest.origin[own[r], 0]}
+            near = {x for x in range(n) if {((x + o) % n) >> lv for o in (-1, 0, 1)} & mine}
+            want = np.flatnonzero(np.isin(v.forest.origin[:, 0], sorted(near)))
+            assert sorted(ids.tolist()) == want.tolist()
+        (r, rows), = d[0]._recvs[lv]
+        (r1, srows), = d[1]._sends[lv]
+        assert r == 1 and r1 == 0
+        assert np.array_equal(d[0].global_ids[lv][rows], d[1].global_ids[lv][srows]) and len(rows) > 0

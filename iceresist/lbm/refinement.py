@@ -183,14 +183,16 @@ def _coarse_stencil(coarse: LevelView, pos, periodic):
     return off, nbrs
 
 
-def explosion_tables(fine: LevelView, coarse: LevelView, periodic):
+def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool = False):
     """The populations a fine level pulls from its ghost cells in the coarser level during the two fine
     sub-steps of one coarse step, conservatively (Rohde et al. 2006): the coarse cells are cut into eight
     homogeneous fine packets that stream without colliding. Slot q of ghost cell h (read only by the fine leaf
     h + c_q) is at sub-step 1 slot q of h's coarse cell at t; at sub-step 2 what reached h at sub-step 1, slot q
     of the cell h - c_q at t (the fine state where that cell is a fine leaf, else its coarse cell's).
 
-    Returns two tables (one per sub-step) of (dst block, q, dst cell, source tag, src block, src cell)."""
+    Returns two tables (one per sub-step) of (dst block, q, dst cell, source tag, src block, src cell). ``partial``:
+    the levels are a rank's region (:mod:`iceresist.parallel.levels`), and a ghost cell whose source is not held
+    there is left out instead of refused."""
     g = np.flatnonzero(fine.ghost_source == FROM_COARSER) + fine.nleaves
     if len(g) == 0:
         return None
@@ -217,23 +219,28 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic):
         ob, oc, _ = _locate(coarse, np.where(pin[:, None], p, hk) >> 1, periodic)
         tables[1].append((hbk, qq, hck, np.where(from_fine, FINE_T, COARSE_T), np.where(from_fine, pb, ob),
                           np.where(from_fine, pc, oc), np.where(pin[:, None], p, hk)))
+    if not tables[0]:
+        return None
     out = []
     for t in tables:
         cols = [np.concatenate([row[k] for row in t]) for k in range(7)]
+        if partial:
+            cols = [c[cols[4] >= 0] for c in cols]
         if (cols[4] < 0).any():
             raise InputError("a fine ghost cell has no coarse cell to take its packets from")
         out.append((*cols[:6], _coarse_stencil(coarse, cols[6], periodic)))
     return out
 
 
-def coalescence_table(coarse: LevelView, fine: LevelView, periodic):
+def coalescence_table(coarse: LevelView, fine: LevelView, periodic, partial: bool = False):
     """The populations coarse leaves pull across the interface into the finer level, conservatively: coarse
     cell X's population q after a coarse step is the mean of what reached its eight fine sub-cells s in the two
     fine sub-steps, each packet taken where it last collided: the fine cell m = s - c_q at t + 1/2 where m is a fine
     leaf, else the fine cell o = s - 2 c_q at t where o is, else o's coarse cell at t. Written into slot q of the
     coarse cell X - c_q (read only by X), for every coarse leaf cell and q whose packets touch the fine level.
 
-    Returns (dst block, q, dst cell, tags (n, 8), src blocks (n, 8), src cells (n, 8))."""
+    Returns (dst block, q, dst cell, tags (n, 8), src blocks (n, 8), src cells (n, 8)); ``partial`` as for
+    :func:`explosion_tables`."""
     near = np.flatnonzero((coarse.forest.nbr_key[:coarse.nleaves] >= coarse.nleaves).any(axis=1))
     if len(near) == 0:
         return None
@@ -266,9 +273,14 @@ def coalescence_table(coarse: LevelView, fine: LevelView, periodic):
         sb = np.where(m_fine, mb[touch], np.where(o_fine, ob[touch], cb))
         sc = np.where(m_fine, mc[touch], np.where(o_fine, oc[touch], cc))
         yb, yc, _ = _locate(coarse, X[touch] - cq, periodic)
+        if partial:
+            held = (yb >= 0) & (sb >= 0).all(axis=1)
+            yb, yc, tag, sb, sc, o = yb[held], yc[held], tag[held], sb[held], sc[held], o[held]
         if (yb < 0).any() or (sb < 0).any():
             raise InputError("a coarse cell next to the finer level has no neighbour to pull from")
         rows.append((yb, np.full(len(yb), q), yc, tag, sb, sc, o))
+    if not rows:
+        return None
     cols = [np.concatenate([r[k] for r in rows]) for k in range(7)]
     return (*cols[:6], _coarse_stencil(coarse, cols[6], periodic))
 
@@ -365,11 +377,16 @@ class RefinedLBM:
     :class:`~iceresist.lbm.solver.LBMSolver`: anything with ``state`` (the populations f - w ``[block, q, cell]`` the
     next step pulls from), ``step()`` and ``initialize(rho, u)`` (the free surface on levels,
     :mod:`iceresist.freesurface.refined`).
+
+    ``views``: the levels to hold, if not every block of ``octree`` (:func:`~iceresist.grid.levels.level_views`): an
+    MPI rank's region (:class:`~iceresist.parallel.levels.LevelDecomposition`); the level transfers then leave out
+    the cells whose sources lie beyond it.
     """
 
     def __init__(self, octree: BlockOctree, *, tau0: float, force0=(0.0, 0.0, 0.0), faces: dict | None = None,
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
-                 scheme: str = "conservative", reconstruction: str = "linear", target=None, solver_factory=None):
+                 scheme: str = "conservative", reconstruction: str = "linear", target=None, solver_factory=None,
+                 views: list | None = None):
         from iceresist.backends import jit
         from iceresist.lbm.solver import LBMSolver
 
@@ -390,7 +407,10 @@ class RefinedLBM:
                              "a packet's non-equilibrium part changes the mass it carries; measured 15 % off in a "
                              "channel); use rescale=False, or scheme='interpolate' with rescale=True")
         self.octree = octree
-        self.views = level_views(octree, faces)
+        partial = views is not None
+        if partial and scheme != "conservative":
+            raise InputError("scheme: a rank's share of the levels runs the conservative level interface only")
+        self.views = views if partial else level_views(octree, faces)
         self.periodic = tuple(bool(p) for p in octree.periodic)
         for v in self.views:
             if v is not None and tuple(v.forest.faces[a + "-"].kind == "periodic" for a in "xyz") != self.periodic:
@@ -421,9 +441,9 @@ class RefinedLBM:
             self.restrict = {lv: restriction_table(self.views[lv], self.views[lv + 1], self.periodic)
                              for lv in self.levels[:-1]}
         else:
-            self.explode = {lv: explosion_tables(self.views[lv], self.views[lv - 1], self.periodic)
+            self.explode = {lv: explosion_tables(self.views[lv], self.views[lv - 1], self.periodic, partial)
                             for lv in self.levels[1:]}
-            self.coalesce = {lv: coalescence_table(self.views[lv], self.views[lv + 1], self.periodic)
+            self.coalesce = {lv: coalescence_table(self.views[lv], self.views[lv + 1], self.periodic, partial)
                              for lv in self.levels[:-1]}
             self.restrict = {lv: restriction_table(self.views[lv], self.views[lv + 1], self.periodic)
                              for lv in self.levels[:-1]}

@@ -124,14 +124,18 @@ def build_octree(scene: Scene, hot: np.ndarray | None = None, body_boxes_m: np.n
 
 class RefinedFluidModel(Model):
     """The LBM fluid alone on the levels of a scene's ``[refinement]`` (CPU or CUDA; on CUDA the conservative
-    interface, every level's state and the transfers on the device)."""
+    interface, every level's state and the transfers on the device).
+
+    ``comm``: an MPI communicator of several ranks; each rank then holds whole level-0 trees of the octree and a ring
+    of trees around them, split along the Morton curve in equal cells x sub-steps and split again after every regrid
+    (:class:`~iceresist.parallel.levels.LevelDecomposition`); fields, level fields and checkpoints are gathered on
+    rank 0 (:attr:`Model.comm`), diagnostics summed over the ranks."""
 
     components = ("fluid", "refinement")
 
-    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None):
-        from iceresist.grid.levels import level_views
-
+    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
+        self.comm = comm if comm is not None and comm.size > 1 else None
         self.units = u = scene.units()
         if scene.domain.pad_to_blocks:
             raise InputError("domain.pad_to_blocks: a refined scene needs whole 8x8x8 blocks; give domain cells in "
@@ -147,13 +151,17 @@ class RefinedFluidModel(Model):
         self.precision = precision or scene.numerics.precision
         self.regrid_every = scene.refinement.regrid_every_steps
         self.regrid_count = 0
+        if self.comm is not None and scene.refinement.scheme != "conservative":
+            raise InputError(f"mpirun -n {self.comm.size}: refinement.scheme: the interpolating level interface runs "
+                             "on one process; use scheme = \"conservative\" on several ranks")
         self.octree = build_octree(scene, body_boxes_m=self.body_boxes_m())
-        views = level_views(self.octree, forest_faces(scene, u))
+        views, self.decomp = self._split(self.octree)
         self.level_bytes = self._level_bytes(views)
+        share = "" if self.decomp is None else " on this rank"
         for lv, nbytes in self.level_bytes.items():
             v = views[lv]
-            log.info("refinement level %d: dx %.4g m, %d leaf blocks + %d ghost blocks, %.3g MB", lv,
-                     u.dx_m / 2 ** lv, v.nleaves, v.nghosts, nbytes / 1e6)
+            log.info("refinement level %d: dx %.4g m, %d leaf blocks + %d ghost blocks%s, %.3g MB", lv,
+                     u.dx_m / 2 ** lv, v.nleaves, v.nghosts, share, nbytes / 1e6)
         self._check_memory(self.level_bytes)
         fl = scene.fluid
         self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
@@ -168,6 +176,19 @@ class RefinedFluidModel(Model):
 
         check_fluid(scene, u)
 
+    def _split(self, octree):
+        """The levels of ``octree`` this process holds and their :class:`~iceresist.parallel.levels.LevelDecomposition`
+        over the ranks (None on one process, where it holds them all)."""
+        from iceresist.grid.levels import level_views
+
+        views = level_views(octree, forest_faces(self.scene, self.units))
+        if self.comm is None:
+            return views, None
+        from iceresist.parallel.levels import LevelDecomposition
+
+        decomp = LevelDecomposition(octree, views, self.comm)
+        return decomp.views, decomp
+
     def _check_memory(self, level_bytes: dict):
         total = sum(level_bytes.values())
         free = available_memory_bytes()
@@ -177,7 +198,8 @@ class RefinedFluidModel(Model):
                              f"smaller refinement.boxes")
 
     def _count_cells(self):
-        self.cells_per_level = {lv: int(self.lbm.views[lv].nleaves) * CELLS for lv in self.lbm.levels}
+        per = self.octree.blocks_per_level()
+        self.cells_per_level = {lv: int(per[lv]) * CELLS for lv in self.lbm.levels}
         self.cells = int(sum(self.cells_per_level.values()))
 
     def _level_bytes(self, views) -> dict[int, int]:
@@ -191,9 +213,15 @@ class RefinedFluidModel(Model):
         from iceresist.lbm.refinement import RefinedLBM
 
         scene, u, fl = self.scene, self.units, self.scene.fluid
+        d = self.decomp
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
-                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
+                              rescale=scene.refinement.scheme == "interpolate", target=self.target,
+                              views=None if d is None else d.views)
+        if d is not None:       # a rank steps its own leaves; after each step of a level its halo leaves are swapped
+            for lv, s in self.lbm.solvers.items():
+                s.active_blocks = d.nown[lv]
+                s.after_step = lambda f, lv=lv: d.exchange(lv, f, self.target)
         if initialize:
             u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
             self.lbm.initialize(1.0, u0)
@@ -226,36 +254,50 @@ class RefinedFluidModel(Model):
         :meth:`hot_cells`, :meth:`body_boxes_m`); where it changed, carry every level's populations to the new
         blocks (:func:`iceresist.grid.regrid.carry_over`) and step on from there. Returns whether the blocks
         changed."""
-        from iceresist.grid.levels import level_views
-
         octree = build_octree(self.scene, self.hot_cells(), self.body_boxes_m())
         if self._is_current(octree.level, octree.coord):
             return False
-        views = level_views(octree, forest_faces(self.scene, self.units))
+        views, decomp = self._split(octree)
         level_bytes = self._level_bytes(views)
+        refused = None
         try:
             self._check_memory(level_bytes)
         except InputError as err:
-            log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.level0_steps, err)
+            refused = str(err)
+        if self.comm is not None:           # every rank keeps the grid if one cannot take the new one
+            refused = next((r for r in self.comm.allgather(refused) if r is not None), None)
+        if refused is not None:
+            log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.level0_steps, refused)
             return False
-        self._rebuild(octree, level_bytes)
+        self._rebuild(octree, level_bytes, decomp)
         self.regrid_count += 1
         log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.level0_steps,
                  [int(n) for n in octree.blocks_per_level()])
         return True
 
-    def _rebuild(self, octree, level_bytes: dict):
+    def _rebuild(self, octree, level_bytes: dict, decomp=None):
         """The levels built on ``octree`` and every level's populations carried over from the present ones
         (:func:`iceresist.grid.regrid.carry_over`; onto the same octree, a rebuild changes nothing:
-        tests/test_regrid_bodies.py), then :meth:`_fill`."""
+        tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``decomp``: the new split) the old
+        levels are gathered on rank 0, carried over there and the new ones dealt out to the ranks."""
         from iceresist.grid.regrid import carry_over
 
         old_views = self.lbm.views
         old = {lv: self._populations(lv) for lv in self.lbm.levels}
         finest = self._finest_extra()
-        self._adopt(octree, level_bytes)
-        new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
-        carry_over(old_views, old, self.lbm.views, new)
+        old_decomp = self.decomp
+        self._adopt(octree, level_bytes, decomp)
+        if old_decomp is None:
+            new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
+            carry_over(old_views, old, self.lbm.views, new)
+        else:
+            old = {lv: old_decomp.gather(lv, f) for lv, f in old.items()}
+            whole = None
+            if self.comm.rank == 0:
+                whole = {lv: np.zeros((decomp.global_views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
+                carry_over(old_decomp.global_views, old, decomp.global_views, whole)
+            new = {lv: decomp.scatter(lv, None if whole is None else whole[lv]) for lv in self.lbm.levels}
+            del whole
         self._fill(new, old_views, finest)
         del old, new, finest, old_views
         release_freed_memory()      # the old levels, which reference cycles hold (iceresist.limits)
@@ -272,10 +314,12 @@ class RefinedFluidModel(Model):
         """Whether the leaves (``level``, ``coord``) are those of the current octree."""
         return np.array_equal(level, self.octree.level) and np.array_equal(coord, self.octree.coord)
 
-    def _adopt(self, octree, level_bytes: dict):
-        """New levels' solvers on ``octree`` (their populations to be filled), the iteration kept."""
+    def _adopt(self, octree, level_bytes: dict, decomp=None):
+        """New levels' solvers on ``octree`` (their populations to be filled; ``decomp``: their split over the
+        ranks), the iteration kept."""
         iteration = self.level0_steps
         self.octree = octree
+        self.decomp = decomp
         self.level_bytes = level_bytes
         self._build(initialize=False)
         self.lbm.iteration = iteration
@@ -316,8 +360,12 @@ class RefinedFluidModel(Model):
 
     def _leaf(self, lv: int):
         """rho (nleaves, 512), u (3, nleaves, 512) in lattice units and the cell coordinates of level ``lv``'s
-        leaves; the free surface overrides it (the gas at the reference state)."""
-        return self.lbm.leaf_fields(lv)
+        leaves (on several ranks this rank's own); the free surface overrides it (the gas at the reference state)."""
+        rho, u, xyz = self.lbm.leaf_fields(lv)
+        if self.decomp is None:
+            return rho, u, xyz
+        n = self.decomp.nown[lv]
+        return rho[:n], u[:, :n], tuple(c[:n] for c in xyz)
 
     def _leaf_extra(self, lv: int) -> list:
         """Further per-leaf values :meth:`_level0` averages after rho and u (none here)."""
@@ -339,6 +387,11 @@ class RefinedFluidModel(Model):
             np.add.at(weight, idx, w)
             for k, v in enumerate(values):
                 np.add.at(acc[k], idx, w * np.asarray(v).ravel())
+        if self.comm is not None:       # every level-0 cell lies in one rank's trees: the others add zeros
+            from mpi4py import MPI
+
+            self.comm.Allreduce(MPI.IN_PLACE, acc, op=MPI.SUM)
+            self.comm.Allreduce(MPI.IN_PLACE, weight, op=MPI.SUM)
         acc /= np.where(weight > 0, weight, np.nan)
         return acc[0], acc[1:4], list(acc[4:])
 
@@ -347,6 +400,8 @@ class RefinedFluidModel(Model):
         from iceresist.grid import flags as FL
 
         rho_lat, u_lat, _ = self._level0()
+        if self.comm is not None and self.comm.rank != 0:
+            return None
         u = self.units
         return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
@@ -359,6 +414,11 @@ class RefinedFluidModel(Model):
         out = []
         for lv in self.lbm.levels:
             rho, vel, (x, y, z) = self._leaf(lv)
+            if self.decomp is not None:     # the whole level on rank 0, in the order of one process
+                rho, vel = self.decomp.gather_leaves(lv, rho), self.decomp.gather_leaves(lv, vel, axis=1)
+                x, y, z = (self.decomp.gather_leaves(lv, c) for c in (x, y, z))
+                if rho is None:
+                    continue
             rho = rho.ravel()
             f = {"rho": u.density_to_physical(rho), "u": u.velocity_to_physical(vel.reshape(3, -1).T),
                  "pressure": u.pressure_to_physical((rho - 1.0) / 3.0)}
@@ -372,7 +432,8 @@ class RefinedFluidModel(Model):
     field_units = staticmethod(FluidModel.field_units)
 
     def is_finite(self) -> bool:
-        return math.isfinite(self.lbm.mass())
+        finite = math.isfinite(self.lbm.mass())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     def diagnostics(self) -> dict[str, float]:
         """Fluid mass (kg) and kinetic energy (J) over every leaf with its own cell volume, the largest speed."""
@@ -385,7 +446,9 @@ class RefinedFluidModel(Model):
             speed2 = (vel ** 2).sum(axis=0)
             mass += float(u.density_to_physical(rho).sum() * vol)
             ke += float(0.5 * (u.density_to_physical(rho) * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
-            umax = max(umax, float(np.sqrt(speed2.max())))
+            umax = max(umax, float(np.sqrt(speed2.max())) if speed2.size else 0.0)
+        if self.decomp is not None:
+            mass, ke, umax = self.decomp.sum(mass), self.decomp.sum(ke), self.decomp.max(umax)
         out = {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
                "max_lattice_speed": umax}
         if self.regrid_every:
@@ -403,7 +466,12 @@ class RefinedFluidModel(Model):
     def state(self) -> dict:
         """Every level's populations in storage precision (bit for bit), the iteration and the block octree
         (the level and coordinates of every leaf)."""
-        return {"f": {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()},
+        f = {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()}
+        if self.decomp is not None:
+            f = {k: self.decomp.gather(int(k), v) for k, v in f.items()}
+            if self.comm.rank != 0:
+                return None
+        return {"f": f,
                 "iteration": np.int64(self.level0_steps), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
                 "regrid_count": np.int64(self.regrid_count)}
@@ -441,11 +509,10 @@ class RefinedFluidModel(Model):
 
     def _adopt_checkpoint_octree(self, state: dict):
         """After :meth:`check_checkpoint`: a regridding run picks up on the checkpoint's last grid."""
-        from iceresist.grid.levels import level_views
-
         if not self._is_current(state["octree_level"], state["octree_coord"]):
             octree = self._octree_of(state)
-            self._adopt(octree, self._level_bytes(level_views(octree, forest_faces(self.scene, self.units))))
+            views, decomp = self._split(octree)
+            self._adopt(octree, self._level_bytes(views), decomp)
         self.regrid_count = int(state.get("regrid_count", self.regrid_count))
 
     def load_state(self, state: dict):
@@ -456,9 +523,13 @@ class RefinedFluidModel(Model):
         f = state.get("f", {})
         for lv, s in self.lbm.solvers.items():
             arr = np.asarray(f.get(str(lv), np.zeros(0)))
-            if arr.shape != (s.forest.nblocks, Q, CELLS):
+            d = self.decomp
+            nblocks = s.forest.nblocks if d is None else d.global_views[lv].forest.nblocks
+            if arr.shape != (nblocks, Q, CELLS):
                 raise InputError(f"checkpoint populations of level {lv} have shape {arr.shape}, this scene needs "
-                                 f"{(s.forest.nblocks, Q, CELLS)}: it belongs to another scene or refinement")
+                                 f"{(nblocks, Q, CELLS)}: it belongs to another scene or refinement")
+            if d is not None:
+                arr = arr[d.global_ids[lv]]
             _set_populations(s, arr.astype(s.real))
             s.iteration = int(state["iteration"]) * 2 ** lv
         self.lbm.iteration = int(state["iteration"])
@@ -471,7 +542,8 @@ class RefinedFluidModel(Model):
                 "scheme": self.scene.refinement.scheme, "regrid_every_steps": self.regrid_every,
                 "vorticity_1_s": self.scene.refinement.vorticity_1_s, "operator": self.scene.fluid.operator,
                 "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
-                "force_lattice": list(self.force_lattice), "unit_system": self.scene.scene.units}
+                "force_lattice": list(self.force_lattice), "unit_system": self.scene.scene.units,
+                **({} if self.decomp is None else {"mpi": self.decomp.describe()})}
 
     def allocation(self) -> dict[str, int]:
         """Bytes of the populations of every level (leaves and ghost blocks, both buffers)."""

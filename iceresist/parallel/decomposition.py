@@ -45,7 +45,51 @@ def block_weights(forest) -> np.ndarray:
     return forest.fluid.sum(axis=1).astype(np.float64) * 2.0 ** forest.levels
 
 
-class Decomposition:
+def swap(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> int:
+    """One non-blocking exchange over ``comm``: for each ``(rank, index)`` of ``sends`` the values ``view[index]``
+    go to that rank, for each of ``recvs`` ``view[index]`` is overwritten with what that rank sends (its sends to
+    this rank list the same values in the same order). Returns the bytes sent."""
+    from mpi4py import MPI
+
+    bufs_in, reqs, outs, sent = [], [], [], 0
+    for r, index in recvs:
+        buf = np.empty_like(view[index])
+        bufs_in.append((index, buf))
+        reqs.append(comm.Irecv(buf, source=r, tag=tag))
+    for r, index in sends:
+        buf = np.ascontiguousarray(view[index])
+        outs.append(buf)
+        sent += buf.nbytes
+        reqs.append(comm.Isend(buf, dest=r, tag=tag))
+    MPI.Request.Waitall(reqs)
+    for index, buf in bufs_in:
+        view[index] = buf
+    return sent
+
+
+class Collectives:
+    """Reductions over the ranks of ``self.comm``, every rank getting the result."""
+
+    def sum(self, value: float) -> float:
+        from mpi4py import MPI
+
+        return float(self.comm.allreduce(float(value), op=MPI.SUM))
+
+    def max(self, value: float) -> float:
+        from mpi4py import MPI
+
+        return float(self.comm.allreduce(float(value), op=MPI.MAX))
+
+    def all(self, flag: bool) -> bool:
+        from mpi4py import MPI
+
+        return bool(self.comm.allreduce(bool(flag), op=MPI.LAND))
+
+    def bcast(self, value):
+        return self.comm.bcast(value, root=0)
+
+
+class Decomposition(Collectives):
     """The share of ``forest`` (the global :class:`BlockForest`) that rank ``comm.rank`` steps (module docstring).
 
     ``owned``: global ids of the rank's blocks; ``halo``: global ids of its halo blocks; ``global_ids``: both, in
@@ -137,8 +181,6 @@ class Decomposition:
         them: the free surface)."""
         import time
 
-        from mpi4py import MPI
-
         t0 = time.perf_counter()
         on_device = target is not None and target.is_cuda
         host = target.to_host(arr) if on_device else arr
@@ -149,23 +191,8 @@ class Decomposition:
             sends = [(r, rows, slice(None)) for r, rows in self.sends_full]
         else:
             recvs, sends = self.recvs, self.sends
-        bufs_in = []
-        reqs = []
-        sent = 0
-        for r, rows, cells in recvs:
-            shape = (len(rows),) + (host.shape[1:] if full else view.shape[2:])
-            buf = np.empty(shape, dtype=host.dtype)
-            bufs_in.append((rows, cells, buf))
-            reqs.append(self.comm.Irecv(buf, source=r, tag=7))
-        outs = []
-        for r, rows, cells in sends:
-            buf = np.ascontiguousarray(view[rows, cells])
-            outs.append(buf)
-            sent += buf.nbytes
-            reqs.append(self.comm.Isend(buf, dest=r, tag=7))
-        MPI.Request.Waitall(reqs)
-        for rows, cells, buf in bufs_in:
-            view[rows, cells] = buf
+        sent = swap(self.comm, view, [(r, (rows, cells)) for r, rows, cells in recvs],
+                    [(r, (rows, cells)) for r, rows, cells in sends])
         if on_device:
             arr.copy_to_device(host)
         self.exchanges += 1
@@ -192,24 +219,6 @@ class Decomposition:
     def local_rows(self, global_array: np.ndarray, axis: int = 0) -> np.ndarray:
         """This rank's rows (owned, then halo) of a per-block array in global order."""
         return np.take(np.asarray(global_array), self.global_ids, axis=axis)
-
-    def sum(self, value: float) -> float:
-        from mpi4py import MPI
-
-        return float(self.comm.allreduce(float(value), op=MPI.SUM))
-
-    def max(self, value: float) -> float:
-        from mpi4py import MPI
-
-        return float(self.comm.allreduce(float(value), op=MPI.MAX))
-
-    def all(self, flag: bool) -> bool:
-        from mpi4py import MPI
-
-        return bool(self.comm.allreduce(bool(flag), op=MPI.LAND))
-
-    def bcast(self, value):
-        return self.comm.bcast(value, root=0)
 
     def describe(self) -> dict:
         blocks = np.bincount(self.owner, minlength=self.size)

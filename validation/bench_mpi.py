@@ -1,7 +1,9 @@
 """MPI benchmark: strong scaling of the fused LBM step from one rank to several on one machine
 (:mod:`iceresist.parallel`), a periodic box of ``--n`` cells per side, cumulant, CPU; with ``--case ship`` the
 coupled tier-2 step of the quick A-c68-v1.0 case instead (3.19e6 cells, the hull, 785 ice cubes, the free
-surface; ``--n`` ignored).
+surface; ``--n`` ignored); with ``--case amr`` a periodic box of ``--n`` level-0 cells per side whose middle half
+along each axis is level 1 (the refined fluid, :mod:`iceresist.parallel.levels`; a step is one level-0 step, MLUPS
+counts level 1's two sub-steps).
 
 Each configuration runs in its own ``mpirun`` (``--ranks``, default 1 and 2 ranks of one thread each, and one rank
 of as many threads as ranks for comparison): after one untimed step (the kernels load), ``--steps`` steps are
@@ -9,7 +11,7 @@ timed; per configuration the seconds per step, MLUPS, the speed-up over one rank
 ranks send per step (halo exchange, all ranks together) and the share of the step spent in the exchange
 (rank 0).
 
-    python -m validation.bench mpi [--case ship] [--n 64] [--steps 20] [--precision float32] [--ranks 2] [--json]
+    python -m validation.bench mpi [--case ship|amr] [--n 64] [--steps 20] [--precision float32] [--ranks 2] [--json]
 """
 
 from __future__ import annotations
@@ -25,8 +27,9 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser):
     parser.add_argument("--ranks", type=int, default=2, help="the largest rank count (default 2)")
-    parser.add_argument("--case", choices=("lbm", "ship"), default="lbm",
-                        help="the fused LBM in a periodic box (default) or the coupled quick tier-2 step")
+    parser.add_argument("--case", choices=("lbm", "ship", "amr"), default="lbm",
+                        help="the fused LBM in a periodic box (default), the coupled quick tier-2 step or a box "
+                             "refined in its middle (two levels)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
 
 
@@ -54,6 +57,56 @@ def worker(n: int, steps: int, precision: str) -> dict | None:
     return _timed(solver.step, comm, decomp, forest, steps, precision)
 
 
+AMR_SCENE = """
+[scene]
+name = "amr_bench"
+units = "lattice"
+
+[domain]
+cells = [{n}, {n}, {n}]
+
+[fluid]
+operator = "cumulant"
+initial_velocity_m_s = [0.02, 0.01, 0.0]
+
+[numerics]
+tau = 0.6
+precision = "{precision}"
+
+[run]
+steps = 1
+
+[refinement]
+levels = 1
+
+[[refinement.boxes]]
+lo_m = [{lo}, {lo}, {lo}]
+hi_m = [{hi}, {hi}, {hi}]
+level = 1
+"""
+
+
+def amr_worker(n: int, steps: int, precision: str) -> dict | None:
+    """Level-0 steps of the refined box in this MPI job (or one process), after one untimed step; rank 0's figures,
+    None on the others."""
+    from types import SimpleNamespace
+
+    from iceresist import parallel
+    from iceresist.models.refined import RefinedFluidModel
+    from iceresist.scene.load import parse_scene
+
+    comm = parallel.world()
+    scene = parse_scene(AMR_SCENE.format(n=n, lo=n / 4, hi=3 * n / 4, precision=precision), "amr_bench.toml")
+    model = RefinedFluidModel(scene, backend="cpu", comm=comm)
+    model.step(1)
+    size = SimpleNamespace(cells=model.lattice_updates_per_step, nblocks=int(model.octree.nleaves))
+    out = _timed(model.step, comm, model.decomp, size, steps, precision)
+    if out is not None and model.decomp is not None:
+        d = model.decomp
+        out["halo_blocks_rank0"] = int(sum(v.nleaves for v in d.views if v is not None) - sum(d.nown.values()))
+    return out
+
+
 def _timed(step, comm, decomp, forest, steps: int, precision: str) -> dict | None:
     """``step(steps)`` timed between barriers after the first (untimed) step: rank 0's figures, None on the
     others."""
@@ -73,7 +126,7 @@ def _timed(step, comm, decomp, forest, steps: int, precision: str) -> dict | Non
         return None
     return {"cells": int(forest.cells), "seconds_per_step": seconds, "mlups": forest.cells / seconds / 1e6,
             "bytes_sent_per_step": float(sent), "exchange_share": share,
-            "halo_blocks_rank0": 0 if decomp is None else int(len(decomp.halo)),
+            "halo_blocks_rank0": 0 if decomp is None else int(len(getattr(decomp, "halo", ()))),
             "blocks": int(forest.nblocks), "float": str(np.dtype(precision))}
 
 
@@ -117,7 +170,8 @@ def run(args) -> list[dict]:
         for ranks, threads in configs:
             r = _launch(ranks, threads, args, precision)
             base = base or r["seconds_per_step"]
-            name = "quick tier-2 step (A-c68-v1.0)" if args.case == "ship" else f"lbm n={args.n}"
+            name = {"ship": "quick tier-2 step (A-c68-v1.0)", "amr": f"two levels n={args.n}"}.get(args.case,
+                                                                                                f"lbm n={args.n}")
             rows.append({"name": name, "ranks": ranks, "threads_per_rank": threads,
                          "precision": precision, "cells": r["cells"], "steps": args.steps,
                          "seconds_per_step": r["seconds_per_step"], "mlups": r["mlups"],
@@ -135,7 +189,12 @@ def _main(argv=None):
     p.add_argument("--precision", default="float32")
     p.add_argument("--case", default="lbm")
     a = p.parse_args(argv)
-    out = ship_worker(a.steps, a.precision) if a.case == "ship" else worker(a.n, a.steps, a.precision)
+    if a.case == "ship":
+        out = ship_worker(a.steps, a.precision)
+    elif a.case == "amr":
+        out = amr_worker(a.n, a.steps, a.precision)
+    else:
+        out = worker(a.n, a.steps, a.precision)
     if out is not None:
         print(json.dumps(out))
 

@@ -196,11 +196,17 @@ class RefinedFreeSurface:
     ``faces``, ``operator``, ``precision``, ``target`` as for :class:`~iceresist.lbm.refinement.RefinedLBM`.
     ``lbm`` is the :class:`RefinedLBM` that steps the levels; ``surface`` the finest level's
     :class:`FreeSurfaceFluid`.
+
+    ``decomp``: the :class:`~iceresist.parallel.levels.LevelDecomposition` of an MPI run; the levels are then this
+    rank's share. A coarser level steps its own leaves and swaps its halo leaves after each step; the finest level
+    steps its halo leaves too (the phase field's passes read the velocity the fused update gives them) and swaps
+    their whole state (populations, h, phi, flags) after each step: the passes reach at most 5 cells into its one
+    block of halo, as on a uniform grid (:class:`~iceresist.models.fluid.FreeSurfaceModel`).
     """
 
     def __init__(self, octree: BlockOctree, *, tau0: float, gravity0: float, depth0: float, mobility: float = 0.05,
                  width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
-                 precision: str = "float32", target=None, faces: dict | None = None):
+                 precision: str = "float32", target=None, faces: dict | None = None, decomp=None):
         self.target = target or jit.cpu
         self.precision = precision
         self.octree = octree
@@ -222,13 +228,39 @@ class RefinedFreeSurface:
             return _LiquidLevel(forest, tau, force, operator=operator, precision=precision, target=self.target,
                                 half_width=0.5 * width)
 
+        self.decomp = decomp
         self.lbm = RefinedLBM(octree, tau0=tau0, force0=(0.0, 0.0, -self.g0), faces=faces, operator=operator,
                               precision=precision, scheme="conservative", target=self.target,
-                              solver_factory=factory)
+                              solver_factory=factory, views=None if decomp is None else decomp.views)
         self.surface: FreeSurfaceFluid = built["surface"]
         self.levels = self.lbm.levels
         self.views = self.lbm.views
         self._ghost_table()
+        if decomp is not None:
+            self._split_steps(decomp)
+
+    def _split_steps(self, decomp):
+        """On several ranks: each level's step followed by the swap of its halo leaves (class docstring)."""
+        from iceresist.parallel.levels import LevelShare
+
+        fs, t = self.surface, self.target
+        fs.decomp = LevelShare(decomp, self.finest)
+        for lv, level in self.lbm.solvers.items():
+            if lv == self.finest:
+                def arrays():
+                    return fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags
+            else:
+                level.active_blocks = decomp.nown[lv]
+
+                def arrays(level=level):
+                    return (level.state,)
+
+            def step(level=level, lv=lv, arrays=arrays):
+                level.step()
+                for a in arrays():
+                    decomp.exchange(lv, a, t)
+
+            self.lbm.set_stepper(lv, step)
 
     # ------------------------------------------------------------------ ghosts
     def _ghost_table(self):
@@ -359,12 +391,20 @@ class RefinedFreeSurface:
 
     # ------------------------------------------------------------------ diagnostics
     def volume(self) -> float:
-        """The water volume in level-0 cells: the finest level's leaves' sum of phi over 8^L, plus every coarser
-        level's leaf cells (liquid throughout) over 8^l."""
-        phi = np.asarray(self.target.to_host(self.surface.phase.phi), dtype=np.float64)[:self._nleaves]
-        total = phi.sum() / 8.0 ** self.finest
+        """The water volume in level-0 cells: the finest level's leaves' sum of phi over 8^L (per-block sums added in
+        the level's global block order: the same float64 sum on any number of ranks), plus every coarser level's
+        leaf cells (liquid throughout) over 8^l."""
+        phi = np.asarray(self.target.to_host(self.surface.phase.phi), dtype=np.float64)
+        leaves = self.octree.blocks_per_level()
+        d = self.decomp
+        if d is None:
+            per_block = phi[:self._nleaves].sum(axis=1)
+        else:
+            whole = d.gather_leaves(self.finest, phi[:d.nown[self.finest]].sum(axis=1))
+            per_block = d.bcast(whole)
+        total = per_block.sum() / 8.0 ** self.finest
         for level in self.levels[:-1]:
-            total += self.views[level].nleaves * CELLS / 8.0 ** level
+            total += int(leaves[level]) * CELLS / 8.0 ** level
         return float(total)
 
     def surface_height(self) -> np.ndarray:

@@ -361,11 +361,15 @@ class RefinedFluidModel(Model):
     def _leaf(self, lv: int):
         """rho (nleaves, 512), u (3, nleaves, 512) in lattice units and the cell coordinates of level ``lv``'s
         leaves (on several ranks this rank's own); the free surface overrides it (the gas at the reference state)."""
-        rho, u, xyz = self.lbm.leaf_fields(lv)
+        return self._own(lv, *self.lbm.leaf_fields(lv))
+
+    def _own(self, lv: int, rho, u, xyz=None):
+        """rho (nleaves, 512), u (3, nleaves, 512) and the coordinates of level ``lv``'s leaves cut to this rank's
+        own leaves (all of them on one process)."""
         if self.decomp is None:
             return rho, u, xyz
         n = self.decomp.nown[lv]
-        return rho[:n], u[:, :n], tuple(c[:n] for c in xyz)
+        return rho[:n], u[:, :n], None if xyz is None else tuple(c[:n] for c in xyz)
 
     def _leaf_extra(self, lv: int) -> list:
         """Further per-leaf values :meth:`_level0` averages after rho and u (none here)."""

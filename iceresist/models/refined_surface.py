@@ -24,9 +24,17 @@ from iceresist.models.refined import RefinedFluidModel
 
 
 class RefinedFreeSurfaceModel(RefinedFluidModel):
-    """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA)."""
+    """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA); on several MPI ranks
+    (``comm``) each takes its share of the levels (:class:`RefinedFreeSurface` with a ``decomp``), a static grid
+    only so far."""
 
     components = ("fluid", "free_surface", "refinement")
+
+    def _split(self, octree):
+        if self.comm is not None and self.scene.refinement.regrid_every_steps:
+            raise InputError(f"mpirun -n {self.comm.size}: refinement.regrid_every_steps: a free surface on levels "
+                             f"regrids on one process so far; run it without mpirun, or leave regrid_every_steps out")
+        return super()._split(octree)
 
     def _level_bytes(self, views) -> dict[int, int]:
         """Bytes each level's blocks take: both population buffers, and on the finest level the phase field (h in
@@ -80,7 +88,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
         return cls(self.octree, tau0=u.tau, gravity0=self.gravity0, depth0=self.depth0, mobility=fs.mobility_lattice,
                    width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
-                   precision=self.precision, target=self.target, faces=forest_faces(scene, u))
+                   precision=self.precision, target=self.target, faces=forest_faces(scene, u), decomp=self.decomp)
 
     def _finest_extra(self) -> dict:
         """The finest level's free-surface state before a regrid (:meth:`FreeSurfaceFluid.state`)."""
@@ -98,13 +106,14 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def _phi_leaves(self) -> np.ndarray:
-        n = self.lbm.views[self.finest].nleaves
+        """phi of the finest level's leaves (this rank's own on several ranks)."""
+        n = self.lbm.views[self.finest].nleaves if self.decomp is None else self.decomp.nown[self.finest]
         return np.asarray(self.target.to_host(self.fs.surface.phase.phi), dtype=np.float64)[:n]
 
     def _leaf(self, lv: int):
         """rho and u of the leaves with the gas at the reference state (rho0 = 1, u = 0), as
-        :meth:`FreeSurfaceModel.fields` writes it."""
-        rho, u, xyz = self.lbm.leaf_fields(lv)
+        :meth:`FreeSurfaceModel.fields` writes it (this rank's own leaves on several ranks)."""
+        rho, u, xyz = self._own(lv, *self.lbm.leaf_fields(lv))
         if lv == self.finest:
             gas = self._phi_leaves() < 0.5
             rho = np.where(gas, 1.0, rho)
@@ -115,15 +124,19 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """phi of the leaves (1 on the coarser levels: all water)."""
         if lv == self.finest:
             return [self._phi_leaves()]
-        return [np.ones((self.lbm.views[lv].nleaves, CELLS))]
+        n = self.lbm.views[lv].nleaves if self.decomp is None else self.decomp.nown[lv]
+        return [np.ones((n, CELLS))]
 
     def surface_cells(self, covered_as_water: bool = False) -> np.ndarray:
         """Height of phi = 1/2 over each level-0 column (nx, ny), level-0 cells: the mean of the finest level's
         columns in it (NaN where none has a surface); ``covered_as_water``: a body's cells count as water
-        (:meth:`FreeSurfaceFluid.surface_height`)."""
+        (:meth:`FreeSurfaceFluid.surface_height`); None on MPI ranks other than 0."""
         import warnings
 
-        h = self.fs.surface.surface_height(covered_as_water) / 2 ** self.finest
+        h = self.fs.surface.surface_height(covered_as_water)
+        if h is None:
+            return None
+        h = h / 2 ** self.finest
         s = 2 ** self.finest
         nx, ny = h.shape[0] // s, h.shape[1] // s
         with warnings.catch_warnings():
@@ -135,8 +148,11 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """rho (kg/m^3), u (m/s), pressure (Pa, gauge), flags (FLUID where phi >= 1/2, else GAS), phi and surface (m)
         on the level-0 grid, each cell the mean of the leaf cells in it (:meth:`FreeSurfaceModel.fields`)."""
         rho_lat, u_lat, (phi,) = self._level0()
+        surface = self.surface_cells()
+        if surface is None:         # an MPI rank other than 0
+            return None
         u = self.units
-        surface = u.length_to_physical(self.surface_cells())
+        surface = u.length_to_physical(surface)
         return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
                 "flags": np.where(phi >= 0.5, FL.FLUID, FL.GAS).astype(np.uint8), "phi": phi,
@@ -146,14 +162,18 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
 
     def level_fields(self, names=None) -> list[dict]:
         out = super().level_fields(None)
+        phis = {lv: self._leaf_extra(lv)[0] for lv in self.lbm.levels}
+        if self.decomp is not None:
+            phis = {lv: self.decomp.gather_leaves(lv, phi) for lv, phi in phis.items()}
         for entry in out:
-            entry["fields"]["phi"] = self._leaf_extra(entry["level"])[0].ravel()
+            entry["fields"]["phi"] = phis[entry["level"]].ravel()
             if names is not None:
                 entry["fields"] = {k: v for k, v in entry["fields"].items() if k in names}
         return out
 
     def is_finite(self) -> bool:
-        return math.isfinite(self.fs.volume()) and math.isfinite(self.lbm.mass())
+        finite = math.isfinite(self.fs.volume()) and math.isfinite(self.lbm.mass())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     def diagnostics(self) -> dict[str, float]:
         """Water volume (m^3, :meth:`RefinedFreeSurface.volume`) and its drift, liquid mass (kg) and kinetic energy
@@ -162,7 +182,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         u = self.units
         mass = ke = umax = 0.0
         for lv in self.lbm.levels:
-            rho, vel, _ = self.lbm.leaf_fields(lv)
+            rho, vel, _ = self._own(lv, *self.lbm.leaf_fields(lv))
             liquid = self._leaf_extra(lv)[0] >= 0.5
             vol = (u.dx_m / 2 ** lv) ** 3
             speed2 = (vel ** 2).sum(axis=0)[liquid]
@@ -171,12 +191,18 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             ke += float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
             if speed2.size:
                 umax = max(umax, float(np.sqrt(speed2.max())))
+        if self.decomp is not None:
+            mass, ke, umax = self.decomp.sum(mass), self.decomp.sum(ke), self.decomp.max(umax)
         v = self.fs.volume()
+        surface = self.surface_cells()
+        surface_mean = None if surface is None else float(np.nanmean(surface))
+        if self.decomp is not None:
+            surface_mean = self.decomp.bcast(surface_mean)
         out = {"water_volume_m3": float(v * u.dx_m ** 3),
                "water_volume_drift": float((v - self.volume0_cells) / self.volume0_cells),
                "mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
                "max_lattice_speed": umax,
-               "surface_mean_m": float(u.length_to_physical(np.nanmean(self.surface_cells())))}
+               "surface_mean_m": float(u.length_to_physical(surface_mean))}
         if self.regrid_every:
             out["leaf_cells"] = float(self.cells)
         return out
@@ -185,7 +211,12 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """Every coarser level's populations, the finest level's free surface (populations, h, phi, flags), the
         iteration, the initial volume and the block octree: a bit-for-bit restart."""
         coarse = {str(lv): self.lbm.solvers[lv].fluid.rows()[1] for lv in self.lbm.levels[:-1]}
-        return {"f": coarse, "surface": self.fs.surface.state(), "iteration": np.int64(self.level0_steps),
+        surface = self.fs.surface.state()
+        if self.decomp is not None:     # the whole levels on rank 0, in the order of one process
+            coarse = {k: self.decomp.gather(int(k), f) for k, f in coarse.items()}
+            if self.comm.rank != 0:
+                return None
+        return {"f": coarse, "surface": surface, "iteration": np.int64(self.level0_steps),
                 "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
                 "regrid_count": np.int64(self.regrid_count)}
@@ -199,9 +230,13 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             level = self.lbm.solvers[lv]
             f = np.asarray(state["f"].get(str(lv), np.zeros(0)))
             n = level.forest.nblocks
-            if f.shape != (n, Q, CELLS):
+            d = self.decomp
+            whole = n if d is None else d.global_views[lv].forest.nblocks
+            if f.shape != (whole, Q, CELLS):
                 raise InputError(f"checkpoint populations of level {lv} have shape {f.shape}, this scene needs "
-                                 f"{(n, Q, CELLS)}: it belongs to another scene or refinement")
+                                 f"{(whole, Q, CELLS)}: it belongs to another scene or refinement")
+            if d is not None:
+                f = f[d.global_ids[lv]]
             level.fluid.set_rows(np.arange(n), f.astype(level.fluid.real), n)
             level.fluid.iteration = int(state["iteration"]) * 2 ** lv
         self.fs.surface.load_state(state["surface"])

@@ -207,3 +207,33 @@ class LevelDecomposition(Collectives):
                 "blocks_per_rank": self.leaves_per_rank,
                 "weight_share": [round(float(x / w.sum()), 4) for x in w],
                 "partition": "Morton, whole level-0 trees, equal cells x sub-steps"}
+
+
+class LevelShare(Collectives):
+    """One level of a :class:`LevelDecomposition` seen as a :class:`~iceresist.parallel.decomposition.Decomposition`
+    of that level's forest (leaves and ghosts): what a
+    :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` on the finest level asks of its ``decomp`` (gathering
+    per-block rows on rank 0 in the level's global order, this rank's rows of a whole level, the swap of the halo's
+    whole blocks)."""
+
+    def __init__(self, decomp: LevelDecomposition, level: int):
+        self.decomp, self.level = decomp, int(level)
+        self.comm, self.rank, self.size = decomp.comm, decomp.rank, decomp.size
+        #: The level's whole forest (leaves and ghosts of every rank), as one process holds it.
+        self.forest = decomp.global_views[self.level].forest
+        self.global_ids = decomp.global_ids[self.level]
+        self.nowned = decomp.nown[self.level]
+
+    def gather_rows(self, local: np.ndarray, axis: int = 0):
+        """The level's per-block array (blocks along ``axis``) in global order on rank 0, each block from the rank
+        of its tree; None on the other ranks."""
+        whole = self.decomp.gather(self.level, np.moveaxis(np.asarray(local), axis, 0))
+        return None if whole is None else np.moveaxis(whole, 0, axis)
+
+    def local_rows(self, whole: np.ndarray, axis: int = 0) -> np.ndarray:
+        """This rank's blocks of a per-block array of the whole level."""
+        return np.take(np.asarray(whole), self.global_ids, axis=axis)
+
+    def exchange(self, arr, target=None, full: bool = True) -> None:
+        """The halo leaves of the level take their owners' values: whole blocks (``full`` is the only way)."""
+        self.decomp.exchange(self.level, arr, target)

@@ -523,6 +523,10 @@ class FreeSurfaceFluid:
             nl = len(d.global_ids)
             state = {**state, "f_blocks": np.arange(nl, dtype=np.int64), "f": d.local_rows(whole),
                      "f_rows": np.int64(nl), **{k: d.local_rows(np.asarray(state[k])) for k in ("h", "phi", "h_valid", "flags")}}
+        self.load_rows(state)
+
+    def load_rows(self, state: dict):
+        """:meth:`load_state` of this process's own blocks (on several ranks its share, as the rows are here)."""
         h = np.asarray(state["h"])
         if h.shape != tuple(self.phase.h.shape):
             raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs "

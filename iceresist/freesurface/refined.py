@@ -114,6 +114,40 @@ def ghost_phase_launcher(target, precision: str, lattice_name: str) -> CellLaunc
                                              ("iceresist.freesurface.refined",)))
 
 
+def carried_surface(fs: "RefinedFreeSurface", f_finest, surface_state: dict, old_view, view, flags):
+    """The finest level's (h, phi, h validity, flags) on the blocks of ``view`` after a regrid, from
+    ``surface_state`` (:meth:`FreeSurfaceFluid.state` on the forest of ``old_view``) and the carried populations
+    ``f_finest`` of ``view``'s blocks; ``flags`` the static flags of ``view``'s blocks. Copied block by block where
+    both forests hold a block; a block new to the level lies in the bulk water (the criteria keep the surface on the
+    finest level), so takes phi = 1, h of that water at its carried velocity (:func:`liquid_h`, as
+    :meth:`RefinedFreeSurface.refill_ghosts` gives a ghost block) and the static flags. Raises RuntimeError where a
+    block the level drops holds a cell less liquid than 1 - 1e-4."""
+    from iceresist.grid.regrid import same_blocks
+
+    L_ = fs.finest
+    src, dst = same_blocks(old_view, view)
+    kept = np.zeros(old_view.forest.nblocks, dtype=bool)
+    kept[src] = True
+    gone = np.flatnonzero(~kept[:old_view.nleaves])
+    phi_old = np.asarray(surface_state["phi"])
+    if gone.size and phi_old[gone].min() < 1.0 - PHI_BULK_TOL:
+        raise RuntimeError(f"regrid: the finest level (level {L_}) would drop blocks the surface reaches "
+                           f"(phi = {phi_old[gone].min():.3g})")
+    n = view.forest.nblocks
+    fresh = np.ones(n, dtype=bool)
+    fresh[dst] = False
+    real = jit.real_type(fs.precision)
+    h = np.zeros((n,) + tuple(surface_state["h"].shape[1:]), dtype=real)
+    phi = np.ones((n, CELLS), dtype=real)
+    valid = np.ones(n, dtype=np.int8)
+    flags = np.array(flags, dtype=np.uint8)
+    h[dst], phi[dst] = surface_state["h"][src], phi_old[src]
+    valid[dst], flags[dst] = surface_state["h_valid"][src], surface_state["flags"][src]
+    g_coarse = fs.g0 / 2 ** max(L_ - 1, 0)     # the carried f of a fresh block is its coarse parent's
+    h[fresh] = liquid_h(fs.h_lattice, np.asarray(f_finest)[fresh], g_coarse)
+    return h, phi, valid, flags
+
+
 class _LiquidLevel:
     """A coarser level: liquid throughout, the free-surface fused update with phi = 1 (populations in every block,
     the pool's identity map), so the body force is rho g as on the finest level."""
@@ -343,43 +377,52 @@ class RefinedFreeSurface:
         """Take the state of the levels before a regrid onto this octree's levels (block AMR part 2):
         ``f_levels`` every level's populations (f - w) on this octree's blocks, as
         :func:`iceresist.grid.regrid.carry_over` gives them; ``surface_state`` the finest level's
-        :meth:`FreeSurfaceFluid.state` before, on the forest of ``old_view`` (its :class:`LevelView`). The finest
-        level's h, phi, flags and h validity are copied block by block where both forests hold a block; a block new
-        to the level lies in the bulk water (the criteria keep the surface on the finest level), so takes phi = 1,
-        h of that water at its carried velocity (:func:`liquid_h`, as :meth:`refill_ghosts` gives a ghost block) and
-        the static flags. Raises RuntimeError where a block the level drops holds a cell less liquid than
-        1 - 1e-4."""
-        from iceresist.grid.regrid import same_blocks
+        :meth:`FreeSurfaceFluid.state` before, on the forest of ``old_view`` (its :class:`LevelView`); the finest
+        level's phase field and flags as :func:`carried_surface` gives them."""
+        self._carry_coarse(f_levels)
+        fs, view = self.surface, self.views[self.finest]
+        flags = np.array(self.target.to_host(fs.fluid.flags), dtype=np.uint8)
+        h, phi, valid, flags = carried_surface(self, f_levels[self.finest], surface_state, old_view, view, flags)
+        n = fs.forest.nblocks
+        fs.load_state({"f_blocks": np.arange(n, dtype=np.int64), "f": self._real_f(f_levels[self.finest]),
+                       "f_rows": np.int64(n), "h": h, "phi": phi, "h_valid": valid, "flags": flags,
+                       "iteration": np.int64(surface_state["iteration"])})
 
+    def carry_split(self, f_levels: dict, f_whole, surface_whole, old_view):
+        """:meth:`carry_from` on MPI ranks: ``f_levels`` this rank's share of the carried levels; on rank 0
+        ``f_whole`` (the whole finest level's carried populations), ``surface_whole`` (the finest level's state
+        before, gathered) and ``old_view`` (the finest level's whole view before): rank 0 carries the whole finest
+        level's phase field and flags and deals them out."""
+        d, L = self.decomp, self.finest
+        self._carry_coarse(f_levels)
+        whole, error = None, None
+        if d.rank == 0:
+            view = d.global_views[L]
+            try:
+                whole = carried_surface(self, f_whole[L], surface_whole, old_view, view,
+                                        view.forest.flags.astype(np.uint8))
+            except RuntimeError as err:
+                error = str(err)
+        error = d.bcast(error)
+        if error is not None:
+            raise RuntimeError(error)
+        h, phi, valid, flags = (d.scatter(L, None if whole is None else part) for part in
+                                (whole or (None,) * 4))
+        n = self.surface.forest.nblocks
+        iteration = d.bcast(None if surface_whole is None else int(surface_whole["iteration"]))
+        self.surface.load_rows({"f_blocks": np.arange(n, dtype=np.int64), "f": self._real_f(f_levels[L]),
+                                "f_rows": np.int64(n), "h": h, "phi": phi, "h_valid": valid, "flags": flags,
+                                "iteration": np.int64(iteration)})
+
+    def _carry_coarse(self, f_levels: dict):
         for lv in self.levels[:-1]:
             level = self.lbm.solvers[lv]
             n = level.forest.nblocks
             level.fluid.set_rows(np.arange(n), np.ascontiguousarray(f_levels[lv]).astype(level.fluid.real), n)
             level.fluid.iteration = self.lbm.iteration * 2 ** lv
-        L_, fs, view = self.finest, self.surface, self.views[self.finest]
-        src, dst = same_blocks(old_view, view)
-        kept = np.zeros(old_view.forest.nblocks, dtype=bool)
-        kept[src] = True
-        gone = np.flatnonzero(~kept[:old_view.nleaves])
-        phi_old = np.asarray(surface_state["phi"])
-        if gone.size and phi_old[gone].min() < 1.0 - PHI_BULK_TOL:
-            raise RuntimeError(f"regrid: the finest level (level {L_}) would drop blocks the surface reaches "
-                               f"(phi = {phi_old[gone].min():.3g})")
-        n = fs.forest.nblocks
-        fresh = np.ones(n, dtype=bool)
-        fresh[dst] = False
-        real = jit.real_type(self.precision)
-        h = np.zeros((n,) + tuple(surface_state["h"].shape[1:]), dtype=real)
-        phi = np.ones((n, CELLS), dtype=real)
-        valid = np.ones(n, dtype=np.int8)
-        flags = np.array(self.target.to_host(fs.fluid.flags), dtype=np.uint8)
-        h[dst], phi[dst] = surface_state["h"][src], phi_old[src]
-        valid[dst], flags[dst] = surface_state["h_valid"][src], surface_state["flags"][src]
-        g_coarse = self.g0 / 2 ** max(L_ - 1, 0)     # the carried f of a fresh block is its coarse parent's
-        h[fresh] = liquid_h(self.h_lattice, f_levels[L_][fresh], g_coarse)
-        fs.load_state({"f_blocks": np.arange(n, dtype=np.int64), "f": np.ascontiguousarray(f_levels[L_]).astype(real),
-                       "f_rows": np.int64(n), "h": h, "phi": phi, "h_valid": valid, "flags": flags,
-                       "iteration": np.int64(surface_state["iteration"])})
+
+    def _real_f(self, f):
+        return np.ascontiguousarray(f).astype(jit.real_type(self.precision))
 
     def step(self, n: int = 1):
         """Advance level 0 by ``n`` steps (the finest level by n 2^L)."""

@@ -41,8 +41,8 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
     alone), tier-1 and tier-2 ship scenes ([ship] + [ice]) and scenes of rigid bodies ([[bodies]], with or
     without [free_surface] and [contact]). ``comm``: the MPI communicator of a run on several ranks
-    (:mod:`iceresist.parallel`: every uniform-grid scene but a tier-1 ship, the fluid alone on levels and the free
-    surface on static levels)."""
+    (:mod:`iceresist.parallel`: every uniform-grid scene but a tier-1 ship, the fluid alone and the free surface on
+    levels)."""
     if comm is not None and comm.size > 1:
         extra = scene.optional_sections()
         if extra == ["refinement"]:

@@ -287,6 +287,7 @@ class RefinedFluidModel(Model):
         finest = self._finest_extra()
         old_decomp = self.decomp
         self._adopt(octree, level_bytes, decomp)
+        whole = None
         if old_decomp is None:
             new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
             carry_over(old_views, old, self.lbm.views, new)
@@ -297,8 +298,9 @@ class RefinedFluidModel(Model):
                 whole = {lv: np.zeros((decomp.global_views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
                 carry_over(old_decomp.global_views, old, decomp.global_views, whole)
             new = {lv: decomp.scatter(lv, None if whole is None else whole[lv]) for lv in self.lbm.levels}
-            del whole
-        self._fill(new, old_views, finest)
+            old_views = old_decomp.global_views
+        self._fill(new, old_views, finest, whole)
+        del whole
         del old, new, finest, old_views
         release_freed_memory()      # the old levels, which reference cycles hold (iceresist.limits)
 
@@ -325,9 +327,10 @@ class RefinedFluidModel(Model):
         self.lbm.iteration = iteration
         self._count_cells()
 
-    def _fill(self, new: dict, old_views, finest):
+    def _fill(self, new: dict, old_views, finest, whole=None):
         """The new levels' populations (leaves and ghosts) set from ``new`` (per level, carried over from the levels
-        of ``old_views``; ``finest``: :meth:`_finest_extra`, unused here)."""
+        of ``old_views``; ``finest``: :meth:`_finest_extra`, unused here; on MPI ranks ``new`` is this rank's share,
+        ``old_views`` the whole levels before and ``whole`` the whole carried levels on rank 0)."""
         from iceresist.models.fluid import _set_populations
 
         for lv, s in self.lbm.solvers.items():

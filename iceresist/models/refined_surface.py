@@ -25,16 +25,10 @@ from iceresist.models.refined import RefinedFluidModel
 
 class RefinedFreeSurfaceModel(RefinedFluidModel):
     """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA); on several MPI ranks
-    (``comm``) each takes its share of the levels (:class:`RefinedFreeSurface` with a ``decomp``), a static grid
-    only so far."""
+    (``comm``) each takes its share of the levels (:class:`RefinedFreeSurface` with a ``decomp``)."""
 
     components = ("fluid", "free_surface", "refinement")
 
-    def _split(self, octree):
-        if self.comm is not None and self.scene.refinement.regrid_every_steps:
-            raise InputError(f"mpirun -n {self.comm.size}: refinement.regrid_every_steps: a free surface on levels "
-                             f"regrids on one process so far; run it without mpirun, or leave regrid_every_steps out")
-        return super()._split(octree)
 
     def _level_bytes(self, views) -> dict[int, int]:
         """Bytes each level's blocks take: both population buffers, and on the finest level the phase field (h in
@@ -94,10 +88,13 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """The finest level's free-surface state before a regrid (:meth:`FreeSurfaceFluid.state`)."""
         return self.fs.surface.state()
 
-    def _fill(self, new: dict, old_views, finest: dict):
+    def _fill(self, new: dict, old_views, finest: dict, whole=None):
         """The carried populations and, with them, the finest level's phase field and flags
-        (:meth:`RefinedFreeSurface.carry_from`)."""
-        self.fs.carry_from(new, finest, old_views[self.finest])
+        (:meth:`RefinedFreeSurface.carry_from`; on MPI ranks :meth:`RefinedFreeSurface.carry_split`)."""
+        if self.decomp is None:
+            self.fs.carry_from(new, finest, old_views[self.finest])
+        else:
+            self.fs.carry_split(new, whole, finest, old_views[self.finest])
 
     def _populations(self, lv: int) -> np.ndarray:
         """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""

@@ -539,17 +539,82 @@ def test_a_free_surface_on_levels_regrids_on_two_ranks_as_on_one(tmp_path):
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))
 
 
-@pytest.mark.parametrize("scene, needle", [
-    ("bodies", "a refined scene with [bodies] runs on one process so far"),
-])
-def test_refined_scenes_not_split_yet_are_refused_on_two_ranks(tmp_path, scene, needle):
-    """Bodies on levels: one line naming what runs on one process, exit 2, nothing written."""
-    from tests.test_refined_bodies_model import SPHERE
+def test_bodies_in_water_on_levels_are_refused_on_two_ranks(tmp_path):
+    """A sphere under the surface on levels (bodies in water on levels: the tier-2 ship's case): one line naming
+    what runs on one process, exit 2, nothing written."""
+    from tests.test_refined_surface_bodies import _sink_text
 
-    (tmp_path / "scene.toml").write_text(SPHERE)
+    (tmp_path / "scene.toml").write_text(_sink_text(steps=10))
     r = _run(2, "scene.toml", "--output", "out", cwd=tmp_path)
     assert r.returncode == 2, r.stderr[-2000:]
     lines = [ln for ln in r.stderr.strip().splitlines() if not ln.startswith("INFO")]
+    needle = "a refined scene with [free_surface], [bodies] runs on one process so far"
     assert len(lines) == 1 and lines[0].startswith("iceresist: error: ") and needle in lines[0], r.stderr
     assert "Traceback" not in r.stderr
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_settling_sphere_on_regridded_levels_on_two_ranks_is_the_one_process_run(tmp_path):
+    """A sphere settling in a closed box with the band about it on level 1, regridding every 10 steps (the band
+    moves down at step 50): on two ranks (the coupling's cell owners carried on rank 0 and dealt out with the levels)
+    the octree, every level's populations, the finest level's flags, the covered cells and the sphere's height,
+    speed and force equal one process's bit for bit after 80 steps; 40 steps on two ranks continued on one do too."""
+    from tests.test_regrid_bodies import _settle_text
+
+    (tmp_path / "settle.toml").write_text(_settle_text(steps=80))
+
+    def state(out):
+        s = read_checkpoint(tmp_path / out / "settle.checkpoint.h5")["model"]
+        return ([s["octree_level"], s["octree_coord"], s["regrid_count"], s["flags_finest"], s["coupling"]["owner"],
+                 s["dem"]["pos"]] + [s["f"][k] for k in sorted(s["f"])])
+
+    for ranks, out in ((1, "one"), (2, "two")):
+        r = _run(ranks, "settle.toml", "--output", out, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-2000:]
+    want = state("one")
+    assert int(want[2]) == 1 and np.bincount(want[0]).tolist() == [43, 16] and (want[4] >= 0).sum() == 112
+    assert all(np.array_equal(x, y) for x, y in zip(want, state("two")))
+    _, ta = _fields(tmp_path / "one" / "settle.h5")
+    _, tb = _fields(tmp_path / "two" / "settle.h5")
+    for k in ("sphere_z_m", "sphere_vz_m_s", "sphere_Fz_N"):
+        assert ta[k][-1] != ta[k][0] and np.array_equal(ta[k], tb[k]), k
+    r = _run(2, "settle.toml", "--steps", 40, "--output", "two_one", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _run(1, "settle.toml", "--output", "two_one", "--pickup", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))
+
+
+def test_a_sphere_on_refined_levels_on_two_ranks_is_the_one_process_run(tmp_path):
+    """The sphere in its refined patch (Re 10, level 1 around it, 48 x 32 x 32 level-0 cells), moving up at 0.02
+    across the flow, 40 level-0 steps: on two ranks (the coupling on the finest level's own leaves and halo, the links of its own leaves summed
+    over the ranks, the halo leaves' populations swapped after each finest step) every level's populations, the
+    finest level's flags and the cells the sphere covers equal one process's bit for bit, and the forces and torques
+    within 1e-12 of the drag (summed in another order); a checkpoint of two ranks continues on one to the same
+    state. Planted: the links of the halo counted too (no distribute), and the finest level's swap left out, fail."""
+    from tests.test_refined_bodies_model import SPHERE
+
+    moving = 'motion = "prescribed"\nvelocity_m_s = [0.0, 0.0, 0.02]'      # 1.6 level-1 cells in 40 steps
+    text = SPHERE.replace("steps = 160", "steps = 40").replace('motion = "fixed"', moving)
+    (tmp_path / "sphere.toml").write_text(text)
+
+    def state(out):
+        s = read_checkpoint(tmp_path / out / "refined_sphere.checkpoint.h5")["model"]
+        return [s["f"][k] for k in sorted(s["f"])] + [s["flags_finest"], s["coupling"]["owner"]]
+
+    for ranks, out in ((1, "one"), (2, "two")):
+        r = _run(ranks, "sphere.toml", "--output", out, cwd=tmp_path)
+        assert r.returncode == 0, r.stderr[-2000:]
+    want = state("one")
+    assert (want[-1] >= 0).sum() == 272                 # the sphere's cells (d = 8 level-1 cells)
+    assert all(np.array_equal(x, y) for x, y in zip(want, state("two")))
+    _, ta = _fields(tmp_path / "one" / "refined_sphere.h5")
+    _, tb = _fields(tmp_path / "two" / "refined_sphere.h5")
+    assert ta["sphere_Fx_N"][-1] > 0.3
+    for k in ("sphere_Fx_N", "sphere_Fy_N", "sphere_Fz_N", "sphere_Tx_N_m", "sphere_Ty_N_m", "sphere_Tz_N_m"):
+        assert np.allclose(ta[k], tb[k], rtol=0, atol=1e-12 * ta["sphere_Fx_N"][-1]), k
+    r = _run(2, "sphere.toml", "--steps", 20, "--output", "two_one", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    r = _run(1, "sphere.toml", "--output", "two_one", "--pickup", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))

@@ -85,8 +85,9 @@ class FinestLevelBodies:
 
     def bodies_outside_finest(self, positions_m: np.ndarray, margin_cells: float) -> list[int]:
         """The bodies whose box (:meth:`body_boxes_m` at ``positions_m``), ``margin_cells`` finest cells wider, is
-        not wholly on the finest level's leaves."""
-        view = self.lbm.views[self.finest]
+        not wholly on the finest level's leaves (of every rank)."""
+        d = getattr(self, "decomp", None)
+        view = self.lbm.views[self.finest] if d is None else d.global_views[self.finest]
         dx = self.units.dx_m / 2 ** self.finest
         bm = view.block_map
         out = []
@@ -126,8 +127,11 @@ class FinestLevelBodies:
         return changed
 
     def _finest_state(self) -> dict:
-        """What the finest level holds besides its populations: its view and the coupling's state."""
-        return {"view": self.lbm.views[self.finest], "coupling": self.coupling.state()}
+        """What the finest level holds besides its populations: its view and the coupling's state (on several ranks
+        the whole level's view and the coupling's state gathered on rank 0, None on the others)."""
+        share = self.coupling.decomp
+        view = self.lbm.views[self.finest] if share is None else share.view
+        return {"view": view, "coupling": self.coupling.state()}
 
     def _carry_finest(self, old: dict):
         """The coupling's cell owners (now and a step earlier) copied block by block from ``old``
@@ -137,17 +141,25 @@ class FinestLevelBodies:
         not carried: the new coupling's first refill sets them from the owners on every block a body touches."""
         from iceresist.grid.regrid import same_blocks
 
-        src, dst = same_blocks(old["view"], self.lbm.views[self.finest])
-        st = dict(old["coupling"])
-        for key in ("owner", "owner_prev"):
-            was = np.asarray(st[key])
-            kept = np.zeros(len(was), dtype=bool)
-            kept[src] = True
-            if (was[~kept] >= 0).any():
-                raise RuntimeError(f"regrid: cells a body covers ({key}) lie on finest blocks the new octree drops")
-            now = np.full((self.lbm.solvers[self.finest].forest.nblocks, was.shape[1]), -1, dtype=was.dtype)
-            now[dst] = was[src]
-            st[key] = now
+        d = self.decomp
+        view = self.lbm.views[self.finest] if d is None else d.global_views[self.finest]
+        st, error = None, None
+        if old["coupling"] is not None:     # one process, or rank 0 of several: the whole level
+            src, dst = same_blocks(old["view"], view)
+            st = dict(old["coupling"])
+            for key in ("owner", "owner_prev"):
+                was = np.asarray(st[key])
+                kept = np.zeros(len(was), dtype=bool)
+                kept[src] = True
+                if (was[~kept] >= 0).any():
+                    error = f"regrid: cells a body covers ({key}) lie on finest blocks the new octree drops"
+                now = np.full((view.forest.nblocks, was.shape[1]), -1, dtype=was.dtype)
+                now[dst] = was[src]
+                st[key] = now
+        if d is not None:       # every rank takes its rows of the whole level (FluidStructureCoupling.load_state)
+            st, error = d.bcast((st, error))
+        if error is not None:
+            raise RuntimeError(error)
         self.coupling.load_state(st)
 
     def _bodies_finite(self) -> bool:
@@ -185,9 +197,11 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         if first:
             self._prepare()
         old = None if first else self._finest_state()
+        d = self.decomp
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
-                              rescale=scene.refinement.scheme == "interpolate", target=self.target)
+                              rescale=scene.refinement.scheme == "interpolate", target=self.target,
+                              views=None if d is None else d.views)
         if initialize:
             self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
         finest = self.lbm.levels[-1]
@@ -202,8 +216,31 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
                                                buoyancy=True, contact_film=True if con is None else con.fluid_film)
         self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
+        if d is not None:
+            self._split_steps(d)
         if old is not None:
             self._carry_finest(old)
+
+    def _split_steps(self, d):
+        """On several ranks: a coarser level steps its own leaves and swaps its halo leaves after each step; the
+        finest steps its halo leaves too (the coupling's passes reach at most 6 cells into its one block of halo, as
+        on a uniform grid: :class:`~iceresist.models.bodies.BodiesModel`), counts the links of its own leaves into
+        the forces (summed over the ranks) and swaps its halo leaves' populations after each step. The cell flags
+        need no swap: the replicated bodies mark their cells on the halo leaves alike on every rank."""
+        from iceresist.parallel.levels import LevelShare
+
+        finest, t = self.lbm.solvers[self.finest], self.target
+        self.coupling.distribute(LevelShare(d, self.finest))
+        for lv, level in self.lbm.solvers.items():
+            if lv != self.finest:
+                level.active_blocks = d.nown[lv]
+                level.after_step = lambda f, lv=lv: d.exchange(lv, f, t)
+
+        def step():
+            self.coupling.step(1)
+            d.exchange(self.finest, finest.state, t)
+
+        self.lbm.set_stepper(self.finest, step)
 
     def _prepare(self):
         """Checks and constants of the first build (a scene with a free surface is
@@ -217,9 +254,9 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
     def _leaf(self, lv: int):
         """rho and u of the leaves; the cells a body covers on the finest level at the reference state (rho0,
         u = 0), as :meth:`BodiesModel.fields` writes them."""
-        rho, u, xyz = self.lbm.leaf_fields(lv)
+        rho, u, xyz = self._own(lv, *self.lbm.leaf_fields(lv))
         if lv == self.finest:
-            now = self.coupling.fluid_mask()[:self.lbm.views[lv].nleaves]
+            now = self.coupling.fluid_mask()[:rho.shape[0]]
             rho = np.where(now, rho, 1.0)
             u = np.where(now[None], u, 0.0)
         return rho, u, xyz
@@ -230,14 +267,21 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         return {**self.body_columns(), **super().diagnostics()}
 
     def is_finite(self) -> bool:
-        return self._bodies_finite() and math.isfinite(self.lbm.mass())
+        finite = self._bodies_finite() and math.isfinite(self.lbm.mass())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     def state(self) -> dict:
         """The levels' populations (:meth:`RefinedFluidModel.state`), the finest level's cell flags (the cells the
-        bodies cover), the coupling and the DEM: a bit-for-bit restart."""
+        bodies cover), the coupling and the DEM: a bit-for-bit restart (on several ranks the whole levels on rank 0,
+        None on the others)."""
         finest = self.lbm.solvers[self.finest]
-        return {**super().state(), "flags_finest": np.array(self.target.to_host(finest.flags), copy=True),
-                "coupling": self.coupling.state(), "dem": self.dem.state()}
+        flags = np.array(self.target.to_host(finest.flags), copy=True)
+        levels, coupling = super().state(), self.coupling.state()
+        if self.decomp is not None:
+            flags = self.decomp.gather(self.finest, flags)
+            if levels is None:
+                return None
+        return {**levels, "flags_finest": flags, "coupling": coupling, "dem": self.dem.state()}
 
     def load_state(self, state: dict):
         from iceresist.backends.launch import copy_into
@@ -246,6 +290,9 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
             raise InputError("the checkpoint holds no bodies on refined levels: it belongs to another scene; run "
                              "again without --pickup")
         super().load_state(state)
-        copy_into(self.lbm.solvers[self.finest].flags, np.asarray(state["flags_finest"]).astype(np.uint8))
+        flags = np.asarray(state["flags_finest"])
+        if self.decomp is not None:
+            flags = flags[self.decomp.global_ids[self.finest]]
+        copy_into(self.lbm.solvers[self.finest].flags, flags.astype(np.uint8))
         self.coupling.load_state(state["coupling"])
         self.dem.load_state(state["dem"])

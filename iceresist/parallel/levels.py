@@ -219,8 +219,9 @@ class LevelShare(Collectives):
     def __init__(self, decomp: LevelDecomposition, level: int):
         self.decomp, self.level = decomp, int(level)
         self.comm, self.rank, self.size = decomp.comm, decomp.rank, decomp.size
-        #: The level's whole forest (leaves and ghosts of every rank), as one process holds it.
-        self.forest = decomp.global_views[self.level].forest
+        #: The level's whole view and forest (leaves and ghosts of every rank), as one process holds them.
+        self.view = decomp.global_views[self.level]
+        self.forest = self.view.forest
         self.global_ids = decomp.global_ids[self.level]
         self.nowned = decomp.nown[self.level]
 

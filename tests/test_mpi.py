@@ -355,6 +355,14 @@ REGRID = REFINED_CHANNEL.format(name="regrid", cells="[16, 16, 48]", top="slip",
                                 refinement="vorticity_1_s = 1.0e-5\nregrid_every_steps = 10\n")
 
 
+def _continued(first: int, second: int, scene: str, steps: int, out: str, cwd):
+    """``steps`` steps of ``scene`` on ``first`` ranks, then on ``second`` ranks to the scene's end from the
+    checkpoint (``--pickup``), into ``out``."""
+    for ranks, extra in ((first, ("--steps", steps)), (second, ("--pickup",))):
+        r = _run(ranks, scene, *extra, "--output", out, cwd=cwd)
+        assert r.returncode == 0, r.stderr[-2000:]
+
+
 def _levels(out, name):
     state = read_checkpoint(Path(out) / f"{name}.checkpoint.h5")["model"]
     return state["f"], state["octree_level"], int(state["regrid_count"])
@@ -417,10 +425,7 @@ def test_a_regridding_refined_run_splits_again_and_moves_between_rank_counts(tmp
     assert np.bincount(tree_partition(now, 2)).tolist() == [4, 20]   # a refined tree weighs 16 others
     for first, second, out in ((2, 2, "two"), (2, 1, "two_one"), (1, 2, "one_two")):
         if out != "two":
-            r = _run(first, "regrid.toml", "--steps", 30, "--output", out, cwd=tmp_path)
-            assert r.returncode == 0, r.stderr[-2000:]
-            r = _run(second, "regrid.toml", "--output", out, "--pickup", cwd=tmp_path)
-            assert r.returncode == 0, r.stderr[-2000:]
+            _continued(first, second, "regrid.toml", 30, out, tmp_path)
         fb, lb, nb = _levels(tmp_path / out, "regrid")
         assert nb == na and np.array_equal(la, lb), out
         _, series = _fields(tmp_path / out / "regrid.h5")
@@ -497,10 +502,7 @@ def test_a_free_surface_on_refined_levels_on_two_ranks_is_the_one_process_run(tm
     want = state("one")
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two")))
     for first, second, out in ((2, 1, "two_one"), (1, 2, "one_two")):
-        r = _run(first, "tank.toml", "--steps", 20, "--output", out, cwd=tmp_path)
-        assert r.returncode == 0, r.stderr[-2000:]
-        r = _run(second, "tank.toml", "--output", out, "--pickup", cwd=tmp_path)
-        assert r.returncode == 0, r.stderr[-2000:]
+        _continued(first, second, "tank.toml", 20, out, tmp_path)
         assert all(np.array_equal(x, y) for x, y in zip(want, state(out))), out
 
 
@@ -532,10 +534,7 @@ def test_a_free_surface_on_levels_regrids_on_two_ranks_as_on_one(tmp_path):
     _, ta = _fields(tmp_path / "one" / "tank.h5")
     _, tb = _fields(tmp_path / "two" / "tank.h5")
     assert np.array_equal(ta["water_volume_m3"], tb["water_volume_m3"])
-    r = _run(2, "slosh.toml", "--steps", 20, "--output", "two_one", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
-    r = _run(1, "slosh.toml", "--output", "two_one", "--pickup", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
+    _continued(2, 1, "slosh.toml", 20, "two_one", tmp_path)
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))
 
 
@@ -578,20 +577,18 @@ def test_a_settling_sphere_on_regridded_levels_on_two_ranks_is_the_one_process_r
     _, tb = _fields(tmp_path / "two" / "settle.h5")
     for k in ("sphere_z_m", "sphere_vz_m_s", "sphere_Fz_N"):
         assert ta[k][-1] != ta[k][0] and np.array_equal(ta[k], tb[k]), k
-    r = _run(2, "settle.toml", "--steps", 40, "--output", "two_one", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
-    r = _run(1, "settle.toml", "--output", "two_one", "--pickup", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
+    _continued(2, 1, "settle.toml", 40, "two_one", tmp_path)
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))
 
 
 def test_a_sphere_on_refined_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     """The sphere in its refined patch (Re 10, level 1 around it, 48 x 32 x 32 level-0 cells), moving up at 0.02
-    across the flow, 40 level-0 steps: on two ranks (the coupling on the finest level's own leaves and halo, the links of its own leaves summed
-    over the ranks, the halo leaves' populations swapped after each finest step) every level's populations, the
-    finest level's flags and the cells the sphere covers equal one process's bit for bit, and the forces and torques
-    within 1e-12 of the drag (summed in another order); a checkpoint of two ranks continues on one to the same
-    state. Planted: the links of the halo counted too (no distribute), and the finest level's swap left out, fail."""
+    across the flow, 40 level-0 steps: on two ranks (the coupling on the finest level's own leaves and halo, the
+    links of its own leaves summed over the ranks, the halo leaves' populations swapped after each finest step)
+    every level's populations, the finest level's flags and the cells the sphere covers equal one process's bit for
+    bit, and the forces and torques within 1e-12 of the drag (summed in another order); a checkpoint of two ranks
+    continues on one to the same state. Planted: the links of the halo counted too (no distribute), and the finest
+    level's swap left out, fail."""
     from tests.test_refined_bodies_model import SPHERE
 
     moving = 'motion = "prescribed"\nvelocity_m_s = [0.0, 0.0, 0.02]'      # 1.6 level-1 cells in 40 steps
@@ -613,8 +610,5 @@ def test_a_sphere_on_refined_levels_on_two_ranks_is_the_one_process_run(tmp_path
     assert ta["sphere_Fx_N"][-1] > 0.3
     for k in ("sphere_Fx_N", "sphere_Fy_N", "sphere_Fz_N", "sphere_Tx_N_m", "sphere_Ty_N_m", "sphere_Tz_N_m"):
         assert np.allclose(ta[k], tb[k], rtol=0, atol=1e-12 * ta["sphere_Fx_N"][-1]), k
-    r = _run(2, "sphere.toml", "--steps", 20, "--output", "two_one", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
-    r = _run(1, "sphere.toml", "--output", "two_one", "--pickup", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr[-2000:]
+    _continued(2, 1, "sphere.toml", 20, "two_one", tmp_path)
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))

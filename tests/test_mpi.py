@@ -476,7 +476,8 @@ def test_a_free_surface_on_refined_levels_on_two_ranks_is_the_one_process_run(tm
     """Still water on two levels (the surface on level 1), 40 level-0 steps: on two ranks (the finest level's halo
     leaves stepped and their whole state swapped after each of its steps, level 0's populations after each of its
     own) every level's populations, h, phi and flags, the fields and the time series (water volume, mass, energy,
-    surface height) equal one process's bit for bit; a checkpoint of two ranks continues on one to the same state. Planted: h left out of the swap fails (phi off by 4e-5)."""
+    surface height) equal one process's bit for bit; a checkpoint of two ranks continues on one to the same state.
+    Planted: h left out of the swap fails (phi off by 4e-5)."""
     (tmp_path / "tank.toml").write_text(SURFACE)
     runs = {}
     for ranks, out in ((1, "one"), (2, "two")):

@@ -126,9 +126,9 @@ class RefinedFluidModel(Model):
     """The LBM fluid alone on the levels of a scene's ``[refinement]`` (CPU or CUDA; on CUDA the conservative
     interface, every level's state and the transfers on the device).
 
-    ``comm``: an MPI communicator of several ranks; each rank then holds whole level-0 trees of the octree and a ring
-    of trees around them, split along the Morton curve in equal cells x sub-steps and split again after every regrid
-    (:class:`~iceresist.parallel.levels.LevelDecomposition`); fields, level fields and checkpoints are gathered on
+    ``comm``: an MPI communicator of several ranks; each rank then steps whole level-0 trees of the octree (with one
+    block of every level around them as halo), split along the Morton curve in equal cells x sub-steps and split
+    again after every regrid (:class:`~iceresist.parallel.levels.LevelDecomposition`); fields, level fields and checkpoints are gathered on
     rank 0 (:attr:`Model.comm`), diagnostics summed over the ranks."""
 
     components = ("fluid", "refinement")
@@ -218,10 +218,9 @@ class RefinedFluidModel(Model):
                               operator=fl.operator, precision=self.precision, scheme=scene.refinement.scheme,
                               rescale=scene.refinement.scheme == "interpolate", target=self.target,
                               views=None if d is None else d.views)
-        if d is not None:       # a rank steps its own leaves; after each step of a level its halo leaves are swapped
+        if d is not None:
             for lv, s in self.lbm.solvers.items():
-                s.active_blocks = d.nown[lv]
-                s.after_step = lambda f, lv=lv: d.exchange(lv, f, self.target)
+                d.step_own(lv, s, self.target)
         if initialize:
             u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
             self.lbm.initialize(1.0, u0)
@@ -293,7 +292,6 @@ class RefinedFluidModel(Model):
             carry_over(old_views, old, self.lbm.views, new)
         else:
             old = {lv: old_decomp.gather(lv, f) for lv, f in old.items()}
-            whole = None
             if self.comm.rank == 0:
                 whole = {lv: np.zeros((decomp.global_views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
                 carry_over(old_decomp.global_views, old, decomp.global_views, whole)

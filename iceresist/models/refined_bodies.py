@@ -233,8 +233,7 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         self.coupling.distribute(LevelShare(d, self.finest))
         for lv, level in self.lbm.solvers.items():
             if lv != self.finest:
-                level.active_blocks = d.nown[lv]
-                level.after_step = lambda f, lv=lv: d.exchange(lv, f, t)
+                d.step_own(lv, level, t)
 
         def step():
             self.coupling.step(1)

@@ -166,6 +166,12 @@ class LevelDecomposition(Collectives):
         self.exchanges += 1
         self.exchange_s += time.perf_counter() - t0
 
+    def step_own(self, lv: int, solver, target=None) -> None:
+        """Make ``solver`` (an :class:`~iceresist.lbm.solver.LBMSolver` of level ``lv`` on this rank's blocks) step
+        this rank's own leaves and swap the level's halo leaves after each step."""
+        solver.active_blocks = self.nown[lv]
+        solver.after_step = lambda f: self.exchange(lv, f, target)
+
     # -- whole levels on rank 0 ------------------------------------------------------------------------
     def gather(self, lv: int, local: np.ndarray):
         """Level ``lv``'s per-block array (this rank's blocks along axis 0) as the whole level's in global block

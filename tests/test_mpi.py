@@ -85,12 +85,16 @@ def test_a_checkpoint_moves_between_rank_counts(tmp_path):
                            "ranks; run with at most 2 ranks"),
 ])
 def test_bad_mpi_use_exits_2_with_one_line(tmp_path, ranks, scene, needle):
-    r = _run(ranks, scene, "--steps", 10, "--output", "out", cwd=tmp_path)
+    _refused(_run(ranks, scene, "--steps", 10, "--output", "out", cwd=tmp_path), needle, tmp_path / "out")
+
+
+def _refused(r, needle: str, out: Path):
+    """One line starting with iceresist's error and holding ``needle``, exit 2, no traceback, nothing in ``out``."""
     assert r.returncode == 2, r.stderr[-2000:]
     lines = [ln for ln in r.stderr.strip().splitlines() if not ln.startswith("INFO")]
     assert len(lines) == 1 and lines[0].startswith("iceresist: error: ") and needle in lines[0], r.stderr
     assert "Traceback" not in r.stderr
-    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    assert not out.exists() or not any(out.iterdir())
 
 
 def _cuda_target() -> bool:
@@ -543,13 +547,8 @@ def test_bodies_in_water_on_levels_are_refused_on_two_ranks(tmp_path):
     from tests.test_refined_surface_bodies import _sink_text
 
     (tmp_path / "scene.toml").write_text(_sink_text(steps=10))
-    r = _run(2, "scene.toml", "--output", "out", cwd=tmp_path)
-    assert r.returncode == 2, r.stderr[-2000:]
-    lines = [ln for ln in r.stderr.strip().splitlines() if not ln.startswith("INFO")]
-    needle = "a refined scene with [free_surface], [bodies] runs on one process so far"
-    assert len(lines) == 1 and lines[0].startswith("iceresist: error: ") and needle in lines[0], r.stderr
-    assert "Traceback" not in r.stderr
-    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    _refused(_run(2, "scene.toml", "--output", "out", cwd=tmp_path),
+             "a refined scene with [free_surface], [bodies] runs on one process so far", tmp_path / "out")
 
 
 def test_a_settling_sphere_on_regridded_levels_on_two_ranks_is_the_one_process_run(tmp_path):

@@ -106,7 +106,7 @@ class LevelDecomposition(Collectives):
         root = octree.root
         periodic = tuple(bool(p) for p in octree.periodic)
         self.views: list[LevelView | None] = []
-        self.global_ids, self.nown, self.owned_rows, self.owner = {}, {}, {}, {}
+        self.global_ids, self.nown, self.owned_rows = {}, {}, {}
         self._sends, self._recvs = {}, {}
         for v in views:
             if v is None:
@@ -131,7 +131,6 @@ class LevelDecomposition(Collectives):
             self.global_ids[lv] = ids
             self.nown[lv] = len(own_leaves)
             self.owned_rows[lv] = np.flatnonzero(owner[ids] == self.rank)
-            self.owner[lv] = owner
             pos = np.full(f.nblocks, -1, dtype=np.int64)
             pos[ids] = np.arange(len(ids))
             # whole leaf blocks: this rank's leaves in another rank's halo go there, its halo leaves come
@@ -148,10 +147,6 @@ class LevelDecomposition(Collectives):
         self.leaves_per_rank = [int(n) for n in np.bincount(leaf_owner, minlength=self.size)]
         #: Totals since construction: halo exchanges, bytes this rank sent, wall seconds inside them.
         self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
-
-    @property
-    def levels(self) -> list[int]:
-        return [v.level for v in self.views if v is not None]
 
     # -- halo exchange ------------------------------------------------------------------------------
     def exchange(self, lv: int, arr, target=None) -> None:

@@ -145,6 +145,12 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("iceresist: interrupted; files already written are complete", file=sys.stderr)
         return 130
+    except Exception:
+        from iceresist import parallel
+
+        if parallel.launched_by_mpi() and parallel.world() is not None:
+            parallel.abort(parallel.world())       # the other ranks would wait in their next collective call forever
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

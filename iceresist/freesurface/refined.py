@@ -433,18 +433,20 @@ class RefinedFreeSurface:
         return self.lbm.iteration
 
     # ------------------------------------------------------------------ diagnostics
-    def volume(self) -> float:
+    def volume(self, per_block: np.ndarray | None = None) -> float:
         """The water volume in level-0 cells: the finest level's leaves' sum of phi over 8^L (per-block sums added in
         the level's global block order: the same float64 sum on any number of ranks), plus every coarser level's
-        leaf cells (liquid throughout) over 8^l."""
-        phi = np.asarray(self.target.to_host(self.surface.phase.phi), dtype=np.float64)
+        leaf cells (liquid throughout) over 8^l. ``per_block``: the finest level's volume per block of this rank
+        (its leaves first) to add instead of phi's sums (the bodies': :meth:`PhaseField.volume_per_block`)."""
+        if per_block is None:
+            phi = np.asarray(self.target.to_host(self.surface.phase.phi), dtype=np.float64)
+            per_block = phi.sum(axis=1)
         leaves = self.octree.blocks_per_level()
         d = self.decomp
         if d is None:
-            per_block = phi[:self._nleaves].sum(axis=1)
+            per_block = per_block[:self._nleaves]
         else:
-            whole = d.gather_leaves(self.finest, phi[:d.nown[self.finest]].sum(axis=1))
-            per_block = d.bcast(whole)
+            per_block = d.bcast(d.gather_leaves(self.finest, per_block[:d.nown[self.finest]]))
         total = per_block.sum() / 8.0 ** self.finest
         for level in self.levels[:-1]:
             total += int(leaves[level]) * CELLS / 8.0 ** level

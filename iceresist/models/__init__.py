@@ -41,8 +41,7 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
     alone), tier-1 and tier-2 ship scenes ([ship] + [ice]) and scenes of rigid bodies ([[bodies]], with or
     without [free_surface] and [contact]). ``comm``: the MPI communicator of a run on several ranks
-    (:mod:`iceresist.parallel`: every uniform-grid scene but a tier-1 ship; on levels the fluid alone, a free surface
-    and bodies in a fluid on a static grid)."""
+    (:mod:`iceresist.parallel`: every scene but a tier-1 ship, on a uniform grid or on levels)."""
     if comm is not None and comm.size > 1:
         extra = scene.optional_sections()
         if extra == ["refinement"]:
@@ -51,11 +50,16 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
             return RefinedFreeSurfaceModel(scene, backend=backend, precision=precision, comm=comm)
         if "refinement" in extra and scene.bodies and set(extra) <= {"refinement", "bodies", "contact"}:
             return RefinedBodiesModel(scene, backend=backend, precision=precision, comm=comm)
+        if "refinement" in extra and scene.bodies and set(extra) <= {"refinement", "bodies", "contact",
+                                                                        "free_surface"}:
+            return RefinedSurfaceBodiesModel(scene, backend=backend, precision=precision, comm=comm)
+        if "refinement" in extra and scene.ship is not None and scene.ice is not None and scene.ship.tier == 2 \
+                and not scene.bodies:
+            return RefinedTier2Model(scene, backend=backend, precision=precision, comm=comm)
         if "refinement" in extra:
-            others = ", ".join("[" + s + "]" for s in extra if s != "refinement")
-            raise InputError(f"mpirun -n {comm.size}: a refined scene with {others} runs on one process so far (the "
-                             f"fluid alone, a free surface, and bodies in a fluid on levels run on several); run it "
-                             f"without mpirun")
+            raise InputError(f"mpirun -n {comm.size}: refinement: this refined scene "
+                             f"({', '.join('[' + s + ']' for s in extra)}) has no model on levels; run it without "
+                             f"mpirun to see why")
         if scene.ship is not None and scene.ice is not None and scene.ship.tier == 2 and not scene.bodies:
             return Tier2Model(scene, backend=backend, precision=precision, comm=comm)
         if extra == ["free_surface"]:

@@ -12,6 +12,9 @@ refines around it). The water volume is the finest level's phase volume outside 
 water, in level-0 cells. With ``refinement.regrid_every_steps`` the band of ``refinement.body_band_m`` follows the
 bodies (block AMR part 2): at a regrid the populations of every level, the finest level's h, phi and flags
 (:meth:`RefinedFreeSurface.carry_from`) and the coupling's cell owners are carried to the new blocks, the DEM goes on.
+On several MPI ranks (``comm``) each takes its share of the levels as for the water alone, the finest level's halo
+leaves swap their whole state after the coupling's boundary passes and after each step (:meth:`_swap_finest`), and
+every rank runs the same DEM on the forces summed over the ranks.
 """
 
 from __future__ import annotations
@@ -21,7 +24,6 @@ import math
 import numpy as np
 
 from iceresist.errors import InputError
-from iceresist.grid.forest import CELLS
 from iceresist.models.refined_bodies import FinestLevelBodies
 from iceresist.models.refined_surface import RefinedFreeSurfaceModel
 
@@ -47,33 +49,53 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         con = self.scene.contact
         self.coupling = FluidStructureCoupling(self.fs.surface, self.dem, self.geoms, self.units_finest,
                                                contact_film=True if con is None else con.fluid_film)
+        if self.decomp is not None:     # the links of this rank's own leaves; the halo swapped after the boundaries
+            self.coupling.distribute(self.fs.surface.decomp)
+            self.coupling.after_boundaries = self._swap_finest
         self.lbm.set_stepper(self.finest, self._finest_step)
         if old is not None:
             self._carry_finest(old)
             return
         self.coupling.update_boundaries()       # the bodies placed in the still water (their cells leave it)
+        self._swap_finest()
         self._buoyancy_N = np.zeros((len(self.scene.bodies), 3))
         self.volume0_cells = self.water_volume_cells()
 
     def _finest_step(self):
         """One step of the finest level: the ghost blocks refilled from the coarser level, then the coupled step
-        (boundaries, free-surface step, DEM)."""
+        (boundaries, free-surface step, DEM: :meth:`_couple`); on several ranks the halo leaves swapped after it."""
         self.fs.refill_ghosts()
+        self._couple()
+        self._swap_finest()
+
+    def _couple(self):
+        """The coupled step of the finest level (:meth:`FluidStructureCoupling.step`)."""
         self.coupling.step(1)
+
+    def _swap_finest(self):
+        """On several ranks: the finest level's halo leaves take their owners' whole state (populations, h, phi,
+        flags), as :meth:`FloatingBodies._exchange` on a uniform grid: the coupling's boundary passes and the
+        free-surface step each reach up to 5 cells into the one block of halo, together more than a block, so the
+        swap follows each (the coupling's ``after_boundaries`` and :meth:`_finest_step`). The cell owners follow
+        from the bodies, replicated on every rank."""
+        d = self.decomp
+        if d is None:
+            return
+        fs, t = self.fs.surface, self.target
+        for arr in (fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags):
+            d.exchange(self.finest, arr, t)
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def water_volume_cells(self) -> float:
         """The water volume in level-0 cells: the finest level's phase volume over its leaves outside the bodies
-        (:meth:`PhaseField.volume_per_block`) over 8^L, plus every coarser level's leaf cells over 8^l."""
-        n = self.lbm.views[self.finest].nleaves
-        total = float(self.fs.surface.phase.volume_per_block()[:n].sum()) / 8.0 ** self.finest
-        for lv in self.lbm.levels[:-1]:
-            total += self.lbm.views[lv].nleaves * CELLS / 8.0 ** lv
-        return total
+        (:meth:`PhaseField.volume_per_block`) over 8^L, plus every coarser level's leaf cells over 8^l
+        (:meth:`RefinedFreeSurface.volume`: the same float64 on any number of ranks)."""
+        return self.fs.volume(self.fs.surface.phase.volume_per_block())
 
     def _covered(self) -> np.ndarray:
-        """The finest level's leaf cells a body covers (nleaves, 512)."""
-        return self.coupling.owners()[:self.lbm.views[self.finest].nleaves] >= 0
+        """The finest level's leaf cells a body covers (nleaves, 512; this rank's own leaves on several ranks)."""
+        n = self.lbm.views[self.finest].nleaves if self.decomp is None else self.decomp.nown[self.finest]
+        return self.coupling.owners()[:n] >= 0
 
     def _leaf(self, lv: int):
         """As :meth:`RefinedFreeSurfaceModel._leaf`, the cells the bodies cover at the reference state too."""
@@ -102,12 +124,18 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         return {**self.body_columns(), **out}
 
     def is_finite(self) -> bool:
-        return self._bodies_finite() and math.isfinite(self.water_volume_cells()) and math.isfinite(self.lbm.mass())
+        volume = self.water_volume_cells()          # on several ranks a collective call: every rank takes it
+        finite = self._bodies_finite() and math.isfinite(volume) and math.isfinite(self.lbm.mass())
+        return finite if self.decomp is None else self.decomp.all(finite)
 
     def state(self) -> dict:
         """The water's state (:meth:`RefinedFreeSurfaceModel.state`: the finest level's flags, with the cells the
-        bodies cover, among it), the coupling and the DEM: a bit-for-bit restart."""
-        return {**super().state(), "coupling": self.coupling.state(), "dem": self.dem.state()}
+        bodies cover, among it), the coupling and the DEM: a bit-for-bit restart (on several ranks the whole levels
+        on rank 0, None on the others)."""
+        water, coupling = super().state(), self.coupling.state()
+        if water is None:
+            return None
+        return {**water, "coupling": coupling, "dem": self.dem.state()}
 
     def load_state(self, state: dict):
         if "coupling" not in state or "dem" not in state:

@@ -35,7 +35,8 @@ log = logging.getLogger(__name__)
 
 class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
     """Coupled LBM-DEM ship + ice + water on refined levels (module docstring); ``backend``, ``precision`` override
-    the scene's ``[numerics]``. One process (CPU or CUDA)."""
+    the scene's ``[numerics]``; ``comm``: an MPI communicator of several ranks (CPU or CUDA; the levels split as
+    :class:`~iceresist.models.refined.RefinedFluidModel` splits them, the DEM replicated on every rank)."""
 
     components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice", "refinement")
     tier = 2
@@ -43,7 +44,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
     #: The ship's DEM (its contact law), not the bodies scene's.
     _make_dem = ShipModel._make_dem
 
-    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None):
+    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.backend, self.precision = backend, precision
         gvec = self._set_up_tier2(scene)
         self.decomp = None
@@ -56,7 +57,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         self._force_mean = np.zeros(3)
         self._force_last = np.zeros(3)
         self._fluid_mean = np.zeros(3)
-        super().__init__(scene, backend=self.backend, precision=self.precision)
+        super().__init__(scene, backend=self.backend, precision=self.precision, comm=comm)
         u = self.units
         self.lbm_dt_s = u.dt_s
         self.lbm_steps_per_record = max(1, int(math.ceil(self.contact.sample_interval_s / u.dt_s - 1e-9)))
@@ -157,10 +158,8 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
             positions_m = self._start_positions
         return super().body_boxes_m(positions_m)
 
-    def _finest_step(self):
-        """One finest-level step: the ghost blocks refilled from the coarser level, then the coupled step with the
-        contact loads summed for the record."""
-        self.fs.refill_ghosts()
+    def _couple(self):
+        """The finest level's coupled step with the contact loads summed for the record."""
         self.coupling.step(1, accumulate_contacts=True)
         self._subs += self.dem.last_substeps
 
@@ -209,12 +208,14 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
 
     def _surface_height_m(self) -> np.ndarray:
         """The free surface over each level-0 column (m from the bottom), a floe counted as water
-        (:meth:`RefinedFreeSurfaceModel.surface_cells`)."""
-        return self.surface_cells(covered_as_water=True) * self.units.dx_m
+        (:meth:`RefinedFreeSurfaceModel.surface_cells`); None on an MPI rank other than 0."""
+        h = self.surface_cells(covered_as_water=True)
+        return None if h is None else h * self.units.dx_m
 
     def is_finite(self) -> bool:
+        volume = self.water_volume_cells()          # on several ranks a collective call, the same on every rank
         return bool(np.isfinite(self._force_mean).all() and np.isfinite(self._fluid_mean).all()
-                    and self._bodies_finite() and math.isfinite(self.water_volume_cells()))
+                    and self._bodies_finite() and math.isfinite(volume))
 
     #: As :attr:`Tier2Model.watchdog_interval` and :attr:`Tier2Model.full_probe_every`.
     watchdog_interval = 1
@@ -232,8 +233,10 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         probe = self.fs.surface.probe(full, 0.5 * n * u_ship ** 2)
         if not probe["finite"][0]:
             return probe
-        if full and not math.isfinite(self.lbm.mass()):
-            return {"finite": (False, None)}
+        if full:
+            finite = math.isfinite(self.lbm.mass())         # this rank's leaves: every rank must agree
+            if not (finite if self.decomp is None else self.decomp.all(finite)):
+                return {"finite": (False, None)}
         ice = self.ice_probe()
         if not ice["finite"][0]:
             return ice
@@ -256,7 +259,10 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         """The levels, the free surface, the coupling and the DEM (:meth:`RefinedSurfaceBodiesModel.state`: a
         bit-for-bit restart), the records and the last forces, and the ice bodies alone under ``positions_m`` etc.
         (for readers of the checkpoint)."""
-        return {**super().state(), "records": np.int64(self._records),
+        levels = super().state()
+        if levels is None:          # an MPI rank other than 0
+            return None
+        return {**levels, "records": np.int64(self._records),
                 "force_mean_N": self._force_mean.copy(), "force_last_N": self._force_last.copy(),
                 "fluid_force_mean_N": self._fluid_mean.copy(), **self.ice_state()}
 
@@ -293,4 +299,5 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
                 "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
                 "cells_per_cube": self.cells_per_cube, "bodies_level": self.finest,
-                "precision": self.precision, "backend": self.target.name, "allocation_bytes": self.allocation()}
+                "precision": self.precision, "backend": self.target.name, "allocation_bytes": self.allocation(),
+                **({} if self.decomp is None else {"mpi": self.decomp.describe()})}

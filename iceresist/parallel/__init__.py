@@ -55,6 +55,17 @@ def share_cores(comm) -> int:
     return n
 
 
+def abort(comm) -> None:
+    """Print this rank's traceback and stop every rank (``MPI_Abort``, exit status 1): an error that one rank alone
+    meets would otherwise leave the others waiting in their next collective call until the job's time runs out."""
+    import sys
+    import traceback
+
+    print(f"iceresist: rank {comm.rank} of {comm.size} failed; stopping every rank", file=sys.stderr)
+    traceback.print_exc()
+    sys.stderr.flush()
+    comm.Abort(1)
+
 
 def rank() -> int:
     """This process's rank (0 without MPI)."""

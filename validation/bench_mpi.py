@@ -3,7 +3,8 @@
 coupled tier-2 step of the quick A-c68-v1.0 case instead (3.19e6 cells, the hull, 785 ice cubes, the free
 surface; ``--n`` ignored); with ``--case amr`` a periodic box of ``--n`` level-0 cells per side whose middle half
 along each axis is level 1 (the refined fluid, :mod:`iceresist.parallel.levels`; a step is one level-0 step, MLUPS
-counts level 1's two sub-steps).
+counts level 1's two sub-steps); with ``--case ship-amr`` the quick A-c68-v1.0 case on its refined levels
+(``iceresist sweep --amr``'s tank, the coupled step on the finest level; ``--n`` ignored).
 
 Each configuration runs in its own ``mpirun`` (``--ranks``, default 1 and 2 ranks of one thread each, and one rank
 of as many threads as ranks for comparison): after one untimed step (the kernels load), ``--steps`` steps are
@@ -11,7 +12,8 @@ timed; per configuration the seconds per step, MLUPS, the speed-up over one rank
 ranks send per step (halo exchange, all ranks together) and the share of the step spent in the exchange
 (rank 0).
 
-    python -m validation.bench mpi [--case ship|amr] [--n 64] [--steps 20] [--precision float32] [--ranks 2] [--json]
+    python -m validation.bench mpi [--case ship|amr|ship-amr] [--n 64] [--steps 20] [--precision float32]
+                                   [--ranks 2] [--json]
 """
 
 from __future__ import annotations
@@ -27,9 +29,9 @@ from pathlib import Path
 
 def add_arguments(parser: argparse.ArgumentParser):
     parser.add_argument("--ranks", type=int, default=2, help="the largest rank count (default 2)")
-    parser.add_argument("--case", choices=("lbm", "ship", "amr"), default="lbm",
-                        help="the fused LBM in a periodic box (default), the coupled quick tier-2 step or a box "
-                             "refined in its middle (two levels)")
+    parser.add_argument("--case", choices=("lbm", "ship", "amr", "ship-amr"), default="lbm",
+                        help="the fused LBM in a periodic box (default), the coupled quick tier-2 step, a box "
+                             "refined in its middle (two levels) or the quick tier-2 case on its refined levels")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
 
 
@@ -89,8 +91,6 @@ level = 1
 def amr_worker(n: int, steps: int, precision: str) -> dict | None:
     """Level-0 steps of the refined box in this MPI job (or one process), after one untimed step; rank 0's figures,
     None on the others."""
-    from types import SimpleNamespace
-
     from iceresist import parallel
     from iceresist.models.refined import RefinedFluidModel
     from iceresist.scene.load import parse_scene
@@ -98,9 +98,32 @@ def amr_worker(n: int, steps: int, precision: str) -> dict | None:
     comm = parallel.world()
     scene = parse_scene(AMR_SCENE.format(n=n, lo=n / 4, hi=3 * n / 4, precision=precision), "amr_bench.toml")
     model = RefinedFluidModel(scene, backend="cpu", comm=comm)
-    model.step(1)
-    size = SimpleNamespace(cells=model.lattice_updates_per_step, nblocks=int(model.octree.nleaves))
-    out = _timed(model.step, comm, model.decomp, size, steps, precision)
+    return _levels_timed(model, model.lattice_updates_per_step, comm, steps, precision)
+
+
+def ship_amr_worker(steps: int, precision: str) -> dict | None:
+    """Level-0 steps of the quick A-c68-v1.0 case on its refined levels (``iceresist sweep --amr``'s tank: every
+    level's sub-steps, the coupling, the surface and the DEM on the finest) in this MPI job (or one process), after
+    one untimed step; rank 0's figures, None on the others. No regrid inside the timed steps."""
+    from iceresist import parallel
+    from iceresist.models import RefinedTier2Model
+    from iceresist.ship.cases import amr_overrides
+    from iceresist.ship.presets import case_scene
+
+    comm = parallel.world()
+    model = RefinedTier2Model(case_scene("A-c68-v1.0", "quick", 2, **amr_overrides("quick")), backend="cpu",
+                              precision=precision, comm=comm)
+    return _levels_timed(model, model.lattice_updates_per_step // model.lbm_steps_per_record, comm, steps, precision)
+
+
+def _levels_timed(model, updates: int, comm, steps: int, precision: str) -> dict | None:
+    """``model.lbm.step`` (level-0 steps of a model on levels, ``updates`` cell updates each) timed after one
+    untimed step, with the halo leaves rank 0 holds."""
+    from types import SimpleNamespace
+
+    model.lbm.step(1)
+    size = SimpleNamespace(cells=updates, nblocks=int(model.octree.nleaves))
+    out = _timed(model.lbm.step, comm, model.decomp, size, steps, precision)
     if out is not None and model.decomp is not None:
         d = model.decomp
         out["halo_blocks_rank0"] = int(sum(v.nleaves for v in d.views if v is not None) - sum(d.nown.values()))
@@ -170,8 +193,8 @@ def run(args) -> list[dict]:
         for ranks, threads in configs:
             r = _launch(ranks, threads, args, precision)
             base = base or r["seconds_per_step"]
-            name = {"ship": "quick tier-2 step (A-c68-v1.0)", "amr": f"two levels n={args.n}"}.get(args.case,
-                                                                                                f"lbm n={args.n}")
+            name = {"ship": "quick tier-2 step (A-c68-v1.0)", "amr": f"two levels n={args.n}",
+                    "ship-amr": "quick tier-2 on levels (A-c68-v1.0 --amr)"}.get(args.case, f"lbm n={args.n}")
             rows.append({"name": name, "ranks": ranks, "threads_per_rank": threads,
                          "precision": precision, "cells": r["cells"], "steps": args.steps,
                          "seconds_per_step": r["seconds_per_step"], "mlups": r["mlups"],
@@ -193,6 +216,8 @@ def _main(argv=None):
         out = ship_worker(a.steps, a.precision)
     elif a.case == "amr":
         out = amr_worker(a.n, a.steps, a.precision)
+    elif a.case == "ship-amr":
+        out = ship_amr_worker(a.steps, a.precision)
     else:
         out = worker(a.n, a.steps, a.precision)
     if out is not None:

@@ -151,9 +151,8 @@ class FloatingBodies:
         cell owners follow from the bodies, the same on every rank."""
         if self.decomp is None:
             return
-        fl, t = self.fluid, self.fluid.target
-        for arr in (fl.fluid.state, fl.phase.h, fl.phase.phi, fl.fluid.flags):
-            self.decomp.exchange(arr, t, full=True)
+        for arr in self.fluid.halo_state:
+            self.decomp.exchange(arr, self.fluid.target, full=True)
 
     @property
     def time_s(self) -> float:

@@ -483,6 +483,12 @@ class FreeSurfaceFluid:
                 "other": int(nb * CELLS * (3 * item + 1 + 1 + 1) + nb),
                 }
 
+    @property
+    def halo_state(self) -> tuple:
+        """The arrays a halo block takes whole from its owner on another rank (per block: the populations, h, phi,
+        the cell flags), in the order every rank sends them."""
+        return self.fluid.state, self.phase.h, self.phase.phi, self.fluid.flags
+
     def phi(self) -> np.ndarray:
         """Dense phi (nx, ny, nz), float64."""
         return self.dense(self.phase.phi_host().astype(np.float64))

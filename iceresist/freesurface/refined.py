@@ -282,7 +282,7 @@ class RefinedFreeSurface:
         for lv, level in self.lbm.solvers.items():
             if lv == self.finest:
                 def arrays():
-                    return fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags
+                    return fs.halo_state
             else:
                 level.active_blocks = decomp.nown[lv]
 

@@ -335,9 +335,8 @@ class FreeSurfaceModel(Model):
         step (:meth:`Decomposition.exchange` with ``full``)."""
         if self.decomp is None:
             return
-        fs, t = self.fluid, self.target
-        for arr in (fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags):
-            self.decomp.exchange(arr, t, full=True)
+        for arr in self.fluid.halo_state:
+            self.decomp.exchange(arr, self.target, full=True)
 
     def volume(self) -> float:
         """Water volume sum phi (cells^3): per-block sums on the target, added up in global block order (the same

@@ -81,9 +81,8 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         d = self.decomp
         if d is None:
             return
-        fs, t = self.fs.surface, self.target
-        for arr in (fs.fluid.state, fs.phase.h, fs.phase.phi, fs.fluid.flags):
-            d.exchange(self.finest, arr, t)
+        for arr in self.fs.surface.halo_state:
+            d.exchange(self.finest, arr, self.target)
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def water_volume_cells(self) -> float:

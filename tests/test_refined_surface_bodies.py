@@ -255,3 +255,29 @@ def test_a_sinking_sphere_picks_up_bit_for_bit_across_a_regrid():
         assert np.array_equal(a.octree.coord, b.octree.coord)
         assert_same_water(a, b)
         assert np.array_equal(a.coupling.owners(), b.coupling.owners())
+
+
+def test_a_regrid_keeps_the_finest_blocks_the_surface_reaches():
+    """The regrid's criteria keep on the finest level every block the surface reaches (phi below 1 - 1e-4) and the
+    blocks within one finest block of it (:meth:`RefinedFreeSurfaceModel.hot_cells`): a wave or a piece of ice
+    pushed down can carry the surface out of the band of ``refinement.surface_band_m`` onto blocks refined for a
+    body alone, which the level must not drop when the body moves on (the regrid stopped there, phi = 0.992, in the
+    quick tier-2 case on levels). The sinking-sphere tank at the start: the surface's profile reaches 7 level-1 cells
+    under the still level (z = 29 of 36), so the level-1 blocks from z = 24 up, and one block more: the level-0
+    cells from z = 8 up, none below. A cell of phi = 0.99 planted in a level-1 block at z = 16-24 marks the level-0
+    cells down to z = 4 under it, and the octree refines the level-0 blocks there. Planted: without the surface's
+    cells (only the vorticity criterion, here none) the first assertion fails."""
+    from iceresist.models.refined import build_octree
+
+    model = build_model(parse_scene(_sink_text(), "sink.toml"))
+    hot = model.hot_cells()
+    assert hot is not None and hot[:, :, 8:].all() and not hot[:, :, :8].any()
+    before = build_octree(model.scene, hot, model.body_boxes_m()).blocks_per_level()
+    view = model.lbm.views[model.finest]
+    origin = view.forest.origin[:view.nleaves]
+    low = np.flatnonzero((origin[:, 2] == 2) & (origin[:, 0] == 2) & (origin[:, 1] == 2))[0]
+    model.fs.surface.phase.phi[low, 0] = 0.99
+    hot = model.hot_cells()
+    assert hot[4:16, 4:16, 4:8].all() and not hot[:, :, :4].any() and hot[:, :, 4:8].sum() == 12 * 12 * 4
+    after = build_octree(model.scene, hot, model.body_boxes_m()).blocks_per_level()
+    assert after[1] > before[1]

@@ -101,6 +101,40 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         level = self.lbm.solvers[lv]
         return (level.fs.fluid if lv == self.finest else level.fluid).populations()
 
+    # -- regridding ---------------------------------------------------------------------------------------
+    def hot_cells(self) -> np.ndarray:
+        """The level-0 cells of :meth:`RefinedFluidModel.hot_cells` and those within one finest block of a finest
+        leaf block the surface reaches (a cell with phi below 1 - ``PHI_BULK_TOL``, :meth:`_surface_reach`). The
+        static band of ``refinement.surface_band_m`` lies about the still-water level; a wave or a piece of ice
+        pushed down can carry the surface beyond it, onto blocks that are finest only because a body's band covered
+        them. This keeps those blocks and their neighbours on the finest level when the body moves on, so the
+        surface stays a block clear of the level's edge as at the start (:meth:`RefinedFreeSurface.initialize`);
+        without it the regrid stops in :func:`carried_surface`."""
+        from iceresist.freesurface.refined import PHI_BULK_TOL
+
+        hot = super().hot_cells()
+        shape = tuple(int(n) for n in self.shape_cells)
+        mark = np.zeros(shape, dtype=np.uint8)
+        L_ = self.finest
+        reached = np.flatnonzero(self._surface_reach(1.0 - PHI_BULK_TOL).any(axis=1))
+        if reached.size:
+            edge = max(8 >> L_, 1)                  # a finest block, in level-0 cells
+            origin = self.lbm.views[L_].forest.origin[reached] * 8
+            lo = np.maximum((origin >> L_) - edge, 0)
+            hi = np.minimum(((origin + 8) >> L_) + edge, np.array(shape))
+            for (x0, y0, z0), (x1, y1, z1) in zip(lo, hi):
+                mark[x0:x1, y0:y1, z0:z1] = 1
+        if self.comm is not None:
+            from mpi4py import MPI
+
+            self.comm.Allreduce(MPI.IN_PLACE, mark, op=MPI.MAX)
+        mark = mark.astype(bool)
+        return mark if hot is None else hot | mark
+
+    def _surface_reach(self, bulk: float) -> np.ndarray:
+        """The finest level's leaf cells (this rank's own on several ranks) less liquid than ``bulk``."""
+        return self._phi_leaves() < bulk
+
     # -- values per leaf ---------------------------------------------------------------------------------
     def _phi_leaves(self) -> np.ndarray:
         """phi of the finest level's leaves (this rank's own on several ranks)."""

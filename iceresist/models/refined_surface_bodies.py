@@ -91,6 +91,12 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         (:meth:`RefinedFreeSurface.volume`: the same float64 on any number of ranks)."""
         return self.fs.volume(self.fs.surface.phase.volume_per_block())
 
+    def _surface_reach(self, bulk: float) -> np.ndarray:
+        """The finest leaf cells less liquid than ``bulk`` outside the bodies: a body's cells hold the phi they had
+        when it covered them, which says nothing of the surface (a sphere sunk from under the surface carries
+        phi = 0.98 down with it)."""
+        return super()._surface_reach(bulk) & ~self._covered()
+
     def _covered(self) -> np.ndarray:
         """The finest level's leaf cells a body covers (nleaves, 512; this rank's own leaves on several ranks)."""
         n = self.lbm.views[self.finest].nleaves if self.decomp is None else self.decomp.nown[self.finest]

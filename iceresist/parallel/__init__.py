@@ -59,11 +59,15 @@ def abort(comm) -> None:
     """Print this rank's traceback and stop every rank (``MPI_Abort``, exit status 1): an error that one rank alone
     meets would otherwise leave the others waiting in their next collective call until the job's time runs out."""
     import sys
+    import time
     import traceback
 
-    print(f"iceresist: rank {comm.rank} of {comm.size} failed; stopping every rank", file=sys.stderr)
-    traceback.print_exc()
+    # one write, and a moment for mpirun to forward it: under load the abort killed the job between the first line
+    # and the traceback
+    sys.stderr.write(f"iceresist: rank {comm.rank} of {comm.size} failed; stopping every rank\n"
+                     + traceback.format_exc())
     sys.stderr.flush()
+    time.sleep(0.5)
     comm.Abort(1)
 
 

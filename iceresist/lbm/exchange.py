@@ -3,9 +3,9 @@
 Each item of a transfer table (:func:`iceresist.lbm.refinement.explosion_tables`,
 :func:`~iceresist.lbm.refinement.coalescence_table`) writes one population slot:
 
-    dst[db, q, dc] = weight * sum_k packet_k
+    dst[db, dq, dc] = weight * sum_k packet_k
 
-where packet k is slot q of cell (sb_k, sc_k) of the source array its tag names (0: the coarse level at t, 1: the
+where packet k is slot sq_k of cell (sb_k, sc_k) of the source array its tag names (0: the coarse level at t, 1: the
 fine level at t, 2: the fine level at t + 1/2), and, for coarse packets with the linear reconstruction, plus the
 central difference over the coarse neighbours (nb, nc)[k, 2a], (nb, nc)[k, 2a + 1] along axis a times the packet's
 offset (span: how many of the two neighbours exist). The host form is the NumPy reference
@@ -21,7 +21,7 @@ from functools import lru_cache
 from iceresist.backends import cache
 from iceresist.backends.launch import ItemLauncher
 
-TRANSFER_ARGS = ("db", "dq", "dc", "tag", "sb", "sc", "off", "nb", "nc", "nok", "weight", "linear", "src0", "src1",
+TRANSFER_ARGS = ("db", "dq", "dc", "tag", "sb", "sc", "sq", "off", "nb", "nc", "nok", "weight", "linear", "src0", "src1",
                  "src2", "dst")
 
 
@@ -42,18 +42,18 @@ def build_transfer(target, real):
         return v
 
     @target.device
-    def transfer(i, db, dq, dc, tag, sb, sc, off, nb, nc, nok, weight, linear, src0, src1, src2, dst):
-        q = dq[i]
+    def transfer(i, db, dq, dc, tag, sb, sc, sq, off, nb, nc, nok, weight, linear, src0, src1, src2, dst):
         acc = zero
         for k in range(tag.shape[1]):
             t = tag[i, k]
+            q = sq[i, k]
             if t == 0:
                 acc += packet(src0, sb[i, k], q, sc[i, k], k, i, nb, nc, nok, off, linear, True)
             elif t == 1:
                 acc += packet(src1, sb[i, k], q, sc[i, k], k, i, nb, nc, nok, off, linear, False)
             else:
                 acc += packet(src2, sb[i, k], q, sc[i, k], k, i, nb, nc, nok, off, linear, False)
-        dst[db[i], q, dc[i]] = weight * acc
+        dst[db[i], dq[i], dc[i]] = weight * acc
 
     return transfer
 
@@ -77,9 +77,9 @@ def pack_table(table, real) -> dict:
     int32. A table without coarse packets (a coalescence) never reads the offsets and neighbours of the linear
     reconstruction: they are packed as one row each (the kernel reads them for coarse packets only), which keeps a
     large interface's tables a tenth of the size."""
-    db, q, dc, tag, sb, sc, (off, nbrs) = table
+    db, q, dc, tag, sb, sc, sq, (off, nbrs) = table
     if tag.ndim == 1:
-        tag, sb, sc = tag[:, None], sb[:, None], sc[:, None]
+        tag, sb, sc, sq = tag[:, None], sb[:, None], sc[:, None], sq[:, None]
         off = off[:, None, :]
         nbrs = [(b[:, None], c[:, None], ok[:, None]) for b, c, ok in nbrs]
     rows = slice(None) if (np.asarray(tag) == 0).any() else slice(0, 1)
@@ -88,7 +88,7 @@ def pack_table(table, real) -> dict:
     nok = np.stack([ok[rows] for _, _, ok in nbrs], axis=-1)
     as_int = {k: np.ascontiguousarray(v, dtype=np.int32) for k, v in
               dict(db=db, dq=q, dc=dc, tag=tag, sb=sb, sc=sc, nb=nb, nc=nc).items()}
-    return {**as_int, "nok": np.ascontiguousarray(nok, dtype=np.int8),
+    return {**as_int, "sq": np.ascontiguousarray(sq, dtype=np.int8), "nok": np.ascontiguousarray(nok, dtype=np.int8),
             "off": np.ascontiguousarray(np.asarray(off)[rows], dtype=real)}
 
 

@@ -12,7 +12,10 @@ Level interfaces, through the ghost blocks of each level (:mod:`iceresist.grid.l
   that stream without colliding (explosion): the fine leaves pull at each sub-step the packets that reach them; then
   the coarse step pulls, for every population that crossed the interface, the mean of the eight fine packets that
   reached its sub-cells over the two sub-steps, each taken where it last collided (coalescence). Every packet is
-  consumed once, so mass and momentum cross the interface exactly (mass to round-off: 2e-16 over 1000 steps).
+  consumed once, so mass and momentum cross the interface exactly (mass to round-off: 2e-16 over 1000 steps). Where
+  an interface meets a resting wall the packets follow the wall's bounce-back, and the coarse packets that the
+  plain coarse bounce-back keeps whole are swapped out of the fine leaves' pulls (:func:`_take_free_packets`): the
+  mass is exact there too.
   ``reconstruction='linear'`` (default) gives the packets of a coarse cell its value plus the central-difference
   gradient times the sub-cell's offset (+-1/4 cell; the eight still sum to the cell's mass): a Taylor-Green vortex
   with a refined centre decays at the fine grid's viscosity +0.34 %, where ``'constant'`` packets give +3.0 %;
@@ -39,7 +42,7 @@ from iceresist.errors import InputError
 from iceresist.grid.forest import LX, LY, LZ
 from iceresist.grid.levels import FROM_COARSER, FROM_FINER, LevelView, level_views
 from iceresist.grid.octree import CHILDREN, BlockOctree
-from iceresist.lattice import C
+from iceresist.lattice import C, OPP
 from iceresist.lbm.solver import _equilibrium_minus_w
 
 
@@ -183,16 +186,146 @@ def _coarse_stencil(coarse: LevelView, pos, periodic):
     return off, nbrs
 
 
-def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool = False):
+def _wall_faces(view: LevelView) -> np.ndarray:
+    """(3, 2) bool: whether the low and high face of each axis is a resting wall (half-way bounce-back)."""
+    return np.array([[view.forest.faces[a + s].kind == "wall" for s in "-+"] for a in "xyz"])
+
+
+def _beyond(p, n, walls, periodic):
+    """For cells ``p`` (n, 3) of a level of ``n`` cells: whether each lies beyond a closed face, and whether every
+    face it lies beyond is a resting wall (``walls``: :func:`_wall_faces`)."""
+    crossed = np.zeros(len(p), dtype=bool)
+    all_walls = np.ones(len(p), dtype=bool)
+    for a in range(3):
+        if periodic[a]:
+            continue
+        low, high = p[:, a] < 0, p[:, a] >= n[a]
+        crossed |= low | high
+        all_walls &= ~(low & ~walls[a, 0]) & ~(high & ~walls[a, 1])
+    return crossed, all_walls
+
+
+def _arrival(fine: LevelView, s, d, steps: int, periodic):
+    """Where the packets in slot ``d`` (n,) of fine cells ``s`` (n, 3) after ``steps`` (1 or 2) sub-steps last
+    collided, following them back through cells of the coarser level (where they stream without colliding, as
+    homogeneous packets of their coarse cell) and off the resting walls (half-way bounce-back, as the fused kernel:
+    the packet in slot q of x whose x - c_q lies beyond a wall is the one of slot opp(q) of x a sub-step before).
+
+    Returns (tag, block, cell, slot, position, ok), each (n,) but position (n, 3): a fine leaf at t + 1/2
+    (FINE_HALF, after the first step back of two) or at t (FINE_T), else the coarse cell of ``position`` (COARSE_T;
+    block and cell of the coarse level left to the caller); ``ok`` False where a path crosses a closed face that is
+    not a resting wall."""
+    n = np.array(fine.forest.shape_cells, dtype=np.int64)
+    walls = _wall_faces(fine)
+    s = np.array(s, dtype=np.int64, copy=True)
+    d = np.array(d, dtype=np.int64, copy=True)
+    tag = np.full(len(s), COARSE_T, dtype=np.int64)
+    blk = np.zeros(len(s), dtype=np.int64)
+    cel = np.zeros(len(s), dtype=np.int64)
+    ok = np.ones(len(s), dtype=bool)
+    moving = np.ones(len(s), dtype=bool)        # not yet found at a fine leaf
+    for k in range(steps, 0, -1):
+        p = s - C[d].astype(np.int64)
+        crossed, all_walls = _beyond(p, n, walls, periodic)
+        ok &= ~(moving & crossed & ~all_walls)
+        back = moving & crossed
+        p = np.where(back[:, None], s, p)
+        d = np.where(back, OPP[d], d)
+        pb, pc, _ = _locate(fine, p, periodic)
+        leaf = moving & (pb >= 0) & (pb < fine.nleaves)
+        tag = np.where(leaf, FINE_HALF if k == 2 else FINE_T, tag)
+        blk, cel = np.where(leaf, pb, blk), np.where(leaf, pc, cel)
+        s = np.where(moving[:, None], p, s)
+        moving &= ~leaf
+    for a in range(3):
+        if periodic[a]:
+            s[:, a] %= n[a]
+    return tag, blk, cel, d, s, ok
+
+
+def _coarse_row(coarse: LevelView, pos, d, periodic):
+    """The coarse cell and slot that take the packet of slot ``d`` (n,) at fine cells ``pos`` (n, 3) when its coarse
+    cell streams it without the finer level: the cell Z + c_d pulls it into slot d, or, beyond a resting wall, Z's
+    own bounce-back into slot opp(d). Returns (cell (n, 3), slot (n,), fine cell (n, 3) where that row's picture of
+    the step puts the packet: pos + 2 c_d, or pos itself after a bounce-back, ok (n,): False beyond another face)."""
+    n = np.array(coarse.forest.shape_cells, dtype=np.int64)
+    walls = _wall_faces(coarse)
+    cd = C[d].astype(np.int64)
+    Y = (pos >> 1) + cd
+    crossed, all_walls = _beyond(Y, n, walls, periodic)
+    for a in range(3):
+        if periodic[a]:
+            Y[:, a] %= n[a]
+    cell = np.where(crossed[:, None], pos >> 1, Y)
+    slot = np.where(crossed, OPP[d], d)
+    to = np.where(crossed[:, None], pos, pos + 2 * cd)
+    for a in range(3):
+        if periodic[a]:
+            to[:, a] %= 2 * n[a]
+    return cell, slot, to, ~crossed | all_walls
+
+
+def _sub_cell_keys(coarse: LevelView, to, slot) -> np.ndarray:
+    """An int64 key per (fine cell ``to`` (n, 3) inside a coarse cell, the coarse row's slot): the sub-cell of a
+    coarse row (the coarse cell and the population it pulls)."""
+    n = np.array(coarse.forest.shape_cells, dtype=np.int64)
+    cell = to >> 1
+    child = (to[:, 0] & 1) + 2 * (to[:, 1] & 1) + 4 * (to[:, 2] & 1)
+    return (((cell[:, 0] * n[1] + cell[:, 1]) * n[2] + cell[:, 2]) * 27 + slot) * 8 + child
+
+
+def _take_free_packets(fine: LevelView, coarse: LevelView, periodic, fed, slot, pos):
+    """Where an interface meets a wall, the coarse packets (slot ``slot``, fine cell ``pos``) that the fine leaves
+    pull across it, made free ones. Every coarse leaf's population takes the coarse packets its step would take
+    (:func:`_coarse_row`: the plain stream, or the bounce-back that keeps a packet in its cell) except in the
+    sub-cells the finer level feeds (``fed``: :func:`_sub_cell_keys` of the coalesced rows' sub-cells that take a
+    fine packet); the packets those would have taken, and the ones that stream into the finer level, are the free
+    ones. A packet the fine sub-steps (:func:`_arrival`) carry into a fine leaf is free except where a coarse wall
+    row takes it whole: along a wall the coarse bounce-back keeps a packet in its cell where two fine sub-steps
+    carry part of it into the next. Such a packet is swapped for the one the fine sub-steps bring to the sub-cell
+    where the coarse step puts it, and so on until a free one (the maps are one to one and the chain never
+    returns: mass crosses exactly). Returns the new (slot, pos); a chain through a face that is not a resting wall
+    keeps its packet."""
+    slot, pos = np.array(slot, dtype=np.int64, copy=True), np.array(pos, dtype=np.int64, copy=True)
+
+    def taken(sl, ps):
+        cell, row_slot, to, ok = _coarse_row(coarse, ps, sl, periodic)
+        b, _, _ = _locate(coarse, cell, periodic)
+        by_row = ok & (b >= 0) & (b < coarse.nleaves) & ~np.isin(_sub_cell_keys(coarse, to, row_slot), fed)
+        return by_row, row_slot, to
+
+    idx = np.arange(len(slot))
+    by_row, row_slot, to = taken(slot, pos)
+    idx, row_slot, to = idx[by_row], row_slot[by_row], to[by_row]
+    for _ in range(16):
+        if len(idx) == 0:
+            break
+        tag, _, _, s2, p2, ok = _arrival(fine, to, row_slot, 2, periodic)
+        ok &= tag == COARSE_T
+        idx, s2, p2 = idx[ok], s2[ok], p2[ok]
+        by_row, row_slot, to = taken(s2, p2)
+        done = ~by_row
+        slot[idx[done]], pos[idx[done]] = s2[done], p2[done]
+        idx, row_slot, to = idx[by_row], row_slot[by_row], to[by_row]
+    if len(idx):
+        raise RuntimeError("level interface: a chain of packets at a wall did not end")
+    return slot, pos
+
+
+def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool = False, fed=None):
     """The populations a fine level pulls from its ghost cells in the coarser level during the two fine
     sub-steps of one coarse step, conservatively (Rohde et al. 2006): the coarse cells are cut into eight
     homogeneous fine packets that stream without colliding. Slot q of ghost cell h (read only by the fine leaf
-    h + c_q) is at sub-step 1 slot q of h's coarse cell at t; at sub-step 2 what reached h at sub-step 1, slot q
-    of the cell h - c_q at t (the fine state where that cell is a fine leaf, else its coarse cell's).
+    h + c_q) is at sub-step 1 slot q of h's coarse cell at t; at sub-step 2 what reached h at sub-step 1: slot q
+    of the cell h - c_q at t (the fine state where that cell is a fine leaf, else its coarse cell's), or, where
+    h - c_q lies beyond a resting wall, slot opp(q) of h's coarse cell (the packet the wall sent back,
+    :func:`_arrival`).
 
-    Returns two tables (one per sub-step) of (dst block, q, dst cell, source tag, src block, src cell). ``partial``:
-    the levels are a rank's region (:mod:`iceresist.parallel.levels`), and a ghost cell whose source is not held
-    there is left out instead of refused."""
+    Returns two tables (one per sub-step) of (dst block, q, dst cell, source tag, src block, src cell, src slot,
+    coarse stencil). ``partial``: the levels are a rank's region (:mod:`iceresist.parallel.levels`), and a ghost
+    cell whose source is not held there is left out instead of refused. ``fed``: the coarse sub-cells the finer
+    level feeds (:func:`coalescence`); a coarse packet a coarse row takes is then swapped for a free one
+    (:func:`_take_free_packets`)."""
     g = np.flatnonzero(fine.ghost_source == FROM_COARSER) + fine.nleaves
     if len(g) == 0:
         return None
@@ -212,38 +345,56 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool
         hk, hbk, hck = h[keep], hb[keep], hc[keep]
         cb, cc, _ = _locate(coarse, hk >> 1, periodic)
         qq = np.full(len(hk), q)
-        tables[0].append((hbk, qq, hck, np.full(len(hk), COARSE_T), cb, cc, hk))
-        p = hk - cq
-        pb, pc, pin = _locate(fine, p, periodic)
-        from_fine = pin & (pb >= 0) & (pb < fine.nleaves)
-        ob, oc, _ = _locate(coarse, np.where(pin[:, None], p, hk) >> 1, periodic)
-        tables[1].append((hbk, qq, hck, np.where(from_fine, FINE_T, COARSE_T), np.where(from_fine, pb, ob),
-                          np.where(from_fine, pc, oc), np.where(pin[:, None], p, hk)))
+        tables[0].append((hbk, qq, hck, np.full(len(hk), COARSE_T), cb, cc, qq, hk))
+        tag, pb, pc, slot, pos, ok = _arrival(fine, hk, qq, 1, periodic)
+        # a path through a face that is not a resting wall: h's own coarse cell, slot q
+        tag, slot, pos = np.where(ok, tag, COARSE_T), np.where(ok, slot, q), np.where(ok[:, None], pos, hk)
+        ob, oc, _ = _locate(coarse, pos >> 1, periodic)
+        coarse_src = tag == COARSE_T
+        tables[1].append((hbk, qq, hck, tag, np.where(coarse_src, ob, pb), np.where(coarse_src, oc, pc), slot, pos))
     if not tables[0]:
         return None
     out = []
     for t in tables:
-        cols = [np.concatenate([row[k] for row in t]) for k in range(7)]
+        cols = [np.concatenate([row[k] for row in t]) for k in range(8)]
+        if fed is not None:
+            c = cols[3] == COARSE_T
+            cols[6], cols[7] = cols[6].copy(), cols[7].copy()
+            cols[6][c], cols[7][c] = _take_free_packets(fine, coarse, periodic, fed, cols[6][c], cols[7][c])
+            cols[4][c], cols[5][c], _ = _locate(coarse, cols[7][c] >> 1, periodic)
         if partial:
             cols = [c[cols[4] >= 0] for c in cols]
         if (cols[4] < 0).any():
             raise InputError("a fine ghost cell has no coarse cell to take its packets from")
-        out.append((*cols[:6], _coarse_stencil(coarse, cols[6], periodic)))
+        out.append((*cols[:7], _coarse_stencil(coarse, cols[7], periodic)))
     return out
 
 
 def coalescence_table(coarse: LevelView, fine: LevelView, periodic, partial: bool = False):
+    """:func:`coalescence` without the keys of its rows."""
+    return coalescence(coarse, fine, periodic, partial)[0]
+
+
+def coalescence(coarse: LevelView, fine: LevelView, periodic, partial: bool = False):
     """The populations coarse leaves pull across the interface into the finer level, conservatively: coarse
     cell X's population q after a coarse step is the mean of what reached its eight fine sub-cells s in the two
-    fine sub-steps, each packet taken where it last collided: the fine cell m = s - c_q at t + 1/2 where m is a fine
-    leaf, else the fine cell o = s - 2 c_q at t where o is, else o's coarse cell at t. Written into slot q of the
-    coarse cell X - c_q (read only by X), for every coarse leaf cell and q whose packets touch the fine level.
+    fine sub-steps, each packet taken where it last collided (:func:`_arrival`): the fine cell m = s - c_q at
+    t + 1/2 where m is a fine leaf, else the fine cell o = m - c_q at t where o is, else o's coarse cell at t; a
+    step whose source lies beyond a resting wall takes the packet the wall sent back (slot opp(q) of the cell
+    itself). Written into slot q of the coarse cell X - c_q, read only by X; where X - c_q lies beyond a resting
+    wall, into slot opp(q) of X itself, which only X's bounce-back reads. For every coarse leaf cell and q whose
+    packets touch the fine level.
 
-    Returns (dst block, q, dst cell, tags (n, 8), src blocks (n, 8), src cells (n, 8)); ``partial`` as for
-    :func:`explosion_tables`."""
+    In a row whose X - c_q lies beyond the wall, a sub-cell that no fine packet reaches takes X's own packet of slot
+    opp(q) in that sub-cell, as the coarse bounce-back does; the fine leaves' pulls then leave those packets alone
+    (:func:`_take_free_packets`).
+
+    Returns the table, (dst block, dst slot, dst cell, tags (n, 8), src blocks (n, 8), src cells (n, 8), src slots
+    (n, 8), coarse stencil), or None, and the keys of the sub-cells the finer level feeds (:func:`_sub_cell_keys`);
+    ``partial`` as for :func:`explosion_tables`."""
     near = np.flatnonzero((coarse.forest.nbr_key[:coarse.nleaves] >= coarse.nleaves).any(axis=1))
     if len(near) == 0:
-        return None
+        return None, np.zeros(0, dtype=np.int64)
     X = _cells_of(coarse, near).reshape(-1, 3)
     # only a cell next to the finer level has packets that touch it: every sub-cell m or o lies in X's coarse cell
     # or one of its 26 neighbours, and the finer level's leaves lie under the coarse ghost blocks from the finer level
@@ -254,47 +405,59 @@ def coalescence_table(coarse: LevelView, fine: LevelView, periodic, partial: boo
         b, _, inside = _locate(coarse, X + e.astype(np.int64), periodic)
         next_to_finer |= inside & (b >= 0) & from_finer[np.maximum(b, 0)]
     X = X[next_to_finer]
-    rows = []
+    walls = _wall_faces(coarse)
+    nc = np.array(coarse.forest.shape_cells, dtype=np.int64)
+    rows, fine_src, keys = [], [], []
     for q in range(1, 27):
         cq = C[q].astype(np.int64)
-        s = 2 * X[:, None, :] + CHILDREN[None, :, :]                      # (n, 8, 3) fine sub-cells
-        m, o = s - cq, s - 2 * cq
-        mb, mc, min_ = _locate(fine, m, periodic)
-        ob, oc, oin = _locate(fine, o, periodic)
-        m_fine = min_ & (mb >= 0) & (mb < fine.nleaves)
-        o_fine = oin & (ob >= 0) & (ob < fine.nleaves)
-        touch = (m_fine | o_fine).any(axis=1) & min_.all(axis=1) & oin.all(axis=1)
+        s = (2 * X[:, None, :] + CHILDREN[None, :, :]).reshape(-1, 3)      # (n * 8, 3) fine sub-cells
+        tag, fb, fc, slot, pos, ok = (a.reshape(len(X), 8, *a.shape[1:])
+                                      for a in _arrival(fine, s, np.full(len(s), q), 2, periodic))
+        # where the coarse cell X pulls population q from: X - c_q, or its own slot opp(q) beyond a resting wall
+        Y = X - cq
+        crossed, all_walls = _beyond(Y, nc, walls, periodic)
+        touch = (tag != COARSE_T).any(axis=1) & ok.all(axis=1) & (~crossed | all_walls)
         if not touch.any():
             continue
-        m, o = m[touch], o[touch]
-        m_fine, o_fine = m_fine[touch], o_fine[touch]
-        cb, cc, _ = _locate(coarse, o >> 1, periodic)
-        tag = np.where(m_fine, FINE_HALF, np.where(o_fine, FINE_T, COARSE_T))
-        sb = np.where(m_fine, mb[touch], np.where(o_fine, ob[touch], cb))
-        sc = np.where(m_fine, mc[touch], np.where(o_fine, oc[touch], cc))
-        yb, yc, _ = _locate(coarse, X[touch] - cq, periodic)
-        if partial:
-            held = (yb >= 0) & (sb >= 0).all(axis=1)
-            yb, yc, tag, sb, sc, o = yb[held], yc[held], tag[held], sb[held], sc[held], o[held]
-        if (yb < 0).any() or (sb < 0).any():
-            raise InputError("a coarse cell next to the finer level has no neighbour to pull from")
-        rows.append((yb, np.full(len(yb), q), yc, tag, sb, sc, o))
+        tag, slot, pos, crossed = tag[touch], slot[touch], pos[touch], crossed[touch]
+        fine_src.append((fb[touch], fc[touch]))
+        s = s.reshape(len(X), 8, 3)[touch]
+        # a row whose X - c_q lies beyond a resting wall: where no fine packet comes, the coarse bounce-back's
+        # picture (X's own packet of slot opp(q) in the same sub-cell), as the rows the plain coarse step takes
+        back = crossed[:, None] & (tag == COARSE_T)
+        slot = np.where(back, OPP[q], slot)
+        pos = np.where(back[..., None], s, pos)
+        fed = tag != COARSE_T
+        keys.append(_sub_cell_keys(coarse, s[fed], np.full(int(fed.sum()), q)))
+        yb, yc, _ = _locate(coarse, np.where(crossed[:, None], X[touch], Y[touch]), periodic)
+        dq = np.where(crossed, OPP[q], q)
+        rows.append((yb, dq, yc, tag, slot, pos))
     if not rows:
-        return None
-    cols = [np.concatenate([r[k] for r in rows]) for k in range(7)]
-    return (*cols[:6], _coarse_stencil(coarse, cols[6], periodic))
+        return None, np.zeros(0, dtype=np.int64)
+    keys = np.concatenate(keys)
+    yb, dq, yc, tag, slot, pos = (np.concatenate([r[k] for r in rows]) for k in range(6))
+    fb, fc = (np.concatenate([r[k] for r in fine_src]) for k in range(2))
+    coarse_src = tag == COARSE_T
+    cb, cc, _ = _locate(coarse, pos >> 1, periodic)
+    sb, sc = np.where(coarse_src, cb, fb), np.where(coarse_src, cc, fc)
+    if partial:
+        held = (yb >= 0) & (sb >= 0).all(axis=1)
+        yb, yc, dq, tag, sb, sc, slot, pos = (a[held] for a in (yb, yc, dq, tag, sb, sc, slot, pos))
+    if (yb < 0).any() or (sb < 0).any():
+        raise InputError("a coarse cell next to the finer level has no neighbour to pull from")
+    return (yb, dq, yc, tag, sb, sc, slot, _coarse_stencil(coarse, pos, periodic)), keys
 
 
 def _apply_slots(table, dst, sources, weight: float = 1.0, linear: bool = False):
-    """dst[b, q, c] = weight * sum over the table's source columns of sources[tag][sb, q, sc] (in place); with
+    """dst[b, q, c] = weight * sum over the table's source columns of sources[tag][sb, sq, sc] (in place); with
     ``linear`` a packet from the coarse level is its cell's value plus the central-difference gradient times the
     sub-cell's offset (the eight sub-cells of a coarse cell still sum to eight times its value)."""
-    db, q, dc, tag, sb, sc, (off, nbrs) = table
+    db, q, dc, tag, sb, sc, sq, (off, nbrs) = table
     if tag.ndim == 1:
-        tag, sb, sc = tag[:, None], sb[:, None], sc[:, None]
+        tag, sb, sc, sq = tag[:, None], sb[:, None], sc[:, None], sq[:, None]
         off = off[:, None, :]
         nbrs = [(b[:, None], c[:, None], ok[:, None]) for b, c, ok in nbrs]
-    qq = np.broadcast_to(q[:, None], tag.shape)
+    qq = sq
     acc = np.zeros(len(db), dtype=np.float64)
     for t, src in enumerate(sources):
         sel = tag == t
@@ -331,7 +494,7 @@ def restriction_as_transfer(table, keep=None):
     tag = np.full((n * 27, 8), FINE_T, dtype=np.int64)
     zeros = np.zeros((n * 27, 8), dtype=np.int64)
     stencil = (np.zeros((n * 27, 8, 3)), [(zeros, zeros, zeros.astype(bool))] * 6)
-    return rep(gb), q, rep(gc), tag, rep(b), rep(c), stencil
+    return rep(gb), q, rep(gc), tag, rep(b), rep(c), np.broadcast_to(q[:, None], tag.shape), stencil
 
 
 def _apply(table, dst, src, neq_scale: float = 1.0):
@@ -353,7 +516,7 @@ def _apply(table, dst, src, neq_scale: float = 1.0):
 def _source_blocks(table, tag: int) -> np.ndarray:
     """The blocks a transfer table reads from the source array of ``tag`` (0: the coarse level at t, with its
     packets' neighbours; 1: the fine level at t; 2: the fine level at t + 1/2)."""
-    _, _, _, tags, sb, _, (_, nbrs) = table
+    _, _, _, tags, sb, _, _, (_, nbrs) = table
     tags, sb = np.asarray(tags), np.asarray(sb)
     if tags.ndim == 1:
         tags, sb = tags[:, None], sb[:, None]
@@ -441,10 +604,10 @@ class RefinedLBM:
             self.restrict = {lv: restriction_table(self.views[lv], self.views[lv + 1], self.periodic)
                              for lv in self.levels[:-1]}
         else:
-            self.explode = {lv: explosion_tables(self.views[lv], self.views[lv - 1], self.periodic, partial)
-                            for lv in self.levels[1:]}
-            self.coalesce = {lv: coalescence_table(self.views[lv], self.views[lv + 1], self.periodic, partial)
-                             for lv in self.levels[:-1]}
+            self.coalesce, self.explode = {}, {}
+            for lv in self.levels[1:]:
+                self.coalesce[lv - 1], fed = coalescence(self.views[lv - 1], self.views[lv], self.periodic, partial)
+                self.explode[lv] = explosion_tables(self.views[lv], self.views[lv - 1], self.periodic, partial, fed)
             self.restrict = {lv: restriction_table(self.views[lv], self.views[lv + 1], self.periodic)
                              for lv in self.levels[:-1]}
             self._kernel_tables(precision)
@@ -491,7 +654,7 @@ class RefinedLBM:
             if table is None:
                 return None
             p = pack_table(table, real)
-            keys = ("db", "dq", "dc", "tag", "sb", "sc", "off", "nb", "nc", "nok")
+            keys = ("db", "dq", "dc", "tag", "sb", "sc", "sq", "off", "nb", "nc", "nok")
             return len(p["db"]), tuple(dev(p[k]) for k in keys)
 
         self._transfer = transfer_launcher(self.target, real)

@@ -488,8 +488,11 @@ class Refinement(_Section):
         None, ge=1, description="Regrid every this many level-0 steps: the octree is built again from the criteria "
         "(the static regions above, `vorticity_1_s` on the current flow, `body_band_m` around the bodies where "
         "they are) and every cell's populations carried to the new blocks (a refined cell copies its parent, a "
-        "coarsened one takes the mean of its children: mass to round-off; iceresist.grid.regrid). With a `[free_surface]` the surface band stays where it is (its phase field is carried with the "
-        "water) and must hold the surface wherever it goes.")
+        "coarsened one takes the mean of its children: mass to round-off; iceresist.grid.regrid). With a "
+        "`[free_surface]` the surface band stays where it is (its phase field is carried with the water), and a "
+        "regrid also keeps on the finest level every block the surface has reached (phi below 1 - 1e-4 outside the "
+        "bodies) and the blocks within one finest block of it, so a wave or ice pushed down past the band does not "
+        "lose its fine blocks when a body's band moves on.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "

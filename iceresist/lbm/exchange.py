@@ -21,8 +21,8 @@ from functools import lru_cache
 from iceresist.backends import cache
 from iceresist.backends.launch import ItemLauncher
 
-TRANSFER_ARGS = ("db", "dq", "dc", "tag", "sb", "sc", "sq", "off", "nb", "nc", "nok", "weight", "linear", "src0", "src1",
-                 "src2", "dst")
+TRANSFER_ARGS = ("db", "dq", "dc", "tag", "sb", "sc", "sq", "off", "nb", "nc", "nok", "weight", "linear", "src0",
+                 "src1", "src2", "dst")
 
 
 def build_transfer(target, real):
@@ -88,7 +88,8 @@ def pack_table(table, real) -> dict:
     nok = np.stack([ok[rows] for _, _, ok in nbrs], axis=-1)
     as_int = {k: np.ascontiguousarray(v, dtype=np.int32) for k, v in
               dict(db=db, dq=q, dc=dc, tag=tag, sb=sb, sc=sc, nb=nb, nc=nc).items()}
-    return {**as_int, "sq": np.ascontiguousarray(sq, dtype=np.int8), "nok": np.ascontiguousarray(nok, dtype=np.int8),
+    return {**as_int, "sq": np.ascontiguousarray(sq, dtype=np.int8),
+            "nok": np.ascontiguousarray(nok, dtype=np.int8),
             "off": np.ascontiguousarray(np.asarray(off)[rows], dtype=real)}
 
 

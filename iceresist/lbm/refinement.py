@@ -205,6 +205,14 @@ def _beyond(p, n, walls, periodic):
     return crossed, all_walls
 
 
+def _wrap(p, n, periodic):
+    """Cells ``p`` (n, 3) of a level of ``n`` cells wrapped on the periodic axes (in place)."""
+    for a in range(3):
+        if periodic[a]:
+            p[:, a] %= n[a]
+    return p
+
+
 def _arrival(fine: LevelView, s, d, steps: int, periodic):
     """Where the packets in slot ``d`` (n,) of fine cells ``s`` (n, 3) after ``steps`` (1 or 2) sub-steps last
     collided, following them back through cells of the coarser level (where they stream without colliding, as
@@ -237,10 +245,7 @@ def _arrival(fine: LevelView, s, d, steps: int, periodic):
         blk, cel = np.where(leaf, pb, blk), np.where(leaf, pc, cel)
         s = np.where(moving[:, None], p, s)
         moving &= ~leaf
-    for a in range(3):
-        if periodic[a]:
-            s[:, a] %= n[a]
-    return tag, blk, cel, d, s, ok
+    return tag, blk, cel, d, _wrap(s, n, periodic), ok
 
 
 def _coarse_row(coarse: LevelView, pos, d, periodic):
@@ -253,15 +258,10 @@ def _coarse_row(coarse: LevelView, pos, d, periodic):
     cd = C[d].astype(np.int64)
     Y = (pos >> 1) + cd
     crossed, all_walls = _beyond(Y, n, walls, periodic)
-    for a in range(3):
-        if periodic[a]:
-            Y[:, a] %= n[a]
+    _wrap(Y, n, periodic)
     cell = np.where(crossed[:, None], pos >> 1, Y)
     slot = np.where(crossed, OPP[d], d)
-    to = np.where(crossed[:, None], pos, pos + 2 * cd)
-    for a in range(3):
-        if periodic[a]:
-            to[:, a] %= 2 * n[a]
+    to = _wrap(np.where(crossed[:, None], pos, pos + 2 * cd), 2 * n, periodic)
     return cell, slot, to, ~crossed | all_walls
 
 

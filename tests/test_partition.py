@@ -1,6 +1,8 @@
 """The Morton partition of a block forest over MPI ranks and the halo it implies (iceresist.parallel.decomposition),
 without MPI: the split itself, checked against what a rank must see."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -53,6 +55,22 @@ def test_each_rank_receives_the_layer_its_blocks_pull_and_sends_what_the_others_
     (r1, srows, scells), = d1.sends
     assert r1 == 0
     assert np.array_equal(d1.global_ids[srows], d0.global_ids[rows]) and np.array_equal(scells, cells)
+
+
+def test_a_rank_updates_the_blocks_it_sends_before_its_messages_go_and_the_rest_while_they_travel():
+    """A 64 x 8 x 8 channel (8 blocks along x, periodic along x) on 2 ranks: rank 0 owns the blocks at x = 0-3;
+    the ones at x = 0 and 3 send a layer to rank 1 (across the periodic face and to x = 4) and are updated before
+    the messages are posted, the ones at x = 1 and 2 while they travel; its halo blocks are updated by neither."""
+    faces = {"x-": Face("periodic"), "x+": Face("periodic"), "y-": Face("wall"), "y+": Face("wall"),
+             "z-": Face("wall"), "z+": Face("wall")}
+    fo = BlockForest.uniform((64, 8, 8), faces)
+    d = Decomposition(fo, _Comm(0, 2))
+    h = d.solver_halo()
+    x = fo.origin[d.global_ids, 0]
+    assert sorted(x[h.sent == 1].tolist()) == [0, 3] and sorted(x[h.inner == 1].tolist()) == [1, 2]
+    assert (h.nsent, h.ninner) == (2, 2) and not (h.sent[d.nowned:] | h.inner[d.nowned:]).any()
+    (_, rows, _), = d.sends
+    assert set(np.unique(rows).tolist()) == set(np.flatnonzero(h.sent).tolist())
 
 
 def test_each_rank_on_a_node_takes_its_own_gpu(monkeypatch):
@@ -144,3 +162,9 @@ def test_each_rank_holds_its_trees_and_the_ring_around_them_and_swaps_its_halo_l
         (r1, srows), = d[1]._sends[lv]
         assert r == 1 and r1 == 0
         assert np.array_equal(d[0].global_ids[lv][rows], d[1].global_ids[lv][srows]) and len(rows) > 0
+        # its own leaves that rank 0 sends are updated before the messages go, its other own leaves while they travel
+        solver = SimpleNamespace()
+        d[1].step_own(lv, solver)
+        h = solver.halo
+        assert np.flatnonzero(h.sent).tolist() == sorted(set(srows.tolist()))
+        assert np.flatnonzero(h.sent | h.inner).tolist() == list(range(d[1].nown[lv])) and h.ninner > 0

@@ -16,7 +16,7 @@ from functools import lru_cache
 import numpy as np
 
 from iceresist.backends import cache, jit
-from iceresist.backends.launch import CellLauncher
+from iceresist.backends.launch import ActiveLauncher, CellLauncher
 from iceresist.errors import InputError, StabilityError
 from iceresist.lattice import C, Q, W
 from iceresist.lbm.stream import ARGS, build_stream_collide, build_stream_collide_block
@@ -63,19 +63,23 @@ def operator_available(operator: str) -> bool:
 
 
 @lru_cache(maxsize=None)
-def fused_launcher(target, precision: str, operator: str, free_surface: bool = False) -> CellLauncher:
+def fused_launcher(target, precision: str, operator: str, free_surface: bool = False, active: bool = False):
     """Compile (once per target, precision, operator) the fused stream-collide launcher, on the CPU from the on-disk
     kernel cache; ``free_surface``: the variant with eq. (11) at gas cells and the force rho g
-    (:mod:`iceresist.lbm.stream`)."""
+    (:mod:`iceresist.lbm.stream`); ``active``: an :class:`ActiveLauncher` of the blocks flagged in an array of a
+    flag per block (an MPI rank updates the blocks whose cells it sends first, the rest while its messages
+    travel), else a :class:`CellLauncher` of the first blocks."""
     real = jit.real_type(precision)
     collide = collide_builder(operator)(target, real)
+    kind, argnames = (ActiveLauncher, ("active",) + ARGS) if active else (CellLauncher, ARGS)
     if target.is_cuda:
-        return CellLauncher(target, build_stream_collide(target, real, collide, free_surface), ARGS,
-                            label="lbm_stream_collide")
+        return kind(target, build_stream_collide(target, real, collide, free_surface), argnames,
+                    label="lbm_stream_collide")
     modules = KEY_MODULES + (CUMULANT_MODULES if operator == "cumulant" else ())
-    key = cache.fingerprint(f"{precision}|{operator}|fs={bool(free_surface)}", modules)
-    return CellLauncher(target, build_stream_collide_block(target, real, collide, free_surface=free_surface), ARGS,
-                        per_block=True, label="lbm_stream_collide", cache_key=key)
+    key = cache.fingerprint(f"{precision}|{operator}|fs={bool(free_surface)}" + ("|active" if active else ""),
+                            modules)
+    return kind(target, build_stream_collide_block(target, real, collide, free_surface=free_surface), argnames,
+                per_block=True, label="lbm_stream_collide", cache_key=key)
 
 
 def _equilibrium_minus_w(rho, ux, uy, uz):
@@ -125,8 +129,11 @@ class LBMSolver:
         #: Blocks the step updates, the forest's first ones (a rank of an MPI run updates its own blocks, not its
         #: halo, :mod:`iceresist.parallel.decomposition`).
         self.active_blocks = forest.nblocks
-        #: ``after_step(state)`` after each step (the halo exchange of an MPI run), or None.
-        self.after_step = None
+        #: The halo exchange of an MPI run after each step (:class:`~iceresist.parallel.decomposition.SolverHalo`),
+        #: or None: the blocks whose cells other ranks pull are updated first, their messages posted, the other
+        #: blocks updated while they travel.
+        self.halo = None
+        self._free_surface = free_surface
         log.info("LBM solver: %d cells in %d blocks, %s %s on %s", self.cells, forest.nblocks, operator,
                  precision, target.name)
 
@@ -177,14 +184,27 @@ class LBMSolver:
         """Advance ``n`` fused stream-collide steps; the buffers swap after each."""
         t = self._tables
         nb = self.active_blocks
+        halo = self.halo
         for _ in range(int(n)):
             src, dst = self._f
-            self._launch(nb, src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"],
-                         t["bc_rho"], *self._scalars)
+            args = (src, dst, t["nbr_key"], t["link_bc"], t["flags"], t["bc_kind"], t["bc_u"], t["bc_rho"],
+                    *self._scalars)
+            if halo is None:
+                self._launch(nb, *args)
+            elif not halo.overlap:
+                self._launch(nb, *args)
+                halo.finish(halo.start(dst))
+            else:
+                launch = self._active_launcher()
+                launch(self.forest.nblocks, halo.sent, *args)
+                pending = halo.start(dst)
+                launch(self.forest.nblocks, halo.inner, *args)
+                halo.finish(pending)
             self._f = [dst, src]
-            if self.after_step is not None:
-                self.after_step(dst)
             self.iteration += 1
+
+    def _active_launcher(self):
+        return fused_launcher(self.target, self.precision, self.operator, self._free_surface, active=True)
 
     def synchronize(self):
         """Wait for the device (CUDA); a no-op on the CPU."""

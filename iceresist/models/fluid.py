@@ -129,7 +129,7 @@ class FluidModel(Model):
                                 precision=self.precision, target=self.target)
         if self.decomp is not None:
             self.solver.active_blocks = self.decomp.nowned
-            self.solver.after_step = lambda f: self.decomp.exchange(f, self.target)
+            self.solver.halo = self.decomp.solver_halo(self.target)
         self.solver.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
         self.cells = int(self.global_forest.cells)
         self.dt_s = u.dt_s

@@ -19,6 +19,8 @@ rank 0), :meth:`Decomposition.sum` / :meth:`Decomposition.max` (all ranks), :met
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from iceresist.errors import InputError
@@ -45,12 +47,22 @@ def block_weights(forest) -> np.ndarray:
     return forest.fluid.sum(axis=1).astype(np.float64) * 2.0 ** forest.levels
 
 
-def swap(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> int:
-    """One non-blocking exchange over ``comm``: for each ``(rank, index)`` of ``sends`` the values ``view[index]``
-    go to that rank, for each of ``recvs`` ``view[index]`` is overwritten with what that rank sends (its sends to
-    this rank list the same values in the same order). Returns the bytes sent."""
-    from mpi4py import MPI
+class Pending:
+    """A halo exchange under way (:func:`swap_start`): its requests, the receive buffers and where they go, the
+    send buffers kept alive until the sends complete, and the bytes sent. On CUDA also the host copy the messages
+    read and write, the device array, and the rows to copy back once the messages are in (``copy_back``)."""
 
+    def __init__(self, reqs, bufs_in, outs, sent: int):
+        self.reqs, self.bufs_in, self.outs, self.sent = reqs, bufs_in, outs, sent
+        self.host = self.device = self.copy_back = None
+        self.t0 = 0.0
+
+
+def swap_start(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> Pending:
+    """Post one non-blocking exchange over ``comm``: for each ``(rank, index)`` of ``sends`` the values
+    ``view[index]`` go to that rank (copied into send buffers now), for each of ``recvs`` a receive is posted;
+    :func:`swap_finish` waits for them and writes what arrived into ``view[index]`` (that rank's sends to this rank
+    list the same values in the same order)."""
     bufs_in, reqs, outs, sent = [], [], [], 0
     for r, index in recvs:
         buf = np.empty_like(view[index])
@@ -61,10 +73,63 @@ def swap(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> int:
         outs.append(buf)
         sent += buf.nbytes
         reqs.append(comm.Isend(buf, dest=r, tag=tag))
-    MPI.Request.Waitall(reqs)
-    for index, buf in bufs_in:
+    return Pending(reqs, bufs_in, outs, sent)
+
+
+def swap_finish(pending: Pending, view: np.ndarray) -> None:
+    """Wait for the exchange ``pending`` and write what arrived into ``view``."""
+    from mpi4py import MPI
+
+    MPI.Request.Waitall(pending.reqs)
+    for index, buf in pending.bufs_in:
         view[index] = buf
-    return sent
+
+
+def swap(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> int:
+    """One non-blocking exchange over ``comm`` waited for at once (:func:`swap_start`, :func:`swap_finish`).
+    Returns the bytes sent."""
+    pending = swap_start(comm, view, recvs, sends, tag)
+    swap_finish(pending, view)
+    return pending.sent
+
+
+def write_back(pending: Pending) -> None:
+    """The rows an exchange wrote into the host copy of a device array, back onto the device."""
+    if pending.device is None:
+        return
+    arr, host = pending.device
+    span = pending.copy_back
+    if span.stop > span.start:
+        arr[span].copy_to_device(np.ascontiguousarray(host[span]))
+
+
+def rows_span(recvs) -> slice:
+    """The rows (axis 0) that the receives ``(rank, rows, ...)`` write, as one slice from the first to the last:
+    what a device array needs back from its host copy after an exchange (a rank's halo rows are contiguous)."""
+    rows = [np.asarray(item[1]).ravel() for item in recvs if len(item[1])]
+    if not rows:
+        return slice(0, 0)
+    allrows = np.concatenate(rows)
+    return slice(int(allrows.min()), int(allrows.max()) + 1)
+
+
+class SolverHalo:
+    """What :meth:`~iceresist.lbm.solver.LBMSolver.step` asks of a rank's halo exchange so that it can update its
+    interior while the messages travel: ``sent`` (a flag per local block on the target: the own blocks whose cells
+    another rank pulls, updated first), ``inner`` (the rest of the own blocks, updated while the messages travel),
+    ``start(arr)`` (the exchange of the updated ``arr`` posted, a :class:`Pending` back) and ``finish(pending)``.
+    ``overlap = False`` updates every own block and then exchanges, as before the split (for benchmarks)."""
+
+    def __init__(self, target, nblocks: int, nowned: int, sent_rows, start, finish):
+        sent = np.zeros(nblocks, dtype=np.uint8)
+        sent[np.asarray(sent_rows, dtype=np.int64)] = 1
+        inner = np.zeros(nblocks, dtype=np.uint8)
+        inner[:nowned] = 1 - sent[:nowned]
+        self.nsent, self.ninner = int(sent.sum()), int(inner.sum())
+        self.sent = sent if target is None else target.to_device(sent)
+        self.inner = inner if target is None else target.to_device(inner)
+        self.start, self.finish = start, finish
+        self.overlap = True
 
 
 class Collectives:
@@ -179,8 +244,10 @@ class Decomposition(Collectives):
         ``target``) with their owners' values; ``full``: every cell of the halo blocks (a step of several passes
         that each reach one cell further into the halo stays exact next to this rank's blocks for up to 7 of
         them: the free surface)."""
-        import time
+        self.finish_exchange(self.start_exchange(arr, target, full))
 
+    def start_exchange(self, arr, target=None, full: bool = False) -> Pending:
+        """Post :meth:`exchange`'s messages (this rank's cells copied out now) and return without waiting."""
         t0 = time.perf_counter()
         on_device = target is not None and target.is_cuda
         host = target.to_host(arr) if on_device else arr
@@ -191,13 +258,30 @@ class Decomposition(Collectives):
             sends = [(r, rows, slice(None)) for r, rows in self.sends_full]
         else:
             recvs, sends = self.recvs, self.sends
-        sent = swap(self.comm, view, [(r, (rows, cells)) for r, rows, cells in recvs],
-                    [(r, (rows, cells)) for r, rows, cells in sends])
+        pending = swap_start(self.comm, view, [(r, (rows, cells)) for r, rows, cells in recvs],
+                             [(r, (rows, cells)) for r, rows, cells in sends])
+        pending.host = view
         if on_device:
-            arr.copy_to_device(host)
-        self.exchanges += 1
-        self.bytes_sent += sent
+            pending.device, pending.copy_back = (arr, host), rows_span(recvs)
+        self.bytes_sent += pending.sent
         self.exchange_s += time.perf_counter() - t0
+        return pending
+
+    def finish_exchange(self, pending: Pending) -> None:
+        """Wait for an exchange :meth:`start_exchange` posted and write the halo cells it brought (on CUDA the
+        halo rows go back to the device, nothing else)."""
+        t0 = time.perf_counter()
+        swap_finish(pending, pending.host)
+        write_back(pending)
+        self.exchanges += 1
+        self.exchange_s += time.perf_counter() - t0
+
+    def solver_halo(self, target=None) -> SolverHalo:
+        """The exchange after each step of an :class:`~iceresist.lbm.solver.LBMSolver` on the local forest, split so
+        that the blocks no other rank pulls from are updated while the messages travel."""
+        sent = np.unique(np.concatenate([rows for _, rows, _ in self.sends])) if self.sends else []
+        return SolverHalo(target, self.local.nblocks, self.nowned, sent,
+                          lambda arr: self.start_exchange(arr, target), self.finish_exchange)
 
     # -- collectives -------------------------------------------------------------------------------------
     def gather_rows(self, local: np.ndarray, axis: int = 0):

@@ -33,7 +33,8 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.grid.forest import BlockForest, morton_key
 from iceresist.grid.levels import LevelView
-from iceresist.parallel.decomposition import Collectives, morton_partition, swap
+from iceresist.parallel.decomposition import (Collectives, Pending, SolverHalo, morton_partition,
+                                              rows_span, swap_finish, swap_start, write_back)
 
 
 def tree_of(view: LevelView) -> np.ndarray:
@@ -152,20 +153,39 @@ class LevelDecomposition(Collectives):
     def exchange(self, lv: int, arr, target=None) -> None:
         """Overwrite the halo leaves of level ``lv`` in ``arr`` (``[block, q, cell]`` over this rank's blocks of the
         level, a host or a device array of ``target``) with their owners' values."""
+        self.finish_exchange(self.start_exchange(lv, arr, target))
+
+    def start_exchange(self, lv: int, arr, target=None) -> Pending:
+        """Post :meth:`exchange`'s messages (this rank's leaves copied out now) and return without waiting."""
         t0 = time.perf_counter()
         on_device = target is not None and target.is_cuda
         host = target.to_host(arr) if on_device else arr
-        self.bytes_sent += swap(self.comm, host, self._recvs[lv], self._sends[lv], tag=100 + lv)
+        pending = swap_start(self.comm, host, self._recvs[lv], self._sends[lv], tag=100 + lv)
+        pending.host = host
         if on_device:
-            arr.copy_to_device(host)
+            pending.device, pending.copy_back = (arr, host), rows_span(self._recvs[lv])
+        self.bytes_sent += pending.sent
+        self.exchange_s += time.perf_counter() - t0
+        return pending
+
+    def finish_exchange(self, pending: Pending) -> None:
+        """Wait for an exchange :meth:`start_exchange` posted and write the halo leaves it brought (on CUDA those
+        rows go back to the device, nothing else)."""
+        t0 = time.perf_counter()
+        swap_finish(pending, pending.host)
+        write_back(pending)
         self.exchanges += 1
         self.exchange_s += time.perf_counter() - t0
 
     def step_own(self, lv: int, solver, target=None) -> None:
         """Make ``solver`` (an :class:`~iceresist.lbm.solver.LBMSolver` of level ``lv`` on this rank's blocks) step
-        this rank's own leaves and swap the level's halo leaves after each step."""
+        this rank's own leaves and swap the level's halo leaves after each step, the leaves no other rank holds
+        updated while the messages travel."""
         solver.active_blocks = self.nown[lv]
-        solver.after_step = lambda f: self.exchange(lv, f, target)
+        sends = self._sends[lv]
+        sent = np.unique(np.concatenate([rows for _, rows in sends])) if sends else []
+        solver.halo = SolverHalo(target, self.views[lv].forest.nblocks, self.nown[lv], sent,
+                                 lambda arr: self.start_exchange(lv, arr, target), self.finish_exchange)
 
     # -- whole levels on rank 0 ------------------------------------------------------------------------
     def gather(self, lv: int, local: np.ndarray):

@@ -20,7 +20,7 @@ EXPECTED = {
     "mark", "links", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
     "near_events", "fill",
     "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero2", "count_k", "chunk_sum", "scan_sums",
-    "chunk_scan", "scatter", "level_transfer", "ghost_phase", "bulk_roles", "bulk_settle",
+    "chunk_scan", "scatter", "level_transfer", "ghost_phase", "bulk_roles", "bulk_settle", "halo_pack", "halo_unpack",
 }
 
 

@@ -27,8 +27,8 @@ except ImportError:
 pytestmark = [pytest.mark.mpi, pytest.mark.skipif(not HAVE_MPI, reason="the `mpi` extra is not installed")]
 
 
-def _run(ranks, *args, cwd):
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+def _run(ranks, *args, cwd, env=None):
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1", **(env or {})}
     cmd = ([str(MPIRUN), "-n", str(ranks)] if ranks > 1 else []) + [str(ICERESIST), "run", *map(str, args),
                                                                     "--no-progress"]
     # 20 min: with a cold kernel cache each rank compiles the kernels it runs
@@ -139,11 +139,25 @@ def _cuda_target() -> bool:
 
 
 @pytest.mark.skipif(not _cuda_target(), reason="no CUDA GPU and the simulator is off")
-def test_cuda_ranks_stage_the_halo_through_the_host(tmp_path):
-    """The cavity with backend = "cuda" (the CUDA simulator in CI), 2 steps: on two ranks, each exchanging its
-    device arrays through the host, the populations are those of one CUDA process, bit for bit."""
-    one = _run(1, "cavity", "--steps", 2, "--backend", "cuda", "--output", "one", cwd=tmp_path)
-    two = _run(2, "cavity", "--steps", 2, "--backend", "cuda", "--output", "two", cwd=tmp_path)
+@pytest.mark.parametrize("aware", ["0", "1"], ids=["staged", "cuda-aware"])
+def test_cuda_ranks_pack_the_halo_on_the_device(tmp_path, aware):
+    """The cavity with backend = "cuda" (the CUDA simulator in CI), its water started moving across the ranks'
+    boundary (z = 8) so that a wrong halo shows at once, 2 steps: on two ranks, each packing its halo messages on
+    the device and passing them to MPI through host buffers (or, with ICERESIST_CUDA_AWARE_MPI=1, as device
+    buffers: the simulator's device memory is host memory), the populations are those of one CUDA process, bit for
+    bit."""
+    from importlib import resources
+
+    from iceresist.scene.load import PRESETS_PACKAGE
+
+    text = (resources.files(PRESETS_PACKAGE) / "cavity.toml").read_text()
+    assert 'operator = "cumulant"' in text
+    scene = tmp_path / "cavity.toml"
+    scene.write_text(text.replace('operator = "cumulant"',
+                                  'operator = "cumulant"\ninitial_velocity_m_s = [0.02, 0.01, 0.03]'))
+    one = _run(1, scene, "--steps", 2, "--backend", "cuda", "--output", "one", cwd=tmp_path)
+    two = _run(2, scene, "--steps", 2, "--backend", "cuda", "--output", "two", cwd=tmp_path,
+               env={"ICERESIST_CUDA_AWARE_MPI": aware})
     assert one.returncode == 0 and two.returncode == 0, (one.stderr[-2000:], two.stderr[-2000:])
     a, b = _populations(tmp_path / "one"), _populations(tmp_path / "two")
     assert np.abs(a).max() > 1e-3 and np.array_equal(a, b)

@@ -168,3 +168,43 @@ def test_each_rank_holds_its_trees_and_the_ring_around_them_and_swaps_its_halo_l
         h = solver.halo
         assert np.flatnonzero(h.sent).tolist() == sorted(set(srows.tolist()))
         assert np.flatnonzero(h.sent | h.inner).tolist() == list(range(d[1].nown[lv])) and h.ninner > 0
+
+
+@pytest.mark.parametrize("layers", [True, False], ids=["layers", "whole-blocks"])
+def test_a_cuda_rank_packs_its_messages_on_the_device_and_unpacks_what_arrives(layers):
+    """iceresist.parallel.staging under the CUDA simulator: the device buffer of a message holds, component by
+    component, the values of its entries (one layer of 64 cells of blocks 3 and 5, or the whole of blocks 3 and 5);
+    unpacking it into blocks 0 and 1 writes those values there and nothing else."""
+    from iceresist.backends import jit
+
+    if not jit.cuda_available():
+        pytest.skip("no CUDA GPU and the simulator is off")
+    from iceresist.parallel.staging import DevicePlan
+
+    target = jit.cuda()
+    rng = np.random.default_rng(3)
+    host = rng.standard_normal((6, 27, 512))
+    arr = target.to_device(host)
+    if layers:
+        cells = np.tile(np.arange(0, 512, 8), 2)
+        send, recv = (np.repeat([3, 5], 64), cells), (np.repeat([0, 1], 64), cells)
+    else:
+        send, recv = ([3, 5], None), ([0, 1], None)
+    plan = DevicePlan(target, arr.shape, arr.dtype, [(1, *recv)], [(1, *send)], layers=layers)
+    plan.pack_sends(arr)
+    (m,), (back,) = plan.sends, plan.recvs
+    buf = m.dbuf.copy_to_host()
+    if layers:
+        want = host[send[0], :, send[1]].T                    # [27, entries]
+    else:
+        want = host[[3, 5]].reshape(1, -1)                    # whole blocks, row by row
+    assert np.array_equal(buf, want)
+    back.dbuf.copy_to_device(buf)
+    plan.unpack_recvs(arr)
+    out = arr.copy_to_host()
+    expect = host.copy()
+    if layers:
+        expect[recv[0], :, recv[1]] = host[send[0], :, send[1]]
+    else:
+        expect[[0, 1]] = host[[3, 5]]
+    assert np.array_equal(out, expect) and not np.array_equal(out, host)

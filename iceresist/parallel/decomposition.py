@@ -48,14 +48,12 @@ def block_weights(forest) -> np.ndarray:
 
 
 class Pending:
-    """A halo exchange under way (:func:`swap_start`): its requests, the receive buffers and where they go, the
-    send buffers kept alive until the sends complete, and the bytes sent. On CUDA also the host copy the messages
-    read and write, the device array, and the rows to copy back once the messages are in (``copy_back``)."""
+    """A halo exchange under way: its requests, the bytes sent, and ``complete()``, which writes what arrived once
+    the requests are done (the receive buffers into a host array, or a device plan's unpack, :mod:`.staging`).
+    The send buffers stay referenced here until the sends complete."""
 
-    def __init__(self, reqs, bufs_in, outs, sent: int):
-        self.reqs, self.bufs_in, self.outs, self.sent = reqs, bufs_in, outs, sent
-        self.host = self.device = self.copy_back = None
-        self.t0 = 0.0
+    def __init__(self, reqs, sent: int, complete, keep=()):
+        self.reqs, self.sent, self.complete, self.keep = reqs, sent, complete, keep
 
 
 def swap_start(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> Pending:
@@ -73,44 +71,28 @@ def swap_start(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> Pending:
         outs.append(buf)
         sent += buf.nbytes
         reqs.append(comm.Isend(buf, dest=r, tag=tag))
-    return Pending(reqs, bufs_in, outs, sent)
+
+    def complete():
+        for index, buf in bufs_in:
+            view[index] = buf
+
+    return Pending(reqs, sent, complete, outs)
 
 
-def swap_finish(pending: Pending, view: np.ndarray) -> None:
-    """Wait for the exchange ``pending`` and write what arrived into ``view``."""
+def swap_finish(pending: Pending) -> None:
+    """Wait for the exchange ``pending`` and write what arrived."""
     from mpi4py import MPI
 
     MPI.Request.Waitall(pending.reqs)
-    for index, buf in pending.bufs_in:
-        view[index] = buf
+    pending.complete()
 
 
 def swap(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> int:
     """One non-blocking exchange over ``comm`` waited for at once (:func:`swap_start`, :func:`swap_finish`).
     Returns the bytes sent."""
     pending = swap_start(comm, view, recvs, sends, tag)
-    swap_finish(pending, view)
+    swap_finish(pending)
     return pending.sent
-
-
-def write_back(pending: Pending) -> None:
-    """The rows an exchange wrote into the host copy of a device array, back onto the device."""
-    if pending.device is None:
-        return
-    arr, host = pending.device
-    span = pending.copy_back
-    if span.stop > span.start:
-        arr[span].copy_to_device(np.ascontiguousarray(host[span]))
-
-
-def rows_span(recvs) -> slice:
-    """The rows (axis 0) that the receives ``(rank, rows, ...)`` write, as one slice from the first to the last:
-    what a device array needs back from its host copy after an exchange (a rank's halo rows are contiguous)."""
-    rows = [np.asarray(item[1]).ravel() for item in recvs if len(item[1])]
-    if not rows:
-        return slice(0, 0)
-    allrows = np.concatenate(rows)
-    return slice(int(allrows.min()), int(allrows.max()) + 1)
 
 
 class SolverHalo:
@@ -205,6 +187,8 @@ class Decomposition(Collectives):
                 self.recvs_full.append((r, pos[self.halo[self.owner[self.halo] == r]]))
         #: Totals since construction: halo exchanges, bytes this rank sent, wall seconds inside them.
         self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
+        #: Device exchanges by (full, shape, dtype) (:class:`~iceresist.parallel.staging.DevicePlan`)
+        self._plans = {}
 
     def _needed(self, sender: int, receiver: int):
         """(global blocks, cells) of ``sender``'s blocks that ``receiver``'s blocks pull from: for a block h next to
@@ -241,38 +225,42 @@ class Decomposition(Collectives):
     def exchange(self, arr, target=None, full: bool = False) -> None:
         """Overwrite the halo cells this rank's blocks pull from in ``arr`` (the local forest's blocks along axis 0,
         the 512 cells along the last axis, ``[block, cell]`` or ``[block, k, cell]``; a host or a device array of
-        ``target``) with their owners' values; ``full``: every cell of the halo blocks (a step of several passes
-        that each reach one cell further into the halo stays exact next to this rank's blocks for up to 7 of
-        them: the free surface)."""
+        ``target``) with their owners' values; ``full``: every value of the halo blocks, of any trailing shape (a
+        step of several passes that each reach one cell further into the halo stays exact next to this rank's
+        blocks for up to 7 of them: the free surface)."""
         self.finish_exchange(self.start_exchange(arr, target, full))
 
     def start_exchange(self, arr, target=None, full: bool = False) -> Pending:
-        """Post :meth:`exchange`'s messages (this rank's cells copied out now) and return without waiting."""
+        """Post :meth:`exchange`'s messages (this rank's values copied out now) and return without waiting; a device
+        array's messages are packed on the device (:mod:`iceresist.parallel.staging`)."""
         t0 = time.perf_counter()
-        on_device = target is not None and target.is_cuda
-        host = target.to_host(arr) if on_device else arr
-        view = np.moveaxis(host, -1, 1)               # [block, cell, ...]: (rows, cells) pairs index it
         if full:
-            view = host
-            recvs = [(r, rows, slice(None)) for r, rows in self.recvs_full]
-            sends = [(r, rows, slice(None)) for r, rows in self.sends_full]
+            recvs = [(r, rows, None) for r, rows in self.recvs_full]
+            sends = [(r, rows, None) for r, rows in self.sends_full]
         else:
             recvs, sends = self.recvs, self.sends
-        pending = swap_start(self.comm, view, [(r, (rows, cells)) for r, rows, cells in recvs],
-                             [(r, (rows, cells)) for r, rows, cells in sends])
-        pending.host = view
-        if on_device:
-            pending.device, pending.copy_back = (arr, host), rows_span(recvs)
+        if target is not None and target.is_cuda:
+            key = (bool(full), tuple(arr.shape), str(arr.dtype))
+            if key not in self._plans:
+                from iceresist.parallel.staging import DevicePlan
+
+                self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends, layers=not full)
+            pending = self._plans[key].start(self.comm, arr, tag=7)
+        else:
+            view = arr if full else np.moveaxis(arr, -1, 1)     # [block, cell, ...]: (rows, cells) pairs index it
+
+            def index(msgs):
+                return [(r, (rows, slice(None) if c is None else c)) for r, rows, c in msgs]
+
+            pending = swap_start(self.comm, view, index(recvs), index(sends))
         self.bytes_sent += pending.sent
         self.exchange_s += time.perf_counter() - t0
         return pending
 
     def finish_exchange(self, pending: Pending) -> None:
-        """Wait for an exchange :meth:`start_exchange` posted and write the halo cells it brought (on CUDA the
-        halo rows go back to the device, nothing else)."""
+        """Wait for an exchange :meth:`start_exchange` posted and write the halo values it brought."""
         t0 = time.perf_counter()
-        swap_finish(pending, pending.host)
-        write_back(pending)
+        swap_finish(pending)
         self.exchanges += 1
         self.exchange_s += time.perf_counter() - t0
 

@@ -33,8 +33,8 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.grid.forest import BlockForest, morton_key
 from iceresist.grid.levels import LevelView
-from iceresist.parallel.decomposition import (Collectives, Pending, SolverHalo, morton_partition,
-                                              rows_span, swap_finish, swap_start, write_back)
+from iceresist.parallel.decomposition import (Collectives, Pending, SolverHalo, morton_partition, swap_finish,
+                                              swap_start)
 
 
 def tree_of(view: LevelView) -> np.ndarray:
@@ -148,6 +148,8 @@ class LevelDecomposition(Collectives):
         self.leaves_per_rank = [int(n) for n in np.bincount(leaf_owner, minlength=self.size)]
         #: Totals since construction: halo exchanges, bytes this rank sent, wall seconds inside them.
         self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
+        #: Device exchanges by (level, shape, dtype) (:class:`~iceresist.parallel.staging.DevicePlan`)
+        self._plans = {}
 
     # -- halo exchange ------------------------------------------------------------------------------
     def exchange(self, lv: int, arr, target=None) -> None:
@@ -156,24 +158,28 @@ class LevelDecomposition(Collectives):
         self.finish_exchange(self.start_exchange(lv, arr, target))
 
     def start_exchange(self, lv: int, arr, target=None) -> Pending:
-        """Post :meth:`exchange`'s messages (this rank's leaves copied out now) and return without waiting."""
+        """Post :meth:`exchange`'s messages (this rank's leaves copied out now, on a device packed there:
+        :mod:`iceresist.parallel.staging`) and return without waiting."""
         t0 = time.perf_counter()
-        on_device = target is not None and target.is_cuda
-        host = target.to_host(arr) if on_device else arr
-        pending = swap_start(self.comm, host, self._recvs[lv], self._sends[lv], tag=100 + lv)
-        pending.host = host
-        if on_device:
-            pending.device, pending.copy_back = (arr, host), rows_span(self._recvs[lv])
+        if target is not None and target.is_cuda:
+            key = (lv, tuple(arr.shape), str(arr.dtype))
+            if key not in self._plans:
+                from iceresist.parallel.staging import DevicePlan
+
+                self._plans[key] = DevicePlan(target, arr.shape, arr.dtype,
+                                              [(r, rows, None) for r, rows in self._recvs[lv]],
+                                              [(r, rows, None) for r, rows in self._sends[lv]], layers=False)
+            pending = self._plans[key].start(self.comm, arr, tag=100 + lv)
+        else:
+            pending = swap_start(self.comm, arr, self._recvs[lv], self._sends[lv], tag=100 + lv)
         self.bytes_sent += pending.sent
         self.exchange_s += time.perf_counter() - t0
         return pending
 
     def finish_exchange(self, pending: Pending) -> None:
-        """Wait for an exchange :meth:`start_exchange` posted and write the halo leaves it brought (on CUDA those
-        rows go back to the device, nothing else)."""
+        """Wait for an exchange :meth:`start_exchange` posted and write the halo leaves it brought."""
         t0 = time.perf_counter()
-        swap_finish(pending, pending.host)
-        write_back(pending)
+        swap_finish(pending)
         self.exchanges += 1
         self.exchange_s += time.perf_counter() - t0
 

@@ -56,6 +56,21 @@ def fluid_launches(precision: str):
     n = solver.forest.nblocks
     solver.halo = SolverHalo(jit.cuda(), n, n, [0], start=lambda arr: None, finish=lambda pending: None)
     solver.step(1)
+    halo_packing(solver.state, solver.flags)
+
+
+def halo_packing(*arrays):
+    """Launches of an MPI rank's halo packing on the device (:mod:`iceresist.parallel.staging`) for each of
+    ``arrays`` (``[block, ..., 512]``): one layer of block 1 sent, block 0 received, then whole blocks."""
+    from iceresist.parallel.staging import DevicePlan
+
+    for arr in arrays:
+        cells = np.arange(64, dtype=np.int64)
+        for layers, msg in ((True, ([1] * 64, cells)), (False, ([1], None))):
+            back = ([0] * len(msg[0]), msg[1])
+            plan = DevicePlan(jit.cuda(), arr.shape, arr.dtype, [(1, *back)], [(1, *msg)], layers=layers)
+            plan.pack_sends(arr)
+            plan.unpack_recvs(arr)
 
 
 def refined_surface_launches(precision: str):

@@ -46,3 +46,16 @@ def test_three_solid_fractions_and_the_ladder_converge_to_zick_homsy():
         res.append(r.resolution)
     for i in range(2):
         assert math.log(errs[i] / errs[i + 1]) / math.log(res[i + 1] / res[i]) >= 1.7
+
+
+@pytest.mark.slow   # about 4 min on a 2-core x86 VM
+def test_the_drag_error_moves_with_tau_from_low_at_tau_1_to_high_at_tau_0_6():
+    """The same three fractions at tau = 0.6 (nu = 1/30, nearer the tau - 1/2 of 1e-5 to 0.1 that the ship and the
+    validation scenes run at): K is high by 2.01 / 1.39 / 3.38 % (measured), where tau = 1 gives -0.96 / -1.36 /
+    -2.15 % and tau = 0.8 +0.31 / -0.15 / +0.20 %: the link bounce-back's wall moves with the viscosity (at
+    second order in the resolution), so the issue's 2 % at 16 cells per diameter holds near tau = 0.8 only. The
+    bound is 4 %, above the reference."""
+    for prm in S.fractions():
+        r = S.run({**prm, "tau": 0.6})
+        assert r.extra["tau"] == pytest.approx(0.6)
+        assert r.reference < r.value < 1.04 * r.reference, prm["label"]

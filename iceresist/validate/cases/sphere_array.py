@@ -18,8 +18,8 @@ V_fluid the fluid cells. Comparing F_s itself with Zick and Homsy's F puts the d
 (-12.5 % at phi = 0.125). Settled, F_s equals the body force on the fluid, f N_fluid, which the case records as a
 check of the exchange (``force_balance``).
 
-Ladder: phi = 0.125 at 10, 15, 20 cells per diameter (L = 16, 24, 32), cumulant collision, tau = 1 (nu = 1/6); the
-body force is set for a Reynolds number U d / nu of about ``REYNOLDS``. Solid fractions (:func:`fractions`): 0.064,
+Ladder: phi = 0.125 at 10, 15, 20 cells per diameter (L = 16, 24, 32), cumulant collision, tau = 1 (nu = 1/6; a
+rung's ``tau`` sets another); the body force is set for a Reynolds number U d / nu of about ``REYNOLDS``. Solid fractions (:func:`fractions`): 0.064,
 0.125 and 0.216 at 16-20 cells per diameter (L a whole number of 8-cell blocks).
 """
 
@@ -72,30 +72,36 @@ def fractions() -> list[dict]:
     return out
 
 
-def force_for(n: int, phi: float) -> float:
+def force_for(n: int, phi: float, nu: float = NU) -> float:
     """Body force density (lattice units) for U d / nu = ``REYNOLDS`` at Zick and Homsy's drag:
     f n^3 = 6 pi mu a K U with U = REYNOLDS nu / (2 a)."""
-    return REYNOLDS * 3.0 * math.pi * NU ** 2 * ZICK_HOMSY_SC[phi] / n ** 3
+    return REYNOLDS * 3.0 * math.pi * nu ** 2 * ZICK_HOMSY_SC[phi] / n ** 3
 
 
-def steps_for(n: int, phi: float = 0.125) -> int:
+def viscosity(params: dict) -> float:
+    """Lattice viscosity (tau - 1/2) / 3 of a rung (``params["tau"]``, default :data:`TAU`)."""
+    return (float(params.get("tau", TAU)) - 0.5) / 3.0
+
+
+def steps_for(n: int, phi: float = 0.125, nu: float = NU) -> int:
     """``SETTLE`` times the slower of L^2 / (4 pi^2 nu) and (1 - phi) L^3 / (6 pi nu a K)."""
     a = radius_cells(n, phi)
-    tau = max(n * n / (4.0 * math.pi ** 2 * NU), (1.0 - phi) * n ** 3 / (6.0 * math.pi * NU * a * ZICK_HOMSY_SC[phi]))
-    return int(math.ceil(SETTLE * tau))
+    t = max(n * n / (4.0 * math.pi ** 2 * nu), (1.0 - phi) * n ** 3 / (6.0 * math.pi * nu * a * ZICK_HOMSY_SC[phi]))
+    return int(math.ceil(SETTLE * t))
 
 
 def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
     """The unit cell (lattice units): n^3 periodic cells, a fixed sphere at the centre, the body force along x."""
-    n, phi = int(params["cells"]), float(params["phi"])
+    n, phi, nu = int(params["cells"]), float(params["phi"]), viscosity(params)
     return scene_of({
         "scene": {"name": f"{NAME}-{n}", "description": f"simple cubic sphere array, phi = {phi:g}, L = {n} cells",
                   "units": "lattice"},
         "domain": {"cells": [n, n, n], "faces": {f: "periodic" for f in ("x_min", "x_max", "y_min", "y_max", "z_min",
                                                                          "z_max")}},
-        "fluid": {"body_force_N_m3": [force_for(n, phi), 0.0, 0.0], "operator": params.get("operator", "cumulant")},
-        "numerics": {"tau": TAU, "u_max_m_s": 0.01, "precision": precision, "backend": backend},
-        "run": {"steps": steps_for(n, phi)},
+        "fluid": {"body_force_N_m3": [force_for(n, phi, nu), 0.0, 0.0],
+                  "operator": params.get("operator", "cumulant")},
+        "numerics": {"tau": 0.5 + 3.0 * nu, "u_max_m_s": 0.01, "precision": precision, "backend": backend},
+        "run": {"steps": steps_for(n, phi, nu)},
         "output": {"fields": ["u", "flags"]},
         "bodies": [{"name": "sphere", "shape": "sphere", "radius_m": radius_cells(n, phi),
                     "position_m": [n / 2.0, n / 2.0, n / 2.0], "motion": "fixed"}],
@@ -106,10 +112,10 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     """One rung: K from the momentum exchange on the sphere and the superficial velocity, against Zick-Homsy."""
     from iceresist.models import build_model
 
-    n, phi = int(params["cells"]), float(params["phi"])
+    n, phi, nu = int(params["cells"]), float(params["phi"]), viscosity(params)
     sc = scene(params, backend=backend, precision=precision)
     model = build_model(sc)
-    steps = steps_for(n, phi)
+    steps = steps_for(n, phi, nu)
     rung = run_rung(model, sc, out_dir, NAME, params, steps=steps, sample_every=max(1, steps // 40),
                     fields=("u",))
     a = radius_cells(n, phi)
@@ -119,7 +125,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     fx = rung.timeseries["sphere_Fx_N"]
     force = float(np.mean(fx[-4:]))
     drag = force * n ** 3 / fluid_cells                       # F = F_s V_cell / V_fluid (module docstring)
-    k = drag / (6.0 * math.pi * NU * a * u_sup)
+    k = drag / (6.0 * math.pi * nu * a * u_sup)
     ref = ZICK_HOMSY_SC[phi]
     settle = abs(fx[-1] - fx[-5]) / abs(fx[-1]) if len(fx) > 5 else float("nan")
     return CaseResult(case=NAME, label=params["label"], resolution=2.0 * a, cells=n ** 3, steps=rung.steps,
@@ -127,7 +133,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
                       error=relative_error(k, ref), backend=backend, precision=precision,
                       extra={"phi": phi, "radius_cells": a, "u_superficial": u_sup, "force": force, "drag": drag,
                              "fluid_fraction": fluid_cells / n ** 3,
-                             "force_balance": (force / (force_for(n, phi) * fluid_cells) if fluid_cells
+                             "force_balance": (force / (force_for(n, phi, nu) * fluid_cells) if fluid_cells
                                                else float("nan")),
-                             "reynolds": u_sup * 2 * a / NU, "last_change": float(settle),
+                             "reynolds": u_sup * 2 * a / nu, "tau": 0.5 + 3.0 * nu, "last_change": float(settle),
                              "result_file": str(rung.path)})

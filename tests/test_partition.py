@@ -38,23 +38,27 @@ class _Comm:
 def test_each_rank_receives_the_layer_its_blocks_pull_and_sends_what_the_others_pull():
     """A 32 x 8 x 8 channel (4 blocks along x, periodic along x, walls elsewhere) on 2 ranks: rank 0 owns blocks
     0-1, rank 1 blocks 2-3; each rank's halo is the two blocks beside its share (one across the periodic face), and
-    from each it receives the one layer of 64 cells facing its own block; what one rank sends is what the other
-    receives."""
+    from each it receives, of the one layer of 64 cells facing its own block, the 9 populations streaming towards
+    it (c_x = -1 from the block at +x, +1 from the one at -x); what one rank sends is what the other receives."""
     faces = {"x-": Face("periodic"), "x+": Face("periodic"), "y-": Face("wall"), "y+": Face("wall"),
              "z-": Face("wall"), "z+": Face("wall")}
     fo = BlockForest.uniform((32, 8, 8), faces)
     d0, d1 = Decomposition(fo, _Comm(0, 2)), Decomposition(fo, _Comm(1, 2))
     assert d0.nowned == d1.nowned == 2
     assert sorted(fo.origin[d0.halo][:, 0].tolist()) == [2, 3]
-    (r, rows, cells), = d0.recvs
-    assert r == 1 and len(cells) == 2 * 64
+    from iceresist.lattice import C
+
+    (r, rows, comps, cells), = d0.recvs
+    assert r == 1 and len(cells) == 2 * 64 * 9
     x = (cells & 7)
-    per_block = {int(b): set(x[rows == b].tolist()) for b in np.unique(rows)}
+    per_block = {int(b): (set(x[rows == b].tolist()), set(C[comps[rows == b], 0].tolist())) for b in np.unique(rows)}
     xs = {int(fo.origin[d0.global_ids[b], 0]): v for b, v in per_block.items()}
-    assert xs == {2: {0}, 3: {7}}          # block 2's low-x layer faces block 1, block 3's high-x layer block 0
-    (r1, srows, scells), = d1.sends
+    # block 2's low-x layer faces block 1 and streams -x into it, block 3's high-x layer streams +x into block 0
+    assert xs == {2: ({0}, {-1}), 3: ({7}, {1})}
+    (r1, srows, scomps, scells), = d1.sends
     assert r1 == 0
     assert np.array_equal(d1.global_ids[srows], d0.global_ids[rows]) and np.array_equal(scells, cells)
+    assert np.array_equal(scomps, comps)
 
 
 def test_a_rank_updates_the_blocks_it_sends_before_its_messages_go_and_the_rest_while_they_travel():
@@ -69,7 +73,7 @@ def test_a_rank_updates_the_blocks_it_sends_before_its_messages_go_and_the_rest_
     x = fo.origin[d.global_ids, 0]
     assert sorted(x[h.sent == 1].tolist()) == [0, 3] and sorted(x[h.inner == 1].tolist()) == [1, 2]
     assert (h.nsent, h.ninner) == (2, 2) and not (h.sent[d.nowned:] | h.inner[d.nowned:]).any()
-    (_, rows, _), = d.sends
+    (_, rows, _, _), = d.sends
     assert set(np.unique(rows).tolist()) == set(np.flatnonzero(h.sent).tolist())
 
 
@@ -170,10 +174,10 @@ def test_each_rank_holds_its_trees_and_the_ring_around_them_and_swaps_its_halo_l
         assert np.flatnonzero(h.sent | h.inner).tolist() == list(range(d[1].nown[lv])) and h.ninner > 0
 
 
-@pytest.mark.parametrize("layers", [True, False], ids=["layers", "whole-blocks"])
+@pytest.mark.parametrize("layers", [True, False], ids=["populations", "whole-blocks"])
 def test_a_cuda_rank_packs_its_messages_on_the_device_and_unpacks_what_arrives(layers):
-    """iceresist.parallel.staging under the CUDA simulator: the device buffer of a message holds, component by
-    component, the values of its entries (one layer of 64 cells of blocks 3 and 5, or the whole of blocks 3 and 5);
+    """iceresist.parallel.staging under the CUDA simulator: the device buffer of a message holds the values of its
+    entries in order (9 populations of a layer of 64 cells of blocks 3 and 5, or the whole of blocks 3 and 5);
     unpacking it into blocks 0 and 1 writes those values there and nothing else."""
     from iceresist.backends import jit
 
@@ -186,25 +190,23 @@ def test_a_cuda_rank_packs_its_messages_on_the_device_and_unpacks_what_arrives(l
     host = rng.standard_normal((6, 27, 512))
     arr = target.to_device(host)
     if layers:
-        cells = np.tile(np.arange(0, 512, 8), 2)
-        send, recv = (np.repeat([3, 5], 64), cells), (np.repeat([0, 1], 64), cells)
+        comps = np.tile(np.repeat(np.arange(9, 18), 64), 2)
+        cells = np.tile(np.arange(0, 512, 8), 18)
+        send, recv = (np.repeat([3, 5], 9 * 64), comps, cells), (np.repeat([0, 1], 9 * 64), comps, cells)
     else:
-        send, recv = ([3, 5], None), ([0, 1], None)
-    plan = DevicePlan(target, arr.shape, arr.dtype, [(1, *recv)], [(1, *send)], layers=layers)
+        send, recv = ([3, 5], None, None), ([0, 1], None, None)
+    plan = DevicePlan(target, arr.shape, arr.dtype, [(1, *recv)], [(1, *send)])
     plan.pack_sends(arr)
     (m,), (back,) = plan.sends, plan.recvs
     buf = m.dbuf.copy_to_host()
-    if layers:
-        want = host[send[0], :, send[1]].T                    # [27, entries]
-    else:
-        want = host[[3, 5]].reshape(1, -1)                    # whole blocks, row by row
+    want = host[send] if layers else host[[3, 5]].ravel()
     assert np.array_equal(buf, want)
     back.dbuf.copy_to_device(buf)
     plan.unpack_recvs(arr)
     out = arr.copy_to_host()
     expect = host.copy()
     if layers:
-        expect[recv[0], :, recv[1]] = host[send[0], :, send[1]]
+        expect[recv] = host[send]
     else:
         expect[[0, 1]] = host[[3, 5]]
     assert np.array_equal(out, expect) and not np.array_equal(out, host)

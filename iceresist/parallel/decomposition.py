@@ -4,11 +4,12 @@ The forest's blocks are in Morton order; :func:`morton_partition` cuts that orde
 weight (a block weighs its cells times the sub-steps of its level, 2^level), so each rank owns a compact piece of the
 domain. A rank steps a :class:`~iceresist.grid.forest.BlockForest` of its own: its blocks first, then its **halo**,
 every block of another rank that one of its blocks pulls from (the 26 neighbours). After each step
-:meth:`Decomposition.exchange` sends the cells of its blocks that a neighbouring rank's blocks pull from (the one
-layer facing them: 64 of a block's 512 cells across a face) and receives its own halo's (non-blocking
-``Isend``/``Irecv`` of packed cells, one message per neighbouring rank and array; device arrays staged through the
-host). A rank updates only its own blocks, so its cells see exactly the values one process would give them: the
-fluid is bit-identical to a run on one process.
+:meth:`Decomposition.exchange` sends the populations of its blocks that a neighbouring rank's blocks pull (of the one
+layer of cells facing them, 64 of a block's 512 across a face, the populations streaming towards them, 9 of 27
+across a face) and receives its own halo's (non-blocking ``Isend``/``Irecv``, one message per neighbouring rank and
+array; device arrays packed on the device, :mod:`iceresist.parallel.staging`). A rank updates only its own blocks,
+so its cells see exactly the values one process would give them: the fluid is bit-identical to a run on one
+process.
 
 The rank-local forest takes the global flags for its halo blocks (a halo block's outer side has no neighbours on
 this rank, which would mark its cells near a wall).
@@ -167,8 +168,9 @@ class Decomposition(Collectives):
         self.local.flags[self.nowned:] = forest.flags[self.halo]
         pos = np.full(forest.nblocks, -1, dtype=np.int64)
         pos[ids] = np.arange(len(ids))
-        #: (rank, local rows, cells) to send and to receive: the cells of each halo block that the receiving rank's
-        #: blocks pull from (the layer facing them), in (global block, cell) order on both sides
+        #: (rank, local rows, populations, cells) to send and to receive: the populations of the cells of each halo
+        #: block that the receiving rank's blocks pull (the layer facing them, the populations crossing towards
+        #: them), in (global block, population, cell) order on both sides
         self.sends = []
         self.recvs = []
         #: (rank, local rows) of whole blocks to send and to receive (:meth:`exchange` with ``full``)
@@ -177,13 +179,13 @@ class Decomposition(Collectives):
         for r in range(self.size):
             if r == self.rank:
                 continue
-            blocks, cells = self._needed(sender=self.rank, receiver=r)
+            blocks, comps, cells = self._needed(sender=self.rank, receiver=r)
             if len(blocks):
-                self.sends.append((r, pos[blocks], cells))
+                self.sends.append((r, pos[blocks], comps, cells))
                 self.sends_full.append((r, pos[np.intersect1d(self.owned, halos[r])]))
-            blocks, cells = self._needed(sender=r, receiver=self.rank)
+            blocks, comps, cells = self._needed(sender=r, receiver=self.rank)
             if len(blocks):
-                self.recvs.append((r, pos[blocks], cells))
+                self.recvs.append((r, pos[blocks], comps, cells))
                 self.recvs_full.append((r, pos[self.halo[self.owner[self.halo] == r]]))
         #: Totals since construction: halo exchanges, bytes this rank sent, wall seconds inside them.
         self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
@@ -191,9 +193,10 @@ class Decomposition(Collectives):
         self._plans = {}
 
     def _needed(self, sender: int, receiver: int):
-        """(global blocks, cells) of ``sender``'s blocks that ``receiver``'s blocks pull from: for a block h next to
-        a receiving block o, the cells of h on its side facing o (one layer; an edge or a corner for diagonal
-        neighbours), sorted by block then cell."""
+        """(global blocks, populations, cells) of ``sender``'s blocks that ``receiver``'s blocks pull: for a block h
+        next to a receiving block o, the cells of h on its side facing o (one layer; an edge or a corner for
+        diagonal neighbours) and of them the populations that stream from h into o (9 across a face, 3 across an
+        edge, 1 across a corner), sorted by block, population, cell."""
         from iceresist.grid.forest import LX, LY, LZ
         from iceresist.lattice import C
 
@@ -212,20 +215,26 @@ class Decomposition(Collectives):
                     m &= local[a] == 0
                 elif C[q, a] == -1:
                     m &= local[a] == 7
+            axes = C[q] != 0              # a cell x of o pulls f_p from x - c_p: in h where c_p = -C[q] on these axes
+            pops = np.flatnonzero((C[:, axes] == -C[q, axes]).all(axis=1))
             for b in h.tolist():
-                mask[b] = mask[b] | m if b in mask else m.copy()
+                if b not in mask:
+                    mask[b] = np.zeros((C.shape[0], 512), dtype=bool)
+                mask[b][pops] |= m
         if not mask:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
         order = sorted(mask)
-        blocks = np.concatenate([np.full(int(mask[b].sum()), b, np.int64) for b in order])
-        cells = np.concatenate([np.flatnonzero(mask[b]) for b in order]).astype(np.int64)
-        return blocks, cells
+        pairs = [np.nonzero(mask[b]) for b in order]
+        blocks = np.concatenate([np.full(len(p), b, np.int64) for b, (p, _) in zip(order, pairs)])
+        comps = np.concatenate([p for p, _ in pairs]).astype(np.int64)
+        cells = np.concatenate([c for _, c in pairs]).astype(np.int64)
+        return blocks, comps, cells
 
     # -- halo exchange ------------------------------------------------------------------------------
     def exchange(self, arr, target=None, full: bool = False) -> None:
-        """Overwrite the halo cells this rank's blocks pull from in ``arr`` (the local forest's blocks along axis 0,
-        the 512 cells along the last axis, ``[block, cell]`` or ``[block, k, cell]``; a host or a device array of
-        ``target``) with their owners' values; ``full``: every value of the halo blocks, of any trailing shape (a
+        """Overwrite the halo populations this rank's blocks pull in ``arr`` (``[block, q, cell]`` over the local
+        forest's blocks, a host or a device array of ``target``) with their owners' values; ``full``: every value of
+        the halo blocks, of any trailing shape (a
         step of several passes that each reach one cell further into the halo stays exact next to this rank's
         blocks for up to 7 of them: the free surface)."""
         self.finish_exchange(self.start_exchange(arr, target, full))
@@ -235,8 +244,8 @@ class Decomposition(Collectives):
         array's messages are packed on the device (:mod:`iceresist.parallel.staging`)."""
         t0 = time.perf_counter()
         if full:
-            recvs = [(r, rows, None) for r, rows in self.recvs_full]
-            sends = [(r, rows, None) for r, rows in self.sends_full]
+            recvs = [(r, rows, None, None) for r, rows in self.recvs_full]
+            sends = [(r, rows, None, None) for r, rows in self.sends_full]
         else:
             recvs, sends = self.recvs, self.sends
         if target is not None and target.is_cuda:
@@ -244,15 +253,13 @@ class Decomposition(Collectives):
             if key not in self._plans:
                 from iceresist.parallel.staging import DevicePlan
 
-                self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends, layers=not full)
+                self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends)
             pending = self._plans[key].start(self.comm, arr, tag=7)
         else:
-            view = arr if full else np.moveaxis(arr, -1, 1)     # [block, cell, ...]: (rows, cells) pairs index it
-
             def index(msgs):
-                return [(r, (rows, slice(None) if c is None else c)) for r, rows, c in msgs]
+                return [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in msgs]
 
-            pending = swap_start(self.comm, view, index(recvs), index(sends))
+            pending = swap_start(self.comm, arr, index(recvs), index(sends))
         self.bytes_sent += pending.sent
         self.exchange_s += time.perf_counter() - t0
         return pending
@@ -267,7 +274,7 @@ class Decomposition(Collectives):
     def solver_halo(self, target=None) -> SolverHalo:
         """The exchange after each step of an :class:`~iceresist.lbm.solver.LBMSolver` on the local forest, split so
         that the blocks no other rank pulls from are updated while the messages travel."""
-        sent = np.unique(np.concatenate([rows for _, rows, _ in self.sends])) if self.sends else []
+        sent = np.unique(np.concatenate([rows for _, rows, _, _ in self.sends])) if self.sends else []
         return SolverHalo(target, self.local.nblocks, self.nowned, sent,
                           lambda arr: self.start_exchange(arr, target), self.finish_exchange)
 

@@ -167,8 +167,8 @@ class LevelDecomposition(Collectives):
                 from iceresist.parallel.staging import DevicePlan
 
                 self._plans[key] = DevicePlan(target, arr.shape, arr.dtype,
-                                              [(r, rows, None) for r, rows in self._recvs[lv]],
-                                              [(r, rows, None) for r, rows in self._sends[lv]], layers=False)
+                                              [(r, rows, None, None) for r, rows in self._recvs[lv]],
+                                              [(r, rows, None, None) for r, rows in self._sends[lv]])
             pending = self._plans[key].start(self.comm, arr, tag=100 + lv)
         else:
             pending = swap_start(self.comm, arr, self._recvs[lv], self._sends[lv], tag=100 + lv)

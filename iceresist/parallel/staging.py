@@ -7,10 +7,10 @@ PCIe bus, never the whole array (a step of the paper's case holds about 20 MB of
 populations). The buffers go through host buffers to MPI, as in the paper; with a CUDA-aware MPI (Open MPI or MPICH
 built with CUDA) ``ICERESIST_CUDA_AWARE_MPI=1`` hands MPI the device buffers themselves.
 
-A message is a list of entries (local block row, position within the block's trailing values): the cells of a layer
-for each of ``K`` leading components (``[block, K, 512]``: the populations, h), or every value of whole blocks. Both
-sides list the entries of one message in the same order (:mod:`iceresist.parallel.decomposition`), and the buffer
-is ``[K, entries]``: consecutive threads read consecutive cells.
+A message is a list of entries (local block row, component, position): a population of a cell
+(``[block, q, 512]``), or every value of whole blocks of any trailing shape (component 0 of the array seen as
+``[block, 1, values]``). Both sides list the entries of one message in the same order
+(:mod:`iceresist.parallel.decomposition`), and the buffer holds them in that order.
 """
 
 from __future__ import annotations
@@ -31,34 +31,31 @@ def cuda_aware() -> bool:
     return os.environ.get(CUDA_AWARE_ENV, "").strip().lower() in ("1", "true", "yes", "on")
 
 
-def _pack(i, arr, rows, cells, count, buf):
-    k = i // count
-    e = i - k * count
-    buf[k, e] = arr[rows[e], k, cells[e]]
+def _pack(i, arr, rows, comps, cells, buf):
+    buf[i] = arr[rows[i], comps[i], cells[i]]
 
 
-def _unpack(i, arr, rows, cells, count, buf):
-    k = i // count
-    e = i - k * count
-    arr[rows[e], k, cells[e]] = buf[k, e]
+def _unpack(i, arr, rows, comps, cells, buf):
+    arr[rows[i], comps[i], cells[i]] = buf[i]
 
 
 @lru_cache(maxsize=None)
 def launchers(target):
-    """(pack, unpack): ``pack(K n, arr, rows, cells, n, buf)`` sets ``buf[k, e] = arr[rows[e], k, cells[e]]``,
-    ``unpack`` the reverse, for e < n, k < K."""
-    names = ("arr", "rows", "cells", "count", "buf")
+    """(pack, unpack): ``pack(n, arr, rows, comps, cells, buf)`` sets ``buf[e] = arr[rows[e], comps[e], cells[e]]``
+    for e < n, ``unpack`` the reverse."""
+    names = ("arr", "rows", "comps", "cells", "buf")
     return (ItemLauncher(target, target.device(_pack), names, label="halo_pack"),
             ItemLauncher(target, target.device(_unpack), names, label="halo_unpack"))
 
 
-def entries(rows, cells, width: int):
-    """(rows, positions) of a message: ``cells`` per entry, or with ``cells`` None every position < ``width`` of
-    each row in ``rows`` (whole blocks), row by row."""
+def entries(rows, comps, cells, width: int):
+    """(rows, components, positions) of a message: as given, or with ``cells`` None every position < ``width`` of
+    each row in ``rows`` (whole blocks, component 0), row by row."""
     rows = np.asarray(rows, dtype=np.int64)
     if cells is not None:
-        return rows, np.asarray(cells, dtype=np.int64)
-    return np.repeat(rows, width), np.tile(np.arange(width, dtype=np.int64), len(rows))
+        return rows, np.asarray(comps, dtype=np.int64), np.asarray(cells, dtype=np.int64)
+    n = len(rows) * width
+    return np.repeat(rows, width), np.zeros(n, dtype=np.int64), np.tile(np.arange(width, dtype=np.int64), len(rows))
 
 
 def _mpi_buffer(dbuf):
@@ -72,35 +69,32 @@ def _mpi_buffer(dbuf):
 class _Route:
     """One message to or from one rank: its entries on the device, its device buffer and (staged) host buffer."""
 
-    def __init__(self, target, rank: int, rows, cells, k: int, dtype, staged: bool):
+    def __init__(self, target, rank: int, rows, comps, cells, dtype, staged: bool):
         self.rank = rank
         self.count = len(rows)
-        self.rows, self.cells = target.to_device(rows), target.to_device(cells)
-        shape = (k, self.count)
-        self.dbuf = target.to_device(np.zeros(shape, dtype=dtype))
-        self.hbuf = np.zeros(shape, dtype=dtype) if staged else None
-        self.nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
+        self.rows, self.comps, self.cells = (target.to_device(a) for a in (rows, comps, cells))
+        self.dbuf = target.to_device(np.zeros(self.count, dtype=dtype))
+        self.hbuf = np.zeros(self.count, dtype=dtype) if staged else None
+        self.nbytes = self.count * np.dtype(dtype).itemsize
 
 
 class DevicePlan:
-    """The halo exchange of device arrays of one shape and dtype: ``recvs`` and ``sends`` are ``(rank, rows,
-    cells)`` with ``cells`` None for whole blocks; ``layers``: the arrays are ``[block, ..., 512]`` and the
-    entries cells of that last axis (each leading component a row of the buffer), else whole blocks of any
-    trailing shape."""
+    """The halo exchange of device arrays of one shape and dtype: ``recvs`` and ``sends`` are ``(rank, rows, comps,
+    cells)``, the entries of a ``[block, q, 512]`` array, or with ``comps`` and ``cells`` None whole blocks of any
+    trailing shape (module docstring)."""
 
-    def __init__(self, target, shape, dtype, recvs, sends, layers: bool):
+    def __init__(self, target, shape, dtype, recvs, sends):
         self.target = target
         shape = tuple(int(n) for n in shape)      # a device array's shape refuses negative indices
-        nb = shape[0]
-        if layers:
-            self.view_shape = (nb, int(np.prod(shape[1:-1], dtype=np.int64)), int(shape[-1]))
+        whole = any(m[3] is None for m in list(recvs) + list(sends))
+        if whole:
+            self.view_shape = (shape[0], 1, int(np.prod(shape[1:], dtype=np.int64)))
         else:
-            self.view_shape = (nb, 1, int(np.prod(shape[1:], dtype=np.int64)))
-        k, width = self.view_shape[1], self.view_shape[2]
+            self.view_shape = (shape[0], int(np.prod(shape[1:-1], dtype=np.int64)), shape[-1])
         self.staged = not cuda_aware()
 
-        def route(r, rows, cells):
-            return _Route(target, r, *entries(rows, cells, width), k, dtype, self.staged)
+        def route(r, rows, comps, cells):
+            return _Route(target, r, *entries(rows, comps, cells, self.view_shape[2]), dtype, self.staged)
 
         self.recvs = [route(*m) for m in recvs]
         self.sends = [route(*m) for m in sends]
@@ -110,13 +104,13 @@ class DevicePlan:
         """Each send's values of ``arr`` into its device buffer."""
         a3 = arr.reshape(self.view_shape)
         for m in self.sends:
-            self.pack(self.view_shape[1] * m.count, a3, m.rows, m.cells, np.int64(m.count), m.dbuf)
+            self.pack(m.count, a3, m.rows, m.comps, m.cells, m.dbuf)
 
     def unpack_recvs(self, arr) -> None:
         """Each receive's device buffer into its values of ``arr``."""
         a3 = arr.reshape(self.view_shape)
         for m in self.recvs:
-            self.unpack(self.view_shape[1] * m.count, a3, m.rows, m.cells, np.int64(m.count), m.dbuf)
+            self.unpack(m.count, a3, m.rows, m.comps, m.cells, m.dbuf)
 
     def start(self, comm, arr, tag: int):
         """Post the receives, pack and post the sends of ``arr``; returns the

@@ -61,14 +61,16 @@ def fluid_launches(precision: str):
 
 def halo_packing(*arrays):
     """Launches of an MPI rank's halo packing on the device (:mod:`iceresist.parallel.staging`) for each of
-    ``arrays`` (``[block, ..., 512]``): one layer of block 1 sent, block 0 received, then whole blocks."""
+    ``arrays`` (``[block, ..., 512]``): nine populations of one layer of block 1 sent and of block 0 received, then
+    whole blocks."""
     from iceresist.parallel.staging import DevicePlan
 
     for arr in arrays:
-        cells = np.arange(64, dtype=np.int64)
-        for layers, msg in ((True, ([1] * 64, cells)), (False, ([1], None))):
-            back = ([0] * len(msg[0]), msg[1])
-            plan = DevicePlan(jit.cuda(), arr.shape, arr.dtype, [(1, *back)], [(1, *msg)], layers=layers)
+        k = min(9, arr.shape[1]) if arr.ndim == 3 else 1
+        comps, cells = np.repeat(np.arange(k), 64), np.tile(np.arange(64), k)
+        for entries in ((comps, cells), (None, None)):
+            n = 1 if entries[0] is None else len(cells)
+            plan = DevicePlan(jit.cuda(), arr.shape, arr.dtype, [(1, [0] * n, *entries)], [(1, [1] * n, *entries)])
             plan.pack_sends(arr)
             plan.unpack_recvs(arr)
 

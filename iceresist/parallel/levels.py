@@ -33,8 +33,8 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.grid.forest import BlockForest, morton_key
 from iceresist.grid.levels import LevelView
-from iceresist.parallel.decomposition import (Collectives, Pending, SolverHalo, morton_partition, swap_finish,
-                                              swap_start)
+from iceresist.parallel.decomposition import Collectives, SolverHalo, morton_partition
+from iceresist.parallel.messages import Pending, swap_finish, swap_start
 
 
 def tree_of(view: LevelView) -> np.ndarray:

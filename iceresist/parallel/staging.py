@@ -21,6 +21,7 @@ from functools import lru_cache
 import numpy as np
 
 from iceresist.backends.launch import ItemLauncher
+from iceresist.parallel.messages import Pending
 
 #: Set to 1 where the MPI library takes CUDA device buffers (a CUDA-aware build); the package index's MPICH does not.
 CUDA_AWARE_ENV = "ICERESIST_CUDA_AWARE_MPI"
@@ -114,9 +115,7 @@ class DevicePlan:
 
     def start(self, comm, arr, tag: int):
         """Post the receives, pack and post the sends of ``arr``; returns the
-        :class:`~iceresist.parallel.decomposition.Pending` exchange, whose completion unpacks into ``arr``."""
-        from iceresist.parallel.decomposition import Pending
-
+        :class:`~iceresist.parallel.messages.Pending` exchange, whose completion unpacks into ``arr``."""
         reqs, sent = [], 0
         for m in self.recvs:
             reqs.append(comm.Irecv(m.hbuf if self.staged else _mpi_buffer(m.dbuf), source=m.rank, tag=tag))

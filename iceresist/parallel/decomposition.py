@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from iceresist.errors import InputError
-from iceresist.parallel.messages import Pending, swap_finish, swap_start
+from iceresist.parallel.messages import Exchanges, Pending, swap_start
 
 
 def morton_partition(weights: np.ndarray, nranks: int) -> np.ndarray:
@@ -90,7 +90,7 @@ class Collectives:
         return self.comm.bcast(value, root=0)
 
 
-class Decomposition(Collectives):
+class Decomposition(Collectives, Exchanges):
     """The share of ``forest`` (the global :class:`BlockForest`) that rank ``comm.rank`` steps (module docstring).
 
     ``owned``: global ids of the rank's blocks; ``halo``: global ids of its halo blocks; ``global_ids``: both, in
@@ -213,16 +213,7 @@ class Decomposition(Collectives):
                 return [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in msgs]
 
             pending = swap_start(self.comm, arr, index(recvs), index(sends))
-        self.bytes_sent += pending.sent
-        self.exchange_s += time.perf_counter() - t0
-        return pending
-
-    def finish_exchange(self, pending: Pending) -> None:
-        """Wait for an exchange :meth:`start_exchange` posted and write the halo values it brought."""
-        t0 = time.perf_counter()
-        swap_finish(pending)
-        self.exchanges += 1
-        self.exchange_s += time.perf_counter() - t0
+        return self._posted(pending, t0)
 
     def solver_halo(self, target=None) -> SolverHalo:
         """The exchange after each step of an :class:`~iceresist.lbm.solver.LBMSolver` on the local forest, split so

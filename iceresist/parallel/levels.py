@@ -34,7 +34,7 @@ from iceresist.errors import InputError
 from iceresist.grid.forest import BlockForest, morton_key
 from iceresist.grid.levels import LevelView
 from iceresist.parallel.decomposition import Collectives, SolverHalo, morton_partition
-from iceresist.parallel.messages import Pending, swap_finish, swap_start
+from iceresist.parallel.messages import Exchanges, Pending, swap_start
 
 
 def tree_of(view: LevelView) -> np.ndarray:
@@ -89,7 +89,7 @@ def near_owners(view: LevelView, tree_owner: np.ndarray, root, periodic) -> np.n
     return out
 
 
-class LevelDecomposition(Collectives):
+class LevelDecomposition(Collectives, Exchanges):
     """The share of every level of ``views`` (the global :func:`~iceresist.grid.levels.level_views` of ``octree``)
     that rank ``comm.rank`` steps (module docstring).
 
@@ -172,16 +172,7 @@ class LevelDecomposition(Collectives):
             pending = self._plans[key].start(self.comm, arr, tag=100 + lv)
         else:
             pending = swap_start(self.comm, arr, self._recvs[lv], self._sends[lv], tag=100 + lv)
-        self.bytes_sent += pending.sent
-        self.exchange_s += time.perf_counter() - t0
-        return pending
-
-    def finish_exchange(self, pending: Pending) -> None:
-        """Wait for an exchange :meth:`start_exchange` posted and write the halo leaves it brought."""
-        t0 = time.perf_counter()
-        swap_finish(pending)
-        self.exchanges += 1
-        self.exchange_s += time.perf_counter() - t0
+        return self._posted(pending, t0)
 
     def step_own(self, lv: int, solver, target=None) -> None:
         """Make ``solver`` (an :class:`~iceresist.lbm.solver.LBMSolver` of level ``lv`` on this rank's blocks) step

@@ -4,6 +4,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 
@@ -45,3 +47,23 @@ def swap_finish(pending: Pending) -> None:
 
     MPI.Request.Waitall(pending.reqs)
     pending.complete()
+
+
+class Exchanges:
+    """The bookkeeping of a rank's halo exchanges, shared by the decompositions: totals since construction
+    (``exchanges``, ``bytes_sent``, ``exchange_s``, the wall seconds inside posting and waiting) and the
+    completion of a posted exchange."""
+
+    exchanges, bytes_sent, exchange_s = 0, 0, 0.0
+
+    def _posted(self, pending: Pending, t0: float) -> Pending:
+        self.bytes_sent += pending.sent
+        self.exchange_s += time.perf_counter() - t0
+        return pending
+
+    def finish_exchange(self, pending: Pending) -> None:
+        """Wait for an exchange that ``start_exchange`` posted and write the halo values it brought."""
+        t0 = time.perf_counter()
+        swap_finish(pending)
+        self.exchanges += 1
+        self.exchange_s += time.perf_counter() - t0

@@ -32,31 +32,30 @@ def cuda_aware() -> bool:
     return os.environ.get(CUDA_AWARE_ENV, "").strip().lower() in ("1", "true", "yes", "on")
 
 
-def _pack(i, arr, rows, comps, cells, buf):
-    buf[i] = arr[rows[i], comps[i], cells[i]]
+def _pack(i, arr, rows, comps, cells, width, buf):
+    if width > 0:                   # whole blocks: entry i is value i % width of the (i // width)-th row
+        b = i // width
+        buf[i] = arr[rows[b], 0, i - b * width]
+    else:
+        buf[i] = arr[rows[i], comps[i], cells[i]]
 
 
-def _unpack(i, arr, rows, comps, cells, buf):
-    arr[rows[i], comps[i], cells[i]] = buf[i]
+def _unpack(i, arr, rows, comps, cells, width, buf):
+    if width > 0:
+        b = i // width
+        arr[rows[b], 0, i - b * width] = buf[i]
+    else:
+        arr[rows[i], comps[i], cells[i]] = buf[i]
 
 
 @lru_cache(maxsize=None)
 def launchers(target):
-    """(pack, unpack): ``pack(n, arr, rows, comps, cells, buf)`` sets ``buf[e] = arr[rows[e], comps[e], cells[e]]``
-    for e < n, ``unpack`` the reverse."""
-    names = ("arr", "rows", "comps", "cells", "buf")
+    """(pack, unpack): ``pack(n, arr, rows, comps, cells, width, buf)`` sets ``buf[e] = arr[rows[e], comps[e],
+    cells[e]]`` for e < n, or with ``width`` > 0 (whole blocks) ``buf[e] = arr[rows[e // width], 0, e % width]``;
+    ``unpack`` the reverse."""
+    names = ("arr", "rows", "comps", "cells", "width", "buf")
     return (ItemLauncher(target, target.device(_pack), names, label="halo_pack"),
             ItemLauncher(target, target.device(_unpack), names, label="halo_unpack"))
-
-
-def entries(rows, comps, cells, width: int):
-    """(rows, components, positions) of a message: as given, or with ``cells`` None every position < ``width`` of
-    each row in ``rows`` (whole blocks, component 0), row by row."""
-    rows = np.asarray(rows, dtype=np.int64)
-    if cells is not None:
-        return rows, np.asarray(comps, dtype=np.int64), np.asarray(cells, dtype=np.int64)
-    n = len(rows) * width
-    return np.repeat(rows, width), np.zeros(n, dtype=np.int64), np.tile(np.arange(width, dtype=np.int64), len(rows))
 
 
 def _mpi_buffer(dbuf):
@@ -68,12 +67,18 @@ def _mpi_buffer(dbuf):
 
 
 class _Route:
-    """One message to or from one rank: its entries on the device, its device buffer and (staged) host buffer."""
+    """One message to or from one rank: its entries on the device (``cells`` None: whole rows of ``width`` values,
+    indexed in the kernel), its device buffer and (staged) host buffer."""
 
-    def __init__(self, target, rank: int, rows, comps, cells, dtype, staged: bool):
+    def __init__(self, target, rank: int, rows, comps, cells, width: int, dtype, staged: bool):
         self.rank = rank
-        self.count = len(rows)
-        self.rows, self.comps, self.cells = (target.to_device(a) for a in (rows, comps, cells))
+        rows = np.asarray(rows, dtype=np.int64)
+        none = np.zeros(0, dtype=np.int64)
+        self.width = np.int64(0 if cells is not None else width)
+        self.count = len(rows) if cells is not None else len(rows) * width
+        self.rows = target.to_device(rows)
+        self.comps, self.cells = (target.to_device(none if a is None else np.asarray(a, dtype=np.int64))
+                                  for a in (comps, cells))
         self.dbuf = target.to_device(np.zeros(self.count, dtype=dtype))
         self.hbuf = np.zeros(self.count, dtype=dtype) if staged else None
         self.nbytes = self.count * np.dtype(dtype).itemsize
@@ -95,7 +100,7 @@ class DevicePlan:
         self.staged = not cuda_aware()
 
         def route(r, rows, comps, cells):
-            return _Route(target, r, *entries(rows, comps, cells, self.view_shape[2]), dtype, self.staged)
+            return _Route(target, r, rows, comps, cells, self.view_shape[2], dtype, self.staged)
 
         self.recvs = [route(*m) for m in recvs]
         self.sends = [route(*m) for m in sends]
@@ -105,13 +110,13 @@ class DevicePlan:
         """Each send's values of ``arr`` into its device buffer."""
         a3 = arr.reshape(self.view_shape)
         for m in self.sends:
-            self.pack(m.count, a3, m.rows, m.comps, m.cells, m.dbuf)
+            self.pack(m.count, a3, m.rows, m.comps, m.cells, m.width, m.dbuf)
 
     def unpack_recvs(self, arr) -> None:
         """Each receive's device buffer into its values of ``arr``."""
         a3 = arr.reshape(self.view_shape)
         for m in self.recvs:
-            self.unpack(m.count, a3, m.rows, m.comps, m.cells, m.dbuf)
+            self.unpack(m.count, a3, m.rows, m.comps, m.cells, m.width, m.dbuf)
 
     def start(self, comm, arr, tag: int):
         """Post the receives, pack and post the sends of ``arr``; returns the

@@ -48,6 +48,18 @@ def test_three_solid_fractions_and_the_ladder_converge_to_zick_homsy():
         assert math.log(errs[i] / errs[i + 1]) / math.log(res[i + 1] / res[i]) >= 1.7
 
 
+@pytest.mark.slow   # about 1.5 min on a 2-core x86 VM
+def test_at_tau_0_8_the_three_fractions_meet_the_issues_2_percent_at_16_to_20_cells_per_diameter():
+    """The issue's target, 2 % at 16 cells per diameter, at tau = 0.8 (nu = 0.1): measured +0.31 / -0.15 / +0.20 %
+    for phi = 0.064 / 0.125 / 0.216 (2-core x86 VM, 2026-11-29). Where the link bounce-back's wall sits is a matter
+    of tau (the next test, and tau = 1 above); the bound is the issue's. Planted: the drag without the pressure
+    share V_cell / V_fluid of the module docstring gives -6.4 / -12.4 / -21.7 % and fails."""
+    for prm in S.fractions():
+        r = S.run({**prm, "tau": 0.8})
+        assert r.extra["tau"] == pytest.approx(0.8)
+        assert r.value == pytest.approx(r.reference, rel=0.02), prm["label"]
+
+
 @pytest.mark.slow   # about 4 min on a 2-core x86 VM
 def test_the_drag_error_moves_with_tau_from_low_at_tau_1_to_high_at_tau_0_6():
     """The same three fractions at tau = 0.6 (nu = 1/30, nearer the tau - 1/2 of 1e-5 to 0.1 that the ship and the

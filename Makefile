@@ -4,6 +4,9 @@ PY      ?= python3
 VENV    ?= .venv
 BIN     := $(VENV)/bin
 PYTEST_ARGS ?= -m "not slow and not gpu"
+# Test processes (pytest-xdist): compiling a kernel and most CUDA-simulator tests use one core, so two processes use
+# both of a 2-core CI machine; 0 runs the tests in the pytest process itself.
+PYTEST_WORKERS ?= 2
 
 .PHONY: demo test venv bench clean
 
@@ -21,7 +24,7 @@ demo: venv
 	$(BIN)/python -m iceresist demo
 
 test: venv
-	NUMBA_ENABLE_CUDASIM=$${NUMBA_ENABLE_CUDASIM-1} $(BIN)/python -m pytest $(PYTEST_ARGS)
+	NUMBA_ENABLE_CUDASIM=$${NUMBA_ENABLE_CUDASIM-1} $(BIN)/python -m pytest -n $(PYTEST_WORKERS) $(PYTEST_ARGS)
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -79,6 +79,7 @@ def test_a_body_launched_in_slabs_has_no_film_between_its_own_slabs():
     assert np.allclose(m_whole.fluid_force_N, m_split.fluid_force_N, rtol=1e-12, atol=1e-12 * ARCHIMEDES_N)
 
 
+@pytest.mark.slow   # 133 s in the CUDA simulator with 2 test processes on a 2-core x86 VM
 def test_cpu_and_cuda_simulator_agree_on_the_film_force():
     cpu, m_cpu = _held_cube("plate", film=True, steps=2, nxy=8)
     gpu, m_gpu = _held_cube("plate", film=True, target=jit.cuda(), steps=2, nxy=8)

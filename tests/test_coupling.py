@@ -225,6 +225,7 @@ def test_runs_partition_the_cell_box_of_a_body(runs):
     assert (bint[full, 10] < plane).all()
 
 
+@pytest.mark.slow   # 226 s with 2 test processes on a 2-core x86 VM
 def test_mark_and_link_run_forms_give_the_results_of_the_cell_forms():
     """The CPU run forms of ``mark`` (the sign of the next cells of a line taken from an evaluated cell: from its face
     planes for a box or a convex polyhedron, floor(|d| - 0.01) cells for a sphere) and of the link pass (cells far

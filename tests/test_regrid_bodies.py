@@ -64,6 +64,7 @@ def _settle(model, steps: int, k: int = 1):
     return np.array(w), np.array(z)
 
 
+@pytest.mark.slow   # 166 s with 2 test processes on a 2-core x86 VM
 def test_a_settling_sphere_on_regridded_levels_follows_the_uniform_fine_grid():
     """400 level-0 steps: the sphere falls 8.8 cells, the fine blocks follow it (3 regrids change them: the
     blocks below refined, those above coarsened), and its settling speed over the last 100 steps is the uniform

@@ -27,6 +27,11 @@ except ImportError:
 pytestmark = [pytest.mark.mpi, pytest.mark.skipif(not HAVE_MPI, reason="the `mpi` extra is not installed")]
 
 
+#: Two-rank runs beyond those CI keeps (the fluid, free surface, ships and refined levels), 18-58 s each with two
+#: test processes on a 2-core x86 VM: slow, for the CI time.
+BEYOND_CI = pytest.mark.slow
+
+
 def _run(ranks, *args, cwd, env=None):
     env = {**os.environ, "NUMBA_NUM_THREADS": "1", **(env or {})}
     cmd = ([str(MPIRUN), "-n", str(ranks)] if ranks > 1 else []) + [str(ICERESIST), "run", *map(str, args),
@@ -229,7 +234,7 @@ def test_a_free_surface_run_on_two_ranks_is_the_one_process_run(tmp_path):
             assert np.array_equal(got[last][k], want[last][k]), (out, k)
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_settling_sphere_on_two_ranks_is_the_one_process_run(tmp_path):
     """ten Cate's settling sphere started 82.5 mm up, across the cut between the two ranks' shares (z = 80 mm), 200
     steps: on two ranks (the coupling over each rank's blocks and halo, the links counted on its own blocks, F_s and
@@ -277,7 +282,7 @@ def _close(a, b, rtol=1e-12):
             (k, float(np.nanmax(np.abs(x - y))))
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_floating_cube_on_two_ranks_is_the_one_process_run(tmp_path):
     """The floating-cube scene (a 41 mm cube released at 80 % draft in a 24 x 24 x 32 tank, 36 blocks, the cube
     across the cut between the two shares), float64, 60 steps: on two ranks (the halo's whole state exchanged after
@@ -512,7 +517,7 @@ surface_band_m = 6.0
 """
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_free_surface_on_refined_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     """Still water on two levels (the surface on level 1), 40 level-0 steps: on two ranks (the finest level's halo
     leaves stepped and their whole state swapped after each of its steps, level 0's populations after each of its
@@ -550,7 +555,7 @@ SLOSH = (SURFACE.replace('x_min = "periodic", x_max = "periodic"', 'x_min = "wal
          + "vorticity_1_s = 3.0e-3\nregrid_every_steps = 10\n")
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_free_surface_on_levels_regrids_on_two_ranks_as_on_one(tmp_path):
     """The water started against the walls regrids at steps 10 (every block to level 1), 20 and 40 (two level-0
     blocks back): on two ranks (the finest level's phase field and flags carried on rank 0 and dealt out along the
@@ -574,7 +579,7 @@ def test_a_free_surface_on_levels_regrids_on_two_ranks_as_on_one(tmp_path):
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_sphere_sinking_in_water_on_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     """A sphere released under the surface on levels (surface band and the band about the sphere on level 1, 27
     level-0 trees), 120 level-0 steps with a regrid at step 100 (its band reaches the coarse bottom layer): on two
@@ -640,7 +645,7 @@ def test_a_tier2_ship_on_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     _close(read_checkpoint(tmp_path / "cut" / f"{name}.checkpoint.h5")["model"], one)
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_settling_sphere_on_regridded_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     """A sphere settling in a closed box with the band about it on level 1, regridding every 10 steps (the band
     moves down at step 50): on two ranks (the coupling's cell owners carried on rank 0 and dealt out with the levels)
@@ -667,7 +672,7 @@ def test_a_settling_sphere_on_regridded_levels_on_two_ranks_is_the_one_process_r
     assert all(np.array_equal(x, y) for x, y in zip(want, state("two_one")))
 
 
-@pytest.mark.slow   # CI keeps the fluid, surface, ship and level runs on two ranks; 18-58 s each
+@BEYOND_CI
 def test_a_sphere_on_refined_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     """The sphere in its refined patch (Re 10, level 1 around it, 48 x 32 x 32 level-0 cells), moving up at 0.02
     across the flow, 40 level-0 steps: on two ranks (the coupling on the finest level's own leaves and halo, the

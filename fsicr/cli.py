@@ -8,13 +8,14 @@ gives one line on stderr and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import sys
 
 from . import hullmesh, report
 from .cliparser import OneLineParser
 from .compare import compare_table2
-from .errors import FsicrInputError
+from .errors import FsicrInputError, short_text
 from .power import required_power
 from .resistance import r_ch_at_waterlines
 from .rules import ICE_CLASSES, PROPULSION_KINDS, parse_ice_class
@@ -196,6 +197,12 @@ def main(argv=None) -> int:
         return int(args.func(args) or 0)
     except FsicrInputError as exc:
         print(f"fsicr: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        if exc.errno != errno.ENAMETOOLONG:
+            raise
+        print(f"fsicr: error: a path is too long for the file system: {short_text(str(exc.filename))}; "
+              f"give a shorter one", file=sys.stderr)
         return 2
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FsicrInputError
+from .errors import FsicrInputError, short_text
 
 #: Metres per unit of the mesh's coordinates.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "ft": 0.3048, "in": 0.0254}
@@ -131,6 +131,30 @@ def _rotation(bow: str, up: str, keys: MeshKeys) -> np.ndarray:
     return np.stack([fwd, port, upv])  # rows: ship axes in mesh coordinates
 
 
+def stl_problem(p: Path) -> str | None:
+    """What makes the file ``p`` no STL, in words, or None where it may be one: an ASCII STL starts with
+    ``solid`` and holds ``facet``; a binary STL is 84 bytes of header and count and 50 bytes per triangle (bytes
+    beyond them, which some exporters write, are let be)."""
+    size = p.stat().st_size
+    with open(p, "rb") as fh:
+        head = fh.read(84)
+    if head[:5].lower() == b"solid":
+        with open(p, "rb") as fh:
+            if b"facet" in fh.read(1 << 16):
+                return None
+        if size < 84:
+            return "holds no triangles (a text STL without a facet)"
+    if size < 84:
+        return f"is not an STL: {size} bytes, and a binary STL has at least 84 (header and triangle count)"
+    count = int.from_bytes(head[80:84], "little")
+    if count == 0:
+        return "holds no triangles (a binary STL whose triangle count is 0)"
+    if size < 84 + 50 * count:
+        return (f"is not a whole binary STL: its header announces {count} triangles ({84 + 50 * count} bytes) but "
+                f"the file holds {size} bytes (cut short, or not an STL)")
+    return None
+
+
 def read_mesh(path, *, unit: str = "m", keys: MeshKeys = MeshKeys(), what: str = "hull") -> HullMesh:
     """Read and check a closed surface mesh (STL or OBJ; a built-in name), in metres, as the file places it:
     not empty, watertight, faces outward."""
@@ -140,25 +164,40 @@ def read_mesh(path, *, unit: str = "m", keys: MeshKeys = MeshKeys(), what: str =
         raise FsicrInputError(f"{keys.file}: reading a mesh needs trimesh: pip install trimesh") from None
     p = Path(path)
     builtin = builtin_meshes()
-    if not p.exists() and p.parent == Path(".") and p.stem in builtin:
-        p = builtin[p.stem]
-    if not p.is_file():
-        raise FsicrInputError(f"{keys.file}: no file {str(path)!r}; give the path of an STL or OBJ {what} or a "
-                              f"built-in one ({', '.join(sorted(builtin))})")
+    try:  # a name the file system refuses (too long, a NUL byte) is the user's input, not a crash
+        if not p.exists() and p.parent == Path(".") and p.stem in builtin:
+            p = builtin[p.stem]
+        is_file = p.is_file()
+    except (OSError, ValueError) as exc:
+        raise FsicrInputError(f"{keys.file}: {short_text(str(path))} cannot be a file name here "
+                              f"({getattr(exc, 'strerror', None) or exc}); give the path of an STL or OBJ {what}") \
+            from None
+    if not is_file:
+        raise FsicrInputError(f"{keys.file}: no file {short_text(str(path))}; give the path of an STL or OBJ {what} "
+                              f"or a built-in one ({', '.join(sorted(builtin))})")
     if p.suffix.lower() not in (".stl", ".obj"):
-        raise FsicrInputError(f"{keys.file}: {p.name!r} is not .stl or .obj; export the {what} as STL or OBJ")
+        raise FsicrInputError(f"{keys.file}: {short_text(p.name)} is not .stl or .obj; export the {what} as STL or "
+                              f"OBJ")
     if unit not in UNITS:
         raise FsicrInputError(f"{keys.unit}: {unit!r} is not a length unit; use one of {', '.join(UNITS)}")
+    wrong = stl_problem(p) if p.suffix.lower() == ".stl" else None
+    if wrong:
+        raise FsicrInputError(f"{keys.file}: {short_text(str(p))} {wrong}; export the {what} again as STL or OBJ")
     try:
         mesh = trimesh.load(p, force="mesh", process=True)
     except Exception as exc:  # noqa: BLE001 - any parse failure is the user's file
-        raise FsicrInputError(f"{keys.file}: {p.name!r} could not be read as a mesh ({type(exc).__name__}: "
+        raise FsicrInputError(f"{keys.file}: {short_text(str(p))} could not be read as a mesh ({type(exc).__name__}: "
                               f"{str(exc)[:80]}); export the {what} again as STL or OBJ") from None
     if len(getattr(mesh, "faces", ())) == 0:
-        raise FsicrInputError(f"{keys.file}: {p.name!r} holds no triangles; export the {what} surface as STL or OBJ")
+        raise FsicrInputError(f"{keys.file}: {short_text(str(p))} holds no triangles; export the {what} surface as "
+                              f"STL or OBJ")
     if not mesh.is_watertight:
         raise FsicrInputError(f"{keys.file}: {p.name!r} is not watertight ({len(mesh.faces)} triangles, open edges "
                               f"or holes); close the {what} (deck included) before exporting")
+    bodies = int(mesh.body_count)
+    if bodies > 1:
+        raise FsicrInputError(f"{keys.file}: {p.name!r} holds {bodies} separate closed surfaces; a {what} is one "
+                              f"body: export it alone, or join the parts into one closed surface")
     out = HullMesh(np.asarray(mesh.vertices, float) * UNITS[unit], np.asarray(mesh.faces, np.int64), source=str(p),
                    meta={"file": str(p), "unit": unit, "triangles": int(len(mesh.faces))})
     if out.volume_m3 <= 0:

@@ -15,7 +15,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from .errors import FsicrInputError
+from .errors import FsicrInputError, short_text
 from .ship import DESCRIPTIONS, FLAGS, LowerWaterline, Ship
 
 
@@ -66,13 +66,17 @@ def builtin_ships() -> dict[str, Path]:
 def resolve_ship_path(text: str) -> Path:
     """A path to an existing file, or the name of a built-in ship (``b063_bow_a``)."""
     path = Path(text)
-    if path.is_file():
-        return path
     builtin = builtin_ships()
-    if Path(text).stem in builtin and not path.exists() and path.parent == Path("."):
-        return builtin[Path(text).stem]
-    why = "is not a file" if path.exists() else "not found"
-    raise FsicrInputError(f"ship file {text!r}: {why} (give a TOML file or a built-in ship: {', '.join(sorted(builtin))})")
+    try:
+        if path.is_file():
+            return path
+        if Path(text).stem in builtin and not path.exists() and path.parent == Path("."):
+            return builtin[Path(text).stem]
+        why = "is not a file" if path.exists() else "not found"
+    except (OSError, ValueError) as exc:  # a name the file system refuses (too long, a NUL byte)
+        why = f"cannot be a file name here ({getattr(exc, 'strerror', None) or exc})"
+    raise FsicrInputError(f"ship file {short_text(text)}: {why} (give a TOML file or a built-in ship: "
+                          f"{', '.join(sorted(builtin))})")
 
 
 def read_ship_file(text: str) -> dict[str, Any]:

@@ -7,10 +7,12 @@ with no traceback (:class:`iceresist.errors.InputError`).
 from __future__ import annotations
 
 import argparse
+import errno
 import logging
 import sys
 
 from fsicr.cliparser import OneLineParser
+from fsicr.errors import short_text
 from iceresist import __version__
 from iceresist.errors import InputError
 
@@ -145,6 +147,13 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("iceresist: interrupted; files already written are complete", file=sys.stderr)
         return 130
+    except OSError as exc:
+        if exc.errno != errno.ENAMETOOLONG:     # a path no check before caught: still the user's input
+            raise
+        if root:
+            print(f"iceresist: error: a path is too long for the file system: {short_text(str(exc.filename))}; "
+                  f"give a shorter one", file=sys.stderr)
+        return 2
     except Exception:
         from iceresist import parallel
 

@@ -246,15 +246,16 @@ regrid_every_steps = 10
 """
 
 
-def test_a_regridding_run_writes_each_levels_mesh_as_it_changes(tmp_path, main):  # noqa: F811
+def test_a_regridding_run_writes_each_levels_mesh_as_it_changes(tmp_path, main, monkeypatch):  # noqa: F811
     """The CLI run of a regridding scene with level fields (a channel started from rest: the shear layers at its
     walls, and the fine blocks, grow): a snapshot's level sits on the mesh of its own cells (a new mesh group after
     a regrid), and its fields have as many rows as that mesh has cells."""
     from iceresist.io.hdf5 import RunFile
 
-    text = CHANNEL + f"""
+    monkeypatch.chdir(tmp_path)     # a scene's output.directory lies below the working folder
+    text = CHANNEL + """
 [output]
-directory = "{tmp_path / 'out'}"
+directory = "out"
 fields_every_steps = 10
 """
     p = tmp_path / "vortex_out.toml"

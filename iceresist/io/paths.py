@@ -10,11 +10,23 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from fsicr.errors import short_text
 from iceresist.errors import InputError
 
 
 def check_output_dir(path, key: str) -> Path:
     """``path`` as a folder that exists and is writable, or can be made; else :class:`InputError` naming ``key``."""
+    try:
+        return _check_output_dir(path, key)
+    except (OSError, ValueError) as exc:  # a name the file system refuses (too long, a NUL byte)
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(f"{key}: {short_text(str(path))} cannot be a folder name here "
+                         f"({getattr(exc, 'strerror', None) or exc}); give another folder with {key}, e.g. runs") \
+            from None
+
+
+def _check_output_dir(path, key: str) -> Path:
     text = str(path)
     if not text.strip():
         raise InputError(f"{key}: empty; give a folder, e.g. runs")

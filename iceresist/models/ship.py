@@ -89,6 +89,35 @@ def steady_window_m(scene, geometry: HullGeometry, layout: ChannelLayout) -> tup
     return x0 + geometry.end_length_m, x1
 
 
+def check_hull_fits(scene, geometry: HullGeometry | MeshHull, domain_m, centre_y_m: float, level_m: float) -> None:
+    """Refuse a hull that does not fit the tank ``domain_m`` (x along the run, y across, z up): wider than the
+    tank across its centreline at ``centre_y_m``, longer than the tank, or as deep as the water ``level_m``; one
+    line naming the key that sets the hull (``ship.mesh_file`` or ``ship.beam_m``, ...) and what fits."""
+    sh = scene.ship
+    mesh = isinstance(geometry, MeshHull)
+    if mesh:
+        v = geometry.vertices()
+        breadth, length = float(np.ptp(v[:, 1])), float(np.ptp(v[:, 0]))
+    else:
+        breadth, length = float(geometry.beam_m), float(geometry.length_overall_m)
+    lx, ly, _ = domain_m
+    lo, hi = centre_y_m - 0.5 * breadth, centre_y_m + 0.5 * breadth
+    if lo <= 0.0 or hi >= ly:
+        key = "ship.mesh_file" if mesh else "ship.beam_m"
+        raise InputError(f"{key}: the hull is {breadth:.4g} m wide, so its sides at y = {lo:.4g} .. {hi:.4g} m "
+                         f"cross the tank's walls at y = 0 and {ly:.4g} m (domain.size_m); a hull narrower than "
+                         f"{2.0 * min(centre_y_m, ly - centre_y_m):.4g} m fits (or widen the domain, or move "
+                         f"ship.centre_y_m)")
+    if length >= lx:
+        key = "ship.mesh_file" if mesh else "ship.length_m"
+        raise InputError(f"{key}: the hull is {length:.4g} m long and the tank {lx:.4g} m (domain.size_m): a hull "
+                         f"shorter than the tank fits, with room for the channel ahead of it")
+    if geometry.draught_m >= level_m:
+        raise InputError(f"ship.draught_m: {geometry.draught_m:.4g} m is not less than the water depth "
+                         f"{level_m:.4g} m (free_surface.water_depth_m): the hull would sit on the bottom; give a "
+                         f"draught below {level_m:.4g} m or deeper water")
+
+
 def ship_start_x_m(scene) -> float:
     """Stem position at the start (m): ``ship.start_x_m``, by default 5 cm before the channel."""
     sh = scene.ship
@@ -127,6 +156,7 @@ class ShipModel(Model):
         self.rho_w = float(scene.rho_kg_m3)
         self.geometry = hull_geometry(scene)
         self.centre_y_m = sh.centre_y_m if sh.centre_y_m is not None else 0.5 * self.domain_m[1]
+        check_hull_fits(scene, self.geometry, self.domain_m, self.centre_y_m, self.level_m)
         width = ice.channel_width_m or self.domain_m[1]
         self.layout = ice_layout(scene, width, self.centre_y_m, self.level_m, self.rho_w)
         self.speed_m_s = float(sh.speed_m_s)

@@ -45,6 +45,8 @@ def _unit(name: str) -> str:
 
 
 def _allowed(field) -> str:
+    if isinstance(field.json_schema_extra, dict) and "allowed" in field.json_schema_extra:
+        return field.json_schema_extra["allowed"]
     parts = []
     for m in field.metadata:
         for attr, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<=")):

@@ -14,6 +14,8 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
+from fsicr.errors import short_text
+
 from iceresist.errors import InputError, StabilityError
 from iceresist.scene.schema import CaseBase, Scene
 from iceresist.scene.write import toml_value
@@ -26,8 +28,9 @@ _KEYED = re.compile(r"^([A-Za-z_][A-Za-z0-9_.\[\]]*): (.+)$", re.S)
 
 
 def _show(value) -> str:
-    """A value as TOML would write it (a table as the words "a table")."""
-    return "a table" if isinstance(value, dict) else toml_value(value)
+    """A value as TOML would write it (a table as the words "a table"; a long one shortened)."""
+    text = "a table" if isinstance(value, dict) else toml_value(value)
+    return text if len(text) <= 80 else f"{text[:60]}... ({len(text)} characters)"
 
 
 def _model_at(loc) -> type[BaseModel] | None:
@@ -85,6 +88,8 @@ def _describe(err) -> tuple[str, bool]:
         return "must start with a letter, digit or '_' and hold only letters, digits, '_', '.' and '-'", True
     if t == "string_too_short":
         return "must not be empty", True
+    if t == "string_too_long":
+        return f"must be at most {ctx.get('max_length')} characters (it has {len(err.get('input', ''))})", False
     if t in ("too_short", "too_long"):
         n = ctx.get("min_length") if t == "too_short" else ctx.get("max_length")
         return f"must have {n} items" if isinstance(err.get("input"), (list, tuple)) else \
@@ -182,7 +187,12 @@ def load_scene(path) -> Scene:
     """Read a scene file (or, where no such file exists, a built-in scene of that name)."""
     p = Path(path)
     source = str(path)
-    if p.is_file():
+    try:
+        is_file, exists = p.is_file(), p.exists()
+    except (OSError, ValueError) as exc:  # a name the file system refuses (too long, a NUL byte)
+        raise InputError(f"{short_text(source)}: cannot be a scene file's name here "
+                         f"({getattr(exc, 'strerror', None) or exc}); give the path of a scene file") from None
+    if is_file:
         try:
             text = p.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -190,6 +200,6 @@ def load_scene(path) -> Scene:
         return parse_scene(text, source)
     if p.suffix == "" and p.name in preset_names():
         return parse_scene(preset_text(p.name), f"{p.name} (built-in)")
-    if p.exists():
+    if exists:
         raise InputError(f"{source}: not a file")
     raise InputError(f"{source}: no such scene file (built-in scenes: {', '.join(preset_names())})")

@@ -228,8 +228,29 @@ class RunSettings(_Section):
 class Output(_Section):
     """``[output]``: where results go and how often."""
 
-    directory: str = Field("runs", min_length=1, pattern=r"\S",
-                           description="Result folder (relative to the working directory).")
+    directory: str = Field("runs", min_length=1, max_length=1000,
+                           description="Result folder, relative to the working directory and below it (`runs`, "
+                                       "`my runs/case 1`); `iceresist run --output DIR` names a folder elsewhere.",
+                           json_schema_extra={"allowed": "a folder below the working one: not absolute, no `..`"})
+    @field_validator("directory")
+    @classmethod
+    def _below_working_folder(cls, v: str):
+        """A scene writes only below the folder it runs in (docs/SCENES.md): a relative path without ``..``."""
+        if not v.strip():
+            raise ValueError('must not be blank; give a folder, e.g. "runs"')
+        if any(ord(ch) < 32 for ch in v):
+            raise ValueError('holds a control character; give a folder, e.g. "runs"')
+        parts = v.replace("\\", "/").split("/")
+        if v.startswith(("/", "\\", "~")) or (len(v) > 1 and v[1] == ":"):
+            raise ValueError(f"{v[:60]!r} is not below the working folder: a scene writes only there; "
+                             f"give a relative folder such as \"runs\", or name a folder elsewhere with iceresist "
+                             f"run --output")
+        if ".." in parts:
+            raise ValueError(f"{v[:60]!r} climbs out of the working folder ('..'): a scene writes only "
+                             f"below it; give a relative folder such as \"runs\", or name a folder elsewhere with "
+                             f"iceresist run --output")
+        return v
+
     fields: list[Literal[FIELD_NAMES]] = Field(["rho", "u", "flags"], description="Fields in each snapshot: "
                                                + ", ".join(f"`{n}`" for n in FIELD_NAMES) + ".")
     fields_every_steps: int | None = Field(None, ge=1, description="Snapshot every N steps (and at the end). "
@@ -416,8 +437,11 @@ class Body(_Section):
     name: str = Field(..., pattern=r"^[A-Za-z0-9_.-]+$", description="Body name (time-series column prefix).")
     shape: Literal["box", "sphere", "mesh"] = Field(..., description="`box` (edges size_m), `sphere` (radius_m) or "
                                                     "`mesh` (a closed convex surface in mesh_file).")
-    size_m: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = Field(None, description="Box edges (m).")
-    radius_m: float | None = Field(None, gt=0, description="Sphere radius (m).")
+    size_m: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = Field(
+        None, description="Box edges (m); each at least two cells of the finest level (a smaller body may cover no "
+                          "cell centre, and the fluid would not see it).")
+    radius_m: float | None = Field(None, gt=0, description="Sphere radius (m); at least one cell of the finest "
+                                                           "level (two cells across).")
     mesh_file: str | None = Field(None, description="Mesh body: STL or OBJ file (relative to the scene file), "
                                   "placed as it is drawn with the centre of its bounding box at position_m.")
     mesh_unit: Literal["m", "cm", "mm", "ft", "in"] = Field("m", description="Mesh body: unit of the mesh's "
@@ -518,6 +542,11 @@ class Refinement(_Section):
 
 
 # ---------------------------------------------------------------------------------------------------------
+#: The smallest body the fluid coupling resolves, in cells of the finest level across: a sphere or box at least
+#: two cells across covers a cell centre wherever it lies, so that links cross its surface.
+MIN_BODY_CELLS = 2.0
+
+
 class Scene(_Section):
     """A whole scene file. Build one with :func:`iceresist.scene.load.load_scene`."""
 
@@ -566,6 +595,7 @@ class Scene(_Section):
         names = [b.name for b in self.bodies]
         if len(set(names)) != len(names):
             raise ValueError("bodies: body names must be unique")
+        self._bodies_resolved()
         if self.refinement is not None:
             size = self.domain.size_m or tuple(n * (self.domain.dx_m or 1.0) for n in self.domain.cells or (0, 0, 0))
             for i, b in enumerate(self.refinement.boxes):
@@ -579,6 +609,28 @@ class Scene(_Section):
                 raise ValueError("refinement.body_band_m: a band around the bodies needs [[bodies]] or a ship in "
                                  "[ice]; refine with [[refinement.boxes]] instead")
         return self
+
+    def _bodies_resolved(self):
+        """A sphere or box body at least :data:`MIN_BODY_CELLS` cells of the finest level across (a mesh body's size
+        is known once its file is read): a smaller one may cover no cell centre, and then the fluid does not see it
+        at all (no link crosses its surface)."""
+        dx = (1.0 if self.is_lattice else self.domain.dx_m) / 2 ** (self.refinement.levels if self.refinement else 0)
+        floor = MIN_BODY_CELLS * dx
+        unit = "cells" if self.is_lattice else "m"
+        for i, b in enumerate(self.bodies):
+            if b.shape == "sphere":
+                key, size, value = f"bodies[{i}].radius_m", 2.0 * b.radius_m, b.radius_m
+                need = 0.5 * floor
+            elif b.shape == "box":
+                key, size, value = f"bodies[{i}].size_m", min(b.size_m), min(b.size_m)
+                need = floor
+            else:
+                continue
+            if size < floor * (1.0 - 1e-9):
+                raise ValueError(f"{key}: {value:.4g} {unit} gives a body {size:.4g} {unit} across, below the "
+                                 f"smallest the fluid coupling resolves, {MIN_BODY_CELLS:g} cells of "
+                                 f"{dx:.4g} {unit} (the finest level): use at least {need:.4g} {unit}, or refine "
+                                 f"the grid (domain.dx_m, refinement.levels)")
 
     # -- derived values --------------------------------------------------------------------------------
     @property

@@ -33,12 +33,15 @@ SECTION_LEVELS = 64
 def resolve_mesh_path(text: str, scene_source: str | None = None) -> str:
     """A mesh path as given, else relative to the scene file's folder, else a built-in mesh name."""
     p = Path(text)
-    if p.is_file() or p.is_absolute():
-        return str(p)
-    if scene_source:
-        beside = Path(scene_source).parent / p
-        if beside.is_file():
-            return str(beside)
+    try:
+        if p.is_file() or p.is_absolute():
+            return str(p)
+        if scene_source:
+            beside = Path(scene_source).parent / p
+            if beside.is_file():
+                return str(beside)
+    except (OSError, ValueError):  # a name the file system refuses (too long, ...): the reader names it
+        pass
     return text  # a built-in name (b063), or a missing file that the reader names
 
 

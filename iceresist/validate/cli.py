@@ -43,10 +43,14 @@ def output_dir(args) -> str:
 
 def cmd_validate(args) -> int:
     """Run the ladders (or ``--stability`` the matrix) into the files of :func:`output_dir`."""
+    from iceresist.io.paths import check_output_dir
+    from iceresist.models.fluid import resolve_target
     from iceresist.sweep import set_threads
 
     out = output_dir(args)
     set_threads(args.threads)
+    resolve_target(args.backend, "--backend")       # a backend this machine lacks is refused before a file is made
+    check_output_dir(out, "--out")
     if args.stability:
         try:
             from iceresist.validate.stability import main as stability_main

@@ -91,7 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="iceresist",
                       description="Ice resistance of a ship in a brash-ice channel (LBM-DEM) beside FSICR.")
     p.add_argument("--version", action="version", version=f"iceresist {__version__}")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug lines of iceresist itself")
+    p.add_argument("--debug-numba", action="store_true", help="numba's own debug logging too (very long)")
     sub = p.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
 
     d = sub.add_parser("demo", help="run the main job on the built-in default scene")
@@ -130,15 +131,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     root = True
     try:
         from iceresist import parallel
+        from iceresist.console import configure_logging
 
-        if parallel.launched_by_mpi():       # one rank speaks: the others log warnings only and print no errors
-            root = parallel.rank() == 0
-            if not root:
-                logging.getLogger().setLevel(logging.WARNING)
+        rank = parallel.rank() if parallel.launched_by_mpi() else 0
+        root = rank == 0       # one rank speaks: the others log their own warnings only and print no errors
+        configure_logging(verbose=args.verbose, numba_debug=args.debug_numba, rank=rank)
         return int(args.func(args) or 0)
     except InputError as exc:
         if root:

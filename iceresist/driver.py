@@ -177,7 +177,23 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
         if sim.completed and on_completed is not None and root:
             on_completed(rf, model, sim)
-    rate = f"; {sim.mlups:.2f} MLUPS after it" if model.cells else ""   # tier 1 has no lattice
-    log.info("%s: %d steps in %.2f s of stepping, %.2f s of it the first step (compiling or loading the "
-             "kernels)%s -> %s", sim.stop_reason, sim.steps_done, sim.step_time_s, sim.first_step_s, rate, path)
+    log.info("%s -> %s", closing_line(sim, model, build_s), path)
     return RunResult(path, sim, dog)
+
+
+def closing_line(sim: Simulation, model: Model, build_s: float = 0.0) -> str:
+    """What a leg took, each figure named: its wall time (the one the result file records for the leg), the model's
+    set-up within it, the stepping, the first step's share of the stepping (compiling or loading the kernels) and
+    the kernels compiled in the process; the rate over the steps after the first where there were any."""
+    from iceresist.backends import compilelog
+
+    kernels = compilelog.compiled_kernels()
+    compiled = (f", {kernels} kernels compiled in {compilelog.compile_seconds():.1f} s" if kernels else
+                ", kernels loaded from the cache")
+    text = (f"{sim.stop_reason}: {sim.steps_done} steps; wall time {sim.wall_time_s + build_s:.1f} s: "
+            f"{build_s:.1f} s setting up, {sim.step_time_s:.1f} s stepping ({sim.first_step_s:.1f} s of it in the "
+            f"first step{compiled})")
+    if model.cells:     # tier 1 has no lattice
+        after = sim.steps_done > sim.first_steps
+        text += f"; {sim.mlups:.2f} MLUPS {'after the first step' if after else 'with the first step'}"
+    return text

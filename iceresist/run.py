@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import time
 from pathlib import Path
 
 from iceresist import parallel
@@ -80,6 +81,7 @@ def cmd_run(args) -> int:
     """Run one scene. Exit status 0 when it reached its stop criterion, 1 when it diverged."""
     from iceresist.models import build_model
 
+    t_start = time.perf_counter()
     scene = load_scene(args.scene)
     if args.steps is not None:
         if args.steps < 0:
@@ -104,7 +106,8 @@ def cmd_run(args) -> int:
 
     comm = parallel.world()
     parallel.on_rank0(check_files, comm)   # the files as rank 0 sees them, before it writes any
-    check_memory(scene, args.precision)
+    if scene.has_lattice:
+        check_memory(scene, args.precision)
     if comm is not None and (args.backend or scene.numerics.backend) in ("cuda", "auto"):
         parallel.use_local_gpu(comm)       # several GPUs on a node: one per rank
     model = build_model(scene, backend=args.backend, precision=args.precision,
@@ -113,5 +116,6 @@ def cmd_run(args) -> int:
         log.info("MPI: %d ranks, blocks per rank %s", comm.size, model.describe()["mpi"]["blocks_per_rank"])
     stop, outputs = scene_outputs(scene)
     result = run_model(model, scene, h5_path, chk_path, stop=stop, outputs=outputs, pickup=pickup,
-                       lattice_units=scene.is_lattice, progress=not args.no_progress and parallel.rank() == 0)
+                       lattice_units=scene.is_lattice, progress=not args.no_progress and parallel.rank() == 0,
+                       build_s=time.perf_counter() - t_start)
     return 1 if result.sim.diverged else 0

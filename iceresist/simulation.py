@@ -423,13 +423,19 @@ class Simulation:
         return None if total is None else max(total, 0)
 
     def _log_progress(self, done: int, total: int | None, elapsed_s: float):
-        """One INFO line: the step reached, the share of this run done and the wall time it will still take."""
+        """One INFO line: the step reached, the share of this run done and the wall time it will still take, at the
+        pace of the steps after the first chunk (which compiles or loads the kernels: its time says nothing of the
+        pace of the rest)."""
         m = self.model
         msg = f"step {m.iteration}, t = {m.time_s:.4g} s"
         if total:
             msg += f", {100.0 * done / total:.0f} % of {total} steps"
-            if done > 0:
-                msg += f", about {(total - done) * elapsed_s / done / 60.0:.0f} min to go"
+            paced = done - self.first_steps
+            if paced > 0:
+                per_step = max(elapsed_s - self.first_step_s, 0.0) / paced
+                msg += f", about {(total - done) * per_step / 60.0:.0f} min to go"
+            else:
+                msg += ", the first steps compile or load the kernels"
         rate = f", {self.mlups:.2f} MLUPS" if m.cells else ""      # tier 1 has no lattice
         log.info("%s (%.0f min so far%s)", msg, elapsed_s / 60.0, rate)
 

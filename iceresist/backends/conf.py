@@ -8,6 +8,8 @@ from those three and import no numba themselves.
 
 from __future__ import annotations
 
+import weakref
+
 import numba
 
 from iceresist.errors import InputError
@@ -26,9 +28,25 @@ CUDA_BLOCK_CELLS = 512
 prange = numba.prange
 
 
+#: Every kernel made in this process (numba dispatchers, weakly; not the inlined device functions): those without
+#: code yet are the ones a first run still compiles (:mod:`iceresist.backends.compilelog`).
+KERNELS: weakref.WeakSet = weakref.WeakSet()
+
+
+def made(kernel):
+    """Count ``kernel`` among the :data:`KERNELS` of this process; returns it."""
+    try:
+        KERNELS.add(kernel)
+    except TypeError:       # not weakly referable: not counted
+        pass
+    return kernel
+
+
 def cpu_jit(fn, parallel: bool = False, cache: bool = False, **options):
-    """``numba.njit`` of ``fn`` with the project's fast-math flags (:data:`CPU_FASTMATH`)."""
-    return numba.njit(fn, parallel=parallel, fastmath=set(CPU_FASTMATH), cache=cache, **options)
+    """``numba.njit`` of ``fn`` with the project's fast-math flags (:data:`CPU_FASTMATH`); a kernel (not an inlined
+    device function) is counted for the compile progress lines (:mod:`iceresist.backends.compilelog`)."""
+    kern = numba.njit(fn, parallel=parallel, fastmath=set(CPU_FASTMATH), cache=cache, **options)
+    return kern if options.get("inline") == "always" else made(kern)
 
 
 def cuda_api():
@@ -54,7 +72,7 @@ def cuda_kernel(fn, name: str, threads: int, **options):
     kern = cuda.jit(fn, **options)
     kern.kernel_name = name
     kern.kernel_threads = threads
-    return kern
+    return made(kern)
 
 
 def max_threads() -> int:

@@ -162,7 +162,8 @@ def parse_scene(text: str, source: str = "scene.toml") -> Scene:
     except ValidationError as exc:
         raise InputError(format_validation_error(exc, source)) from None
     try:
-        scene.units()
+        if scene.has_lattice:
+            scene.units()
     except StabilityError as exc:
         raise StabilityError(f"{source}: {exc}") from None
     scene._source_text = text

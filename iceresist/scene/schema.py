@@ -643,6 +643,12 @@ class Scene(_Section):
         return self._source_name
 
     @property
+    def has_lattice(self) -> bool:
+        """Whether the scene builds a lattice: every scene but a tier-1 ship (DEM with water models), whose
+        ``[domain]`` is the tank and no grid, so its cells, tau and Mach number are never checked nor spoken of."""
+        return not (self.ship is not None and self.ice is not None and self.ship.tier == 1 and not self.bodies)
+
+    @property
     def is_lattice(self) -> bool:
         return self.scene.units == "lattice"
 

@@ -71,7 +71,7 @@ def cmd_validate(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(prog="iceresist validate", description="Error against run time of the reference cases.")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug lines of iceresist itself")
     return add_validate_arguments(p)
 
 
@@ -81,8 +81,9 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:           # --help (0) or a usage error (2, one line already on stderr)
         return int(exc.code or 0)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
-                        format="%(levelname)s %(name)s: %(message)s")
+    from iceresist.console import configure_logging
+
+    configure_logging(verbose=args.verbose)
     try:
         return int(args.func(args) or 0)
     except InputError as exc:

@@ -102,7 +102,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     from iceresist.run import add_run_arguments
 
-    r = sub.add_parser("run", help="run one scene file (SCENE.toml or a built-in scene name)")
+    r = sub.add_parser("run", help="run one scene file (SCENE.toml or a built-in scene name)",
+                       description="Run one scene into <output.directory>/<scene.name>.h5. A first run compiles the "
+                                   "kernels its scene needs, a line per kernel: about 2 min on a 2-core CPU for a "
+                                   "free-surface scene (iceresist run still_tank), seconds for tier 1; they are kept "
+                                   "in ~/.cache/iceresist/kernels (ICERESIST_CACHE) and later runs load them in "
+                                   "seconds.")
     add_run_arguments(r)
 
     from iceresist.sweep import add_sweep_arguments

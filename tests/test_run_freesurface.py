@@ -125,3 +125,56 @@ def test_free_surface_scene_runs_to_hdf5_and_restarts_bitwise(tmp_path, scene_fi
     with RunFile(tmp_path / "a" / "dam_break.h5") as ra, RunFile(tmp_path / "b" / "dam_break.h5") as rb:
         for name in ("phi", "u", "rho", "surface"):
             assert np.array_equal(ra.read_field(20, name), rb.read_field(20, name)), name
+
+
+def test_a_free_surface_run_killed_after_a_checkpoint_continues_bit_for_bit(tmp_path, scene_file):
+    """Crash safety on a grid: ``iceresist run`` of the small dam break killed with SIGKILL after it wrote a
+    checkpoint (its result file open, stepping past the checkpoint), then ``--pickup`` to iteration K, gives the
+    populations, h, phi and flags of a straight run to K bit for bit, and the result file reads whole."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    text = scene_file.read_text().replace("fields_every_steps = 10", "fields_every_steps = 1000000")
+    assert text.count("[output]\n") == 1
+    scene = tmp_path / "dam_break.toml"
+    scene.write_text(text.replace("[output]\n", "[output]\ncheckpoint_every_steps = 10\n"))
+    killed, straight = tmp_path / "killed", tmp_path / "straight"
+    cmd = [sys.executable, "-m", "iceresist", "run", str(scene), "--backend", "cpu", "--no-progress"]
+    proc = subprocess.Popen(cmd + ["--output", str(killed), "--steps", "1000000"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    chk = killed / "dam_break.checkpoint.h5"
+    deadline = time.monotonic() + 600.0        # a cold kernel cache compiles first
+    def checkpointed() -> int:                 # the iteration of the checkpoint there now (replaced atomically)
+        return int(read_checkpoint(chk)["model"]["iteration"]) if chk.exists() else -1
+
+    try:
+        while checkpointed() < 10:             # the start writes one at iteration 0
+            assert proc.poll() is None, proc.stderr.read()
+            assert time.monotonic() < deadline, "no checkpoint past the start in 600 s"
+            time.sleep(0.05)
+        time.sleep(0.2)                        # past the checkpoint, into the next rows
+    finally:
+        if proc.poll() is None:
+            os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        proc.stderr.close()
+    assert proc.returncode == -signal.SIGKILL
+    at = checkpointed()
+    assert at >= 10 and at % 10 == 0
+    end = at + 20
+    assert subprocess.run(cmd + ["--output", str(killed), "--steps", str(end), "--pickup"],
+                          capture_output=True, timeout=600).returncode == 0
+    assert _run(scene, "--output", straight, "--steps", end, "--backend", "cpu") == 0
+    a = read_checkpoint(straight / "dam_break.checkpoint.h5")["model"]
+    b = read_checkpoint(chk)["model"]
+    assert int(a["iteration"]) == int(b["iteration"]) == end
+    for key in ("f_blocks", "f", "h", "phi", "flags"):
+        assert np.array_equal(a[key], b[key]), key
+    with RunFile(straight / "dam_break.h5") as ra, RunFile(killed / "dam_break.h5") as rb:
+        assert rb.meta["legs"] == 2 and rb.meta["finished"]
+        np.testing.assert_array_equal(ra.timeseries()["iteration"], rb.timeseries()["iteration"])
+        for name in ("phi", "u", "rho"):
+            assert np.array_equal(ra.read_field(end, name), rb.read_field(end, name)), name

@@ -63,8 +63,9 @@ class _Listener:
         _STATE.t0 = time.perf_counter()
         done = _TOTALS["compiled"]
         if done == 0:
-            log.info("compiling the kernels this run needs; a first run only: they are kept in %s and later runs "
-                     "load them in seconds (a cold start takes 2-3 min on 2 CPU cores)", cache_folder_text())
+            log.info("compiling the kernels this run needs, on a first run only: they are kept in %s and later "
+                     "runs load them in seconds (on 2 CPU cores: seconds for tier 1, about 2 min for a "
+                     "free-surface scene)", cache_folder_text())
         d = event.data.get("dispatcher")
         todo = sum(1 for k in list(KERNELS) if not _has_code(k) and k is not d)
         log.info("compiling kernel %d of the %d made so far: %s (%.0f s of compiling so far)", done + 1,

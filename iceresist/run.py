@@ -105,6 +105,10 @@ def cmd_run(args) -> int:
                              f"continue it")
 
     comm = parallel.world()
+    if args.backend is not None:           # the flag the user typed is the key a refusal names
+        from iceresist.models.fluid import resolve_target
+
+        resolve_target(args.backend, "--backend")
     parallel.on_rank0(check_files, comm)   # the files as rank 0 sees them, before it writes any
     if scene.has_lattice:
         check_memory(scene, args.precision)

@@ -9,8 +9,10 @@ application of the ice class rules, section 3.2.2, "Ship parameters"), measured 
 * **L**: the length of the waterline at T (foremost to aftmost point). The rules ask for the length between
   perpendiculars; for a hull whose rudder post ends the waterline the two agree; otherwise state ``L``.
 * **B**: the largest breadth of the waterline at T.
-* **LPAR**: the length of the parallel midship body, where the waterline's breadth is within ``tolerance``
-  (default 0.1 %) of B: from its aftmost to its foremost vertex.
+* **LPAR**: the length of the parallel midship body, where the waterline's breadth is B to within ``tolerance``
+  (default :data:`PARALLEL_TOLERANCE`, 1e-6 of B: the rounding of a float32 STL, so that a body whose sides are
+  drawn parallel counts whole and a curved waterline has none, LPAR = 0, at any spacing of its stations): from its
+  aftmost to its foremost vertex.
 * **LBOW**: the length of the bow, from the foremost point of the waterline to the forward end of the parallel
   body.
 * **Awf**: the area of the waterline of the bow, forward of the parallel body (the breadth integrated over LBOW;
@@ -42,11 +44,17 @@ AXES = {"+x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "-y": (1, -1.0), "+z": 
 #: Plausible hull lengths (m): a towing-tank model to the largest ships.
 LENGTH_RANGE_M = (0.2, 500.0)
 
+#: How close to B (relative) the waterline's breadth must be along the parallel midship body: a few float32 ulps.
+#: A looser bound (the 1e-3 of earlier versions) let a curved waterline's flat middle count as parallel, over a
+#: length that grew as the mesh was refined (0.05 / 0.075 / 0.09 m at 121 / 241 / 601 stations of a 3 m
+#: parabolic waterline, whose LPAR is 0).
+PARALLEL_TOLERANCE = 1e-6
+
 #: How each input is measured, for reports.
 HOW = {
     "L_m": "waterline length at T",
     "B_m": "largest waterline breadth at T",
-    "LPAR_m": "waterline within the tolerance of B",
+    "LPAR_m": "waterline breadth B (to 1e-6) along it",
     "LBOW_m": "forward end of the parallel body to the stem",
     "Awf_m2": "waterline area forward of the parallel body",
     "alpha_deg": "waterline to centreline at B/4",
@@ -296,7 +304,7 @@ def check_draught(hull: HullMesh, draught_m: float, keys: MeshKeys = MeshKeys())
                               f"{hull.depth_m:.4g}) m; give the draught in metres at the mesh's scale")
 
 
-def measure(hull: HullMesh, draught_m: float, *, scale: float = 1.0, tolerance: float = 1e-3,
+def measure(hull: HullMesh, draught_m: float, *, scale: float = 1.0, tolerance: float = PARALLEL_TOLERANCE,
             keys: MeshKeys = MeshKeys()) -> dict:
     """The FSICR waterline inputs of the hull at ``draught_m`` (module docstring), times ``scale``."""
     check_draught(hull, draught_m, keys)
@@ -310,6 +318,8 @@ def measure(hull: HullMesh, draught_m: float, *, scale: float = 1.0, tolerance: 
     full = xs[b >= (1.0 - tolerance) * B]
     x_fp, x_ap = float(xs.max()), float(xs.min())
     x_fs, x_as = float(full.max()), float(full.min())
+    if x_fs - x_as <= tolerance * (x_fp - x_ap):     # the one widest station, seen twice by the plane's round-off
+        x_fs = x_as = 0.5 * (x_fs + x_as)
     bow = xs >= x_fs
     awf = float(np.trapezoid(b[bow], xs[bow])) if hasattr(np, "trapezoid") else float(np.trapz(b[bow], xs[bow]))
     q, eps = 0.25 * B, 1e-3 * B

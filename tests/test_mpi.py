@@ -76,6 +76,8 @@ def test_a_fluid_run_on_two_ranks_is_the_one_process_run(tmp_path):
     with RunFile(tmp_path / "two" / "cavity.h5") as rf:
         assert rf.meta_object("model")["mpi"]["blocks_per_rank"] == [4, 4]
     assert "blocks per rank [4, 4]" in two.stderr
+    # one rank speaks: rank 0's lines once, nothing of rank 1's (it has nothing of its own to say)
+    assert two.stderr.count("running cavity:") == 1 and "rank 1: " not in two.stderr, two.stderr[-2000:]
 
 
 def test_a_checkpoint_moves_between_rank_counts(tmp_path):

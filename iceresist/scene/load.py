@@ -83,8 +83,6 @@ def _describe(err) -> tuple[str, bool]:
     if t == "literal_error":
         return f"must be one of {ctx.get('expected', '')}", True
     if t == "string_pattern_mismatch":
-        if ctx.get("pattern") == r"\S":
-            return "must not be blank; give a folder, e.g. \"runs\"", True
         return "must start with a letter, digit or '_' and hold only letters, digits, '_', '.' and '-'", True
     if t == "string_too_short":
         return "must not be empty", True

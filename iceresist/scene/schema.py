@@ -232,6 +232,7 @@ class Output(_Section):
                            description="Result folder, relative to the working directory and below it (`runs`, "
                                        "`my runs/case 1`); `iceresist run --output DIR` names a folder elsewhere.",
                            json_schema_extra={"allowed": "a folder below the working one: not absolute, no `..`"})
+
     @field_validator("directory")
     @classmethod
     def _below_working_folder(cls, v: str):

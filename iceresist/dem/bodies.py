@@ -201,8 +201,9 @@ def _dedupe(points: np.ndarray, tol: float) -> np.ndarray:
     from scipy.spatial import cKDTree
 
     keep = np.ones(len(points), dtype=bool)
-    tree = cKDTree(points)
-    for i, j in sorted(tree.query_pairs(tol)):
+    pairs = cKDTree(points).query_pairs(tol, output_type="ndarray")     # i < j in each row
+    pairs = pairs[np.lexsort((pairs[:, 1], pairs[:, 0]))]               # in (i, j) order: the earlier point stays
+    for i, j in pairs.tolist():
         if keep[i] and keep[j]:
             keep[j] = False
     return points[keep]
@@ -370,15 +371,18 @@ def _closest_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.nda
 
 def distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, within: float) -> np.ndarray:
     """Unsigned distance from each point to a triangle mesh, exact up to ``within`` (farther points: at least
-    ``within``); triangles found near each point with a k-d tree of their centroids."""
+    ``within``); the points near each triangle found with a k-d tree of the points, within the triangle's own
+    reach (its centre's farthest corner) plus ``within``."""
     from scipy.spatial import cKDTree
 
     t = vertices[faces]
     centroid = t.mean(axis=1)
-    reach = np.linalg.norm(t - centroid[:, None, :], axis=2).max()
-    pairs = cKDTree(points).query_ball_tree(cKDTree(centroid), within + reach)
-    i = np.repeat(np.arange(len(points)), [len(js) for js in pairs])
-    j = np.fromiter((jj for js in pairs for jj in js), dtype=np.int64, count=len(i))
+    reach = np.linalg.norm(t - centroid[:, None, :], axis=2).max(axis=1)     # each face's own
+    # the points near each face, within its own reach: one long face (a deck strip) no longer widens every
+    # point's search to its size
+    near = cKDTree(points).query_ball_point(centroid, within + reach)
+    j = np.repeat(np.arange(len(faces)), [len(ps) for ps in near])
+    i = np.fromiter((ii for ps in near for ii in ps), dtype=np.int64, count=len(j))
     out = np.full(len(points), np.inf)
     if len(i):
         d = _closest_on_triangles(points[i], t[j, 0], t[j, 1], t[j, 2])

@@ -384,9 +384,10 @@ def distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     j = np.repeat(np.arange(len(faces)), [len(ps) for ps in near])
     i = np.fromiter((ii for ps in near for ii in ps), dtype=np.int64, count=len(j))
     out = np.full(len(points), np.inf)
-    if len(i):
-        d = _closest_on_triangles(points[i], t[j, 0], t[j, 1], t[j, 2])
-        np.minimum.at(out, i, d)
+    step = 1 << 21          # pairs at a time: the temporaries of a fine mesh's tens of millions of pairs stay ~1 GB
+    for lo in range(0, len(i), step):
+        ii, jj = i[lo:lo + step], j[lo:lo + step]
+        np.minimum.at(out, ii, _closest_on_triangles(points[ii], t[jj, 0], t[jj, 1], t[jj, 2]))
     return np.minimum(out, max(within, 0.0) if np.isinf(out).any() else np.inf)
 
 

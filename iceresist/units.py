@@ -1,4 +1,4 @@
-"""Physical (SI) <-> lattice units and the stability limits a run must respect (DESIGN.md section 7).
+"""Physical (SI) <-> lattice units and the stability limits a run must respect (docs/SCENES.md, "Rules").
 
 Lattice units take the cell size ``dx``, the time step ``dt`` and the reference
 density ``rho0`` as 1. A physical quantity with dimension

@@ -1,4 +1,4 @@
-"""The import contract of the packages (docs: DESIGN.md sections 2 and 9), read from the source with ``ast``.
+"""The import contract of the packages (docs/ARCHITECTURE.md, "The layers"), read from the source with ``ast``.
 
 Every ``import`` counts, also those inside functions (a cycle hidden in a function-level import is still a
 cycle). The rules:
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("iceresist", "fsicr", "reports")
 
 #: The layers from the bottom up, each with the top-level parts of iceresist it holds: a part may import its own
-#: layer and those below, never one above (DESIGN.md section 2: kernels < grid < models < driver < cli).
+#: layer and those below, never one above (docs/ARCHITECTURE.md: kernels < grid < models < driver < cli).
 LAYER_PARTS = (
     ("backends", {"backends", "lattice"}),
     ("grid", {"grid"}),

@@ -1,5 +1,5 @@
 """Benchmark dispatcher: ``python -m validation.bench NAME [--backend cpu|cuda] [--precision ...] [--n N]
-[--steps S] [--json]`` (DESIGN.md section 11).
+[--steps S] [--json]`` (docs/PERFORMANCE.md).
 
 NAME selects the module ``validation.bench_NAME``, which provides ``add_arguments(parser)`` and
 ``run(args) -> list[dict]``. With ``--json`` every measurement is printed as one JSON object per

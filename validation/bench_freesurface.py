@@ -1,4 +1,4 @@
-"""Free-surface benchmarks (DESIGN.md section 11).
+"""Free-surface benchmarks (docs/PERFORMANCE.md).
 
 * ``--part coupled`` (default): MLUPS of the whole free-surface step (fused f update with eq. 11, velocity
   extension, phase-field h update, pool rows, reflag) in a closed n x n x n tank filled to 1/4, 1/2 and 3/4

@@ -1,4 +1,4 @@
-"""Launchers: one generator for every iteration shape of the engine's kernels (DESIGN.md section 3).
+"""Launchers: one generator for every iteration shape of the engine's kernels (docs/ARCHITECTURE.md).
 
 A scalar device function is written once; a launcher runs it over an iteration shape on either target:
 

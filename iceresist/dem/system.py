@@ -3,7 +3,7 @@
 State lives in structure-of-arrays on the chosen backend (NumPy arrays on the CPU, device arrays on CUDA) and is
 copied to the host only when a property asks for it. All quantities are SI.
 
-Sub-step rule (DESIGN.md section 7): the critical step of a linear contact is dt_crit = 2 sqrt(m / k) with the
+Sub-step rule: the critical step of a linear contact is dt_crit = 2 sqrt(m / k) with the
 largest stiffness k = max(k_n, k_t) and the smallest pair mass m = m_s,min / 2, where m_s = 1 / (1/m + r^2 / I_min)
 is the effective mass a body shows at its sphere at lever arm r (translation plus the softest rotation). A step
 ``dt`` is cut into ceil(dt / (safety dt_crit)) sub-steps; a forced sub-step above dt_crit is refused with

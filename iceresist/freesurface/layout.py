@@ -1,6 +1,6 @@
 """The block layout the free-surface kernels run on, and the neighbour look-up they share.
 
-Layout (DESIGN.md section 4, :class:`iceresist.grid.BlockForest`): 8x8x8-cell blocks,
+Layout (docs/ARCHITECTURE.md, :class:`iceresist.grid.BlockForest`): 8x8x8-cell blocks,
 cell index ``c = x + 8 * (y + 8 * z)``, arrays ``a[block, component, cell]``, and the
 neighbour table ``forest.nbr[block, q]`` giving the block at offset ``lattice.C[q]``
 (-1 outside the domain; ``nbr[b, 0] == b``).

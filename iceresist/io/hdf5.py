@@ -1,4 +1,4 @@
-"""The result file of one run (HDF5, h5py) with its XDMF sidecar (DESIGN.md section 8).
+"""The result file of one run (HDF5, h5py) with its XDMF sidecar (docs/SCENES.md, "Result file").
 
 Layout::
 

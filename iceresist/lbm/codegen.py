@@ -1,7 +1,7 @@
 """Straight-line code over 27 named scalars, generated once from the lattice tables.
 
 Numba compiles a tuple of 27 scalars into registers on both targets; loops over
-q through arrays cost about twice as much (DESIGN.md section 3). Builders here
+q through arrays cost about twice as much. Builders here
 write Python source text, exec it in a namespace of typed constants, and hand
 the function to ``target.device``.
 """

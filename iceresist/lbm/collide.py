@@ -6,7 +6,7 @@ Interface shared by every operator (BGK here, the cumulant operator in
     collide(f, omega, Fx, Fy, Fz) -> f_post
 
 * ``f``: 27-tuple of populations in the well-conditioned form f_i - w_i rho0,
-  lattice units, rho0 = 1 (DESIGN.md section 3);
+  lattice units, rho0 = 1 (fewer digits lost in float32);
 * ``omega = 1/tau``: the shear relaxation rate;
 * ``Fx, Fy, Fz``: body-force density in lattice units (gravity, driving force);
 * returns the post-collision 27-tuple, same form.

@@ -1,7 +1,7 @@
 """The LBM solver on a block forest: state, fused stream-collide steps, macroscopic fields.
 
 State is two population buffers ``f[block, q, cell]`` in the well-conditioned form
-f - w (rho0 = 1, DESIGN.md section 3), float32 by default. On CUDA the buffers
+f - w (rho0 = 1, :mod:`iceresist.lbm.collide`), float32 by default. On CUDA the buffers
 and tables are copied to the device once and stay there; only ``macroscopic()``
 and ``mass()`` copy populations back. The buffer holds post-collision
 populations, so macroscopic values subtract half the force:

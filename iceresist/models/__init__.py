@@ -1,4 +1,4 @@
-"""The models: state plus one time step of the components a scene uses, no I/O (DESIGN.md sections 2, 6).
+"""The models: state plus one time step of the components a scene uses, no I/O (docs/ARCHITECTURE.md, "The model contract").
 
 ==========================  ======================================================  =============================
 model                       what it holds                                           scene sections

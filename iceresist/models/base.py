@@ -1,4 +1,4 @@
-"""The model contract: state plus one time step of the components a scene uses, no I/O (DESIGN.md sections 2, 6).
+"""The model contract: state plus one time step of the components a scene uses, no I/O (docs/ARCHITECTURE.md, "The model contract").
 
 Every model (:class:`~iceresist.models.fluid.FluidModel`, :class:`~iceresist.models.fluid.FreeSurfaceModel`,
 :class:`~iceresist.models.tier1.Tier1Model`, :class:`~iceresist.models.tier2.Tier2Model`) derives from

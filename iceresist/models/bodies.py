@@ -19,8 +19,8 @@ Motion (``bodies[].motion``): ``free`` bodies move under gravity, the fluid forc
 domain's wall faces (``wall``, ``moving_wall``, ``slip``) are DEM contact planes; without a ``[contact]`` section
 the DEM keeps its own contact law (:class:`~iceresist.dem.ContactParameters`, sub-step 0.05 of the critical step).
 
-Units: a physical scene gives dx (``domain.dx_m``) and dt (``numerics.dt_s`` or the Mach rule, DESIGN.md
-section 7); a lattice-unit scene has dx = dt = rho0 = 1, and the bodies' sizes, positions, speeds and densities
+Units: a physical scene gives dx (``domain.dx_m``) and dt (``numerics.dt_s`` or the Mach rule of
+docs/SCENES.md, "Rules"); a lattice-unit scene has dx = dt = rho0 = 1, and the bodies' sizes, positions, speeds and densities
 are read in lattice units too.
 """
 

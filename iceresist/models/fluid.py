@@ -2,7 +2,7 @@
 
 A fluid-only scene gets a block forest and an LBM solver and nothing else: no phase-field arrays, no DEM, no
 coupling state; a scene with ``[free_surface]`` alone gets the LBM and the phase field, no DEM, no coupling
-(DESIGN.md section 6). Both follow the contract of :class:`iceresist.models.base.Model`.
+(docs/SCENES.md, "Rules": optional sections). Both follow the contract of :class:`iceresist.models.base.Model`.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The ship in a brash-ice channel, the part tiers 1 and 2 share (paper section 3, DESIGN.md section 1).
+"""The ship in a brash-ice channel, the part tiers 1 and 2 share (paper section 3, docs/SHIP.md).
 
 :class:`ShipModel` sets up what both tiers hold: the hull geometry and its DEM sphere clump, the ice channel
 layout, the stem start and the steady window, the DEM system with its contact law and the tank walls, the ice

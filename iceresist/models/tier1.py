@@ -1,4 +1,4 @@
-"""Tier 1: the ship in a brash-ice channel with DEM contacts and water models, no flow field (DESIGN.md section 1).
+"""Tier 1: the ship in a brash-ice channel with DEM contacts and water models, no flow field (docs/SHIP.md).
 
 The hull is a kinematic clump of spheres moving at the prescribed ship speed along +x; the ice cubes are free
 clumps floating in still water (buoyancy, quadratic drag and added mass, :mod:`iceresist.dem.hydro`); the tank

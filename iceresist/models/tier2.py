@@ -6,7 +6,7 @@ LBM with the phase field, eqs. 1-11), the hull as a kinematic body moving at the
 dynamic bodies (box signed distance + DEM clump) moved by gravity, the fluid force of the momentum exchange
 (eqs. 16-21; buoyancy is the hydrostatic pressure of the LBM) and the DEM contacts, the tank walls as DEM planes.
 
-Units (the rule of :meth:`iceresist.scene.schema.Scene.units`, DESIGN.md section 7):
+Units (the rule of :meth:`iceresist.scene.schema.Scene.units`):
 
 * dx = ``domain.dx_m``;
 * dt = mach dx / max(U_ship, sqrt(g h)), ``numerics.mach`` the lattice velocity limit, h the water depth: the

@@ -1,4 +1,4 @@
-"""The scene file schema: TOML sections as pydantic v2 models (DESIGN.md section 6).
+"""The scene file schema: TOML sections as pydantic v2 models; docs/SCENES.md is generated from them.
 
 Every model forbids unknown keys. Key names carry their SI unit (``_m``, ``_s``,
 ``_m_s``, ``_kg_m3``, ``_N_m``, ...). A scene with ``[scene] units = "lattice"``

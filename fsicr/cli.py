@@ -8,14 +8,13 @@ gives one line on stderr and exit status 2, never a traceback.
 from __future__ import annotations
 
 import argparse
-import errno
 import json
 import sys
 
 from . import hullmesh, report
 from .cliparser import OneLineParser
 from .compare import compare_table2
-from .errors import FsicrInputError, short_text
+from .errors import FsicrInputError, too_long_path
 from .power import required_power
 from .resistance import r_ch_at_waterlines
 from .rules import ICE_CLASSES, PROPULSION_KINDS, parse_ice_class
@@ -199,10 +198,9 @@ def main(argv=None) -> int:
         print(f"fsicr: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
-        if exc.errno != errno.ENAMETOOLONG:
+        if too_long_path(exc) is None:
             raise
-        print(f"fsicr: error: a path is too long for the file system: {short_text(str(exc.filename))}; "
-              f"give a shorter one", file=sys.stderr)
+        print(f"fsicr: error: {too_long_path(exc)}", file=sys.stderr)
         return 2
 
 

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import FsicrInputError, short_text
+from .errors import FsicrInputError, short_text, unusable_name
 
 #: Metres per unit of the mesh's coordinates.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "ft": 0.3048, "in": 0.0254}
@@ -145,11 +145,10 @@ def stl_problem(p: Path) -> str | None:
     beyond them, which some exporters write, are let be)."""
     size = p.stat().st_size
     with open(p, "rb") as fh:
-        head = fh.read(84)
+        head = fh.read(1 << 16)
     if head[:5].lower() == b"solid":
-        with open(p, "rb") as fh:
-            if b"facet" in fh.read(1 << 16):
-                return None
+        if b"facet" in head:
+            return None
         if size < 84:
             return "holds no triangles (a text STL without a facet)"
     if size < 84:
@@ -177,9 +176,8 @@ def read_mesh(path, *, unit: str = "m", keys: MeshKeys = MeshKeys(), what: str =
             p = builtin[p.stem]
         is_file = p.is_file()
     except (OSError, ValueError) as exc:
-        raise FsicrInputError(f"{keys.file}: {short_text(str(path))} cannot be a file name here "
-                              f"({getattr(exc, 'strerror', None) or exc}); give the path of an STL or OBJ {what}") \
-            from None
+        raise FsicrInputError(f"{keys.file}: {unusable_name(str(path), exc, 'file')}; give the path of an STL or "
+                              f"OBJ {what}") from None
     if not is_file:
         raise FsicrInputError(f"{keys.file}: no file {short_text(str(path))}; give the path of an STL or OBJ {what} "
                               f"or a built-in one ({', '.join(sorted(builtin))})")

@@ -15,7 +15,7 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from .errors import FsicrInputError, short_text
+from .errors import FsicrInputError, short_text, unusable_name
 from .ship import DESCRIPTIONS, FLAGS, LowerWaterline, Ship
 
 
@@ -74,7 +74,8 @@ def resolve_ship_path(text: str) -> Path:
             return builtin[Path(text).stem]
         why = "is not a file" if path.exists() else "not found"
     except (OSError, ValueError) as exc:  # a name the file system refuses (too long, a NUL byte)
-        why = f"cannot be a file name here ({getattr(exc, 'strerror', None) or exc})"
+        raise FsicrInputError(f"ship file: {unusable_name(text, exc, 'file')}; give a TOML file or a built-in "
+                              f"ship: {', '.join(sorted(builtin))}") from None
     raise FsicrInputError(f"ship file {short_text(text)}: {why} (give a TOML file or a built-in ship: "
                           f"{', '.join(sorted(builtin))})")
 

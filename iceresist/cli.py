@@ -7,12 +7,11 @@ with no traceback (:class:`iceresist.errors.InputError`).
 from __future__ import annotations
 
 import argparse
-import errno
 import logging
 import sys
 
 from fsicr.cliparser import OneLineParser
-from fsicr.errors import short_text
+from fsicr.errors import too_long_path
 from iceresist import __version__
 from iceresist.errors import InputError
 
@@ -153,11 +152,10 @@ def main(argv=None) -> int:
         print("iceresist: interrupted; files already written are complete", file=sys.stderr)
         return 130
     except OSError as exc:
-        if exc.errno != errno.ENAMETOOLONG:     # a path no check before caught: still the user's input
+        if too_long_path(exc) is None:          # only a path no check before caught is still the user's input
             raise
         if root:
-            print(f"iceresist: error: a path is too long for the file system: {short_text(str(exc.filename))}; "
-                  f"give a shorter one", file=sys.stderr)
+            print(f"iceresist: error: {too_long_path(exc)}", file=sys.stderr)
         return 2
     except Exception:
         from iceresist import parallel

@@ -177,19 +177,19 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
                           finished_utc=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
         if sim.completed and on_completed is not None and root:
             on_completed(rf, model, sim)
-    log.info("%s -> %s", closing_line(sim, model, build_s), path)
+    log.info("%s -> %s", closing_line(sim, model, build_s, since=t0), path)
     return RunResult(path, sim, dog)
 
 
-def closing_line(sim: Simulation, model: Model, build_s: float = 0.0) -> str:
+def closing_line(sim: Simulation, model: Model, build_s: float = 0.0, since: float = 0.0) -> str:
     """What a leg took, each figure named: its wall time (the one the result file records for the leg), the model's
     set-up within it, the stepping, the first step's share of the stepping (compiling or loading the kernels) and
-    the kernels compiled in the process; the rate over the steps after the first where there were any."""
+    the kernels compiled since ``since`` (``time.perf_counter()`` at the leg's start, its set-up included); the rate
+    over the steps after the first where there were any."""
     from iceresist.backends import compilelog
 
-    kernels = compilelog.compiled_kernels()
-    compiled = (f", {kernels} kernels compiled in {compilelog.compile_seconds():.1f} s" if kernels else
-                ", kernels loaded from the cache")
+    kernels, seconds = compilelog.compiled_since(since)
+    compiled = f", {kernels} kernels compiled in {seconds:.1f} s" if kernels else ", kernels loaded from the cache"
     text = (f"{sim.stop_reason}: {sim.steps_done} steps; wall time {sim.wall_time_s + build_s:.1f} s: "
             f"{build_s:.1f} s setting up, {sim.step_time_s:.1f} s stepping ({sim.first_step_s:.1f} s of it in the "
             f"first step{compiled})")

@@ -5,7 +5,8 @@ has its own event of that name); a kernel loaded from the on-disk cache (:mod:`i
 compiled and says nothing. :func:`install` listens to both: each kernel compiled at the top level (not a device
 function compiled inside another) is logged by name with its count against the kernels made so far
 (:data:`iceresist.backends.conf.KERNELS`: compiled, or made and without code yet), so a user sees a compile, not a
-hang. :func:`compile_seconds` is the wall time spent compiling so far, which the closing line of a run names.
+hang. :func:`compiled_since` gives the kernels and seconds of compiling since a time, which a run's closing line
+names.
 """
 
 from __future__ import annotations
@@ -22,7 +23,8 @@ log = logging.getLogger(__name__)
 log.setLevel(logging.INFO)     # shown even where a command quiets the engine's own lines (``iceresist demo``)
 
 _STATE = threading.local()
-_TOTALS = {"compiled": 0, "seconds": 0.0}
+#: (start on the perf_counter clock, seconds) of every top-level compile in this process.
+_COMPILES: list[tuple[float, float]] = []
 _INSTALLED = False
 
 
@@ -61,7 +63,7 @@ class _Listener:
         if depth:
             return
         _STATE.t0 = time.perf_counter()
-        done = _TOTALS["compiled"]
+        done = len(_COMPILES)
         if done == 0:
             log.info("compiling the kernels this run needs, on a first run only: they are kept in %s and later "
                      "runs load them in seconds (on 2 CPU cores: seconds for tier 1, about 2 min for a "
@@ -69,17 +71,18 @@ class _Listener:
         d = event.data.get("dispatcher")
         todo = sum(1 for k in list(KERNELS) if not _has_code(k) and k is not d)
         log.info("compiling kernel %d of the %d made so far: %s (%.0f s of compiling so far)", done + 1,
-                 done + 1 + todo, kernel_label(d), _TOTALS["seconds"])
+                 done + 1 + todo, kernel_label(d), sum(sec for _, sec in _COMPILES))
 
     def on_end(self, event):
         _STATE.depth = max(getattr(_STATE, "depth", 1) - 1, 0)
         if _STATE.depth == 0:
-            _TOTALS["compiled"] += 1
-            _TOTALS["seconds"] += time.perf_counter() - getattr(_STATE, "t0", time.perf_counter())
+            t0 = getattr(_STATE, "t0", time.perf_counter())
+            _COMPILES.append((t0, time.perf_counter() - t0))
 
 
 def _listener_class(base):
-    return type("CompileProgress", (base, _Listener), {"on_start": _Listener.on_start, "on_end": _Listener.on_end})
+    """:class:`_Listener` as a subclass of numba's (or numba-cuda's) ``Listener``: its methods come first."""
+    return type("CompileProgress", (_Listener, base), {})
 
 
 def install() -> None:
@@ -104,14 +107,8 @@ def install() -> None:
                 continue
 
 
-def compiled_kernels() -> int:
-    """Kernels compiled at the top level in this process since :func:`install`."""
-    return _TOTALS["compiled"]
-
-
-def compile_seconds() -> float:
-    """Wall time (s) spent compiling kernels in this process since :func:`install`."""
-    extra = 0.0
-    if getattr(_STATE, "depth", 0):
-        extra = time.perf_counter() - getattr(_STATE, "t0", time.perf_counter())
-    return _TOTALS["seconds"] + extra
+def compiled_since(t0: float) -> tuple[int, float]:
+    """(kernels, seconds) compiled at the top level since ``t0`` (``time.perf_counter()``): a run's own, not those
+    of an earlier run in the same process (the cases of a sweep)."""
+    own = [s for start, s in _COMPILES if start >= t0]
+    return len(own), float(sum(own))

@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from fsicr.errors import short_text
+from fsicr.errors import unusable_name
 from iceresist.errors import InputError
 
 
@@ -18,12 +18,11 @@ def check_output_dir(path, key: str) -> Path:
     """``path`` as a folder that exists and is writable, or can be made; else :class:`InputError` naming ``key``."""
     try:
         return _check_output_dir(path, key)
+    except InputError:
+        raise
     except (OSError, ValueError) as exc:  # a name the file system refuses (too long, a NUL byte)
-        if isinstance(exc, InputError):
-            raise
-        raise InputError(f"{key}: {short_text(str(path))} cannot be a folder name here "
-                         f"({getattr(exc, 'strerror', None) or exc}); give another folder with {key}, e.g. runs") \
-            from None
+        raise InputError(f"{key}: {unusable_name(str(path), exc, 'folder')}; give another folder with {key}, "
+                         f"e.g. runs") from None
 
 
 def _check_output_dir(path, key: str) -> Path:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from fsicr.errors import short_text
+from fsicr.errors import unusable_name
 
 from iceresist.errors import InputError, StabilityError
 from iceresist.scene.schema import CaseBase, Scene
@@ -189,8 +189,7 @@ def load_scene(path) -> Scene:
     try:
         is_file, exists = p.is_file(), p.exists()
     except (OSError, ValueError) as exc:  # a name the file system refuses (too long, a NUL byte)
-        raise InputError(f"{short_text(source)}: cannot be a scene file's name here "
-                         f"({getattr(exc, 'strerror', None) or exc}); give the path of a scene file") from None
+        raise InputError(f"{unusable_name(source, exc, 'scene file')}; give the path of a scene file") from None
     if is_file:
         try:
             text = p.read_text(encoding="utf-8")

@@ -29,9 +29,11 @@ import json
 import logging
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+from pydantic import ValidationError
 
 from iceresist import parallel
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S
@@ -40,6 +42,7 @@ from iceresist.io.paths import check_output_dir
 from iceresist.models.fluid import resolve_target
 from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, sweep_table
 from iceresist.post.sweeptable import stored_meta as _stored_meta
+from iceresist.ship.matrix import MatrixCase
 from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
 
 log = logging.getLogger(__name__)
@@ -130,16 +133,17 @@ def check_same_scene(path: Path, scene_text: str) -> None:
                      f"again")
 
 
-def resolve_cases(cases) -> list[str]:
-    """Case names in matrix order; ``None`` or ``"all"`` = every case."""
+def resolve_cases(cases, plan: dict | None = None) -> list[str]:
+    """Case names in matrix order (``plan``'s, default the paper's); ``None`` or ``"all"`` = every case."""
+    known = list(plan) if plan is not None else list(CASES)
     if cases is None or cases == "all" or cases == ["all"]:
-        return list(CASES)
+        return known
     if isinstance(cases, str):
         cases = [c.strip() for c in cases.split(",") if c.strip()]
     if not cases:
-        raise InputError(f"--cases: no case named; give 'all' or case names such as {next(iter(CASES))}")
-    names = [get_case(c).name for c in cases]
-    return [c for c in CASES if c in names]
+        raise InputError(f"--cases: no case named; give 'all' or case names such as {known[0]}")
+    names = [case_spec(c, plan).name for c in cases]
+    return [c for c in known if c in names]
 
 
 def read_sweep_info(path: Path) -> dict:
@@ -155,11 +159,29 @@ def read_sweep_info(path: Path) -> dict:
     return info
 
 
+def case_spec(case: str, plan: dict | None = None) -> MatrixCase:
+    """The :class:`~iceresist.ship.matrix.MatrixCase` of a case name: from ``plan`` (a user's matrix, or the paper's
+    cases on a mesh) or the paper's case on B-063."""
+    if plan is not None:
+        if case not in plan:
+            raise InputError(f"--cases: {case!r} is not a case of this sweep; its cases: {', '.join(plan)}")
+        return plan[case]
+    return MatrixCase(get_case(case))
+
+
+def sweep_scene(spec: MatrixCase, fidelity: str, tier: int, amr: bool = False, overrides: dict | None = None):
+    """The validated scene of one case of a sweep (:func:`~iceresist.ship.presets.case_scene`)."""
+    return case_scene(spec.case, fidelity, tier, amr=amr, hull=spec.hull, hull_keys=spec.hull_keys,
+                      **(overrides or {}))
+
+
 def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "auto", progress: bool = False,
-             overrides: dict | None = None, callbacks: dict | None = None, checkpoint_schedule=None) -> Path:
+             overrides: dict | None = None, callbacks: dict | None = None, checkpoint_schedule=None,
+             amr: bool = False, plan: dict | None = None, meta: dict | None = None) -> Path:
     """Run one case to ``DIR/cases/<case>.h5`` through the driver (:func:`iceresist.driver.run_model`), via a
     partial file renamed at the end, continuing a killed run of it from its checkpoint. ``checkpoint_schedule``:
-    when to checkpoint (default every ``CHECKPOINT_WALL_S`` of wall time)."""
+    when to checkpoint (default every ``CHECKPOINT_WALL_S`` of wall time); ``plan``: the sweep's cases by name
+    (default the paper's on B-063); ``meta``: more for the case file's meta (the hull's power inputs)."""
     from iceresist.driver import Outputs, Stop, run_model
     from iceresist.models import RefinedTier2Model, Tier1Model, Tier2Model
     from iceresist.simulation import IterationInterval, WallTimeInterval
@@ -167,7 +189,8 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     t_build = time.perf_counter()
-    scene = case_scene(case, fidelity, tier, **(overrides or {}))
+    spec = case_spec(case, plan)
+    scene = sweep_scene(spec, fidelity, tier, amr, overrides)
     final = case_path(out_dir, case)
     partial = final.with_name(f"{case}.partial.h5")
     chk = checkpoint_path(out_dir, case)
@@ -177,7 +200,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
         model = Tier1Model(scene, backend=backend)
     else:
         model = (Tier2Model if scene.refinement is None else RefinedTier2Model)(scene, backend=backend)
-    c = get_case(case)
+    c = spec.case
 
     def on_new(rf, model):
         g = rf.h5.require_group("bodies")
@@ -203,8 +226,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
                       checkpoint=checkpoint_schedule or WallTimeInterval(CHECKPOINT_WALL_S))
     result = run_model(model, scene, partial, chk, stop=Stop(time_s=scene.run.end_time_s), outputs=outputs,
                        pickup=earlier is not None, progress=progress, callbacks=callbacks,
-                       meta={"case": case, "fidelity": fidelity, "tier": tier, "bow": c.bow,
-                             "concentration_nominal": c.concentration, "knots": c.knots},
+                       meta={"case": case, "fidelity": fidelity, "tier": tier, **c.meta(), **(meta or {})},
                        on_new=on_new, on_completed=on_completed, build_s=time.perf_counter() - t_build,
                        leave_progress=False)
     sim, dog = result.sim, result.watchdog
@@ -223,30 +245,34 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
 
 def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "auto", progress: bool = False,
               overrides: dict | None = None, callbacks: dict | None = None,
-              checkpoint_schedule=None) -> pd.DataFrame:
+              checkpoint_schedule=None, amr: bool = False, plan: dict | None = None,
+              about: dict | None = None) -> pd.DataFrame:
     """Run every case not yet finished in ``out_dir`` (an interrupted one continues from its checkpoint) and
-    write ``sweep.csv``; returns the table."""
+    write ``sweep.csv``; returns the table. ``plan``: the sweep's cases by name (a user's matrix,
+    :meth:`iceresist.ship.matrix.Matrix.cases`; default the paper's on B-063), ``about``: what ``sweep.json`` and
+    every case file record of it beside the preset (the hull, the matrix, the power inputs)."""
     if fidelity not in FIDELITIES:
         raise InputError(f"--preset: unknown preset {fidelity!r}; use one of {', '.join(FIDELITIES)}")
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
-    names = resolve_cases(cases)
+    names = list(plan) if plan is not None and cases in (None, "all") else resolve_cases(cases, plan)
+    job = SweepJob(fidelity, tier, amr, overrides or {}, plan, about or {})
     comm = parallel.world()
     if comm is not None:
-        return _run_sweep_ranks(comm, fidelity, tier, out_dir, names, backend=backend, overrides=overrides,
-                                callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+        return _run_sweep_ranks(comm, job, out_dir, names, backend=backend, callbacks=callbacks,
+                                checkpoint_schedule=checkpoint_schedule)
     out = check_output_dir(out_dir, "--output")
     resolve_target(backend, "--backend")
     out.mkdir(parents=True, exist_ok=True)
     lock = folder_lock(out)
     try:
-        return _run_sweep_locked(fidelity, tier, out, names, backend=backend, progress=progress,
-                                 overrides=overrides, callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+        return _run_sweep_locked(job, out, names, backend=backend, progress=progress, callbacks=callbacks,
+                                 checkpoint_schedule=checkpoint_schedule)
     finally:
         lock.release()
 
 
-def _run_sweep_ranks(comm, fidelity: str, tier: int, out_dir, names: list, *, backend, overrides, callbacks,
+def _run_sweep_ranks(comm, job: "SweepJob", out_dir, names: list, *, backend, callbacks,
                      checkpoint_schedule) -> pd.DataFrame | None:
     """:func:`run_sweep` under ``mpirun``: whole cases spread over the ranks (each case on one process, the cases
     not yet finished dealt out in turn). Rank 0 checks the folder, takes its lock, writes ``sweep.json`` and, when
@@ -260,7 +286,7 @@ def _run_sweep_ranks(comm, fidelity: str, tier: int, out_dir, names: list, *, ba
             resolve_target(backend, "--backend")
             out.mkdir(parents=True, exist_ok=True)
             lock = folder_lock(out)
-            finished = _prepare_sweep(fidelity, tier, out, names, overrides)
+            finished = _prepare_sweep(job, out, names)
         except InputError as exc:
             error = str(exc)
             if lock is not None:
@@ -274,8 +300,8 @@ def _run_sweep_ranks(comm, fidelity: str, tier: int, out_dir, names: list, *, ba
     failed = None
     for case in mine:
         try:
-            run_case(case, fidelity, tier, out, backend=backend, progress=False, overrides=overrides,
-                     callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+            job.run(case, out, backend=backend, progress=False, callbacks=callbacks,
+                    checkpoint_schedule=checkpoint_schedule)
         except InputError as exc:
             failed = f"case {case}: {exc}"
             break
@@ -307,10 +333,11 @@ def folder_lock(out: Path):
     return lock
 
 
-def _run_sweep_locked(fidelity: str, tier: int, out: Path, names: list, *, backend, progress, overrides, callbacks,
+def _run_sweep_locked(job: "SweepJob", out: Path, names: list, *, backend, progress, callbacks,
                       checkpoint_schedule) -> pd.DataFrame:
     """:func:`run_sweep` inside the folder's lock."""
-    finished = _prepare_sweep(fidelity, tier, out, names, overrides)
+    fidelity, tier = job.fidelity, job.tier
+    finished = _prepare_sweep(job, out, names)
     bar = _cases_bar(names, progress)
     for case in names:
         if bar is not None:
@@ -318,8 +345,8 @@ def _run_sweep_locked(fidelity: str, tier: int, out: Path, names: list, *, backe
         if case in finished:
             log.info("case %s: finished earlier, skipped", case)
         else:
-            run_case(case, fidelity, tier, out, backend=backend, progress=progress, overrides=overrides,
-                     callbacks=callbacks, checkpoint_schedule=checkpoint_schedule)
+            job.run(case, out, backend=backend, progress=progress, callbacks=callbacks,
+                    checkpoint_schedule=checkpoint_schedule)
         if bar is not None:
             bar.update(1)
     if bar is not None:
@@ -333,24 +360,61 @@ def _write_table(out: Path) -> pd.DataFrame:
     return table
 
 
-def _prepare_sweep(fidelity: str, tier: int, out: Path, names: list, overrides) -> list:
+def _prepare_sweep(job: "SweepJob", out: Path, names: list) -> list:
     """Inside the folder's lock, before any case runs: the folder's ``sweep.json`` checked against this sweep and
     rewritten, files of other sweeps set aside, the finished cases' scenes checked; returns the finished cases."""
-    info = {"preset": fidelity, "tier": tier, "cases": names, "overrides": overrides or {}}
+    info = {"preset": job.fidelity, "tier": job.tier, "cases": names, "overrides": job.overrides,
+            **({"amr": True} if job.amr else {}), **job.about}
     info_path = out / "sweep.json"
     if info_path.is_file():
         old = read_sweep_info(info_path)
-        if (old.get("preset"), old.get("tier"), old.get("overrides", {})) != (fidelity, tier, overrides or {}):
-            raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}: "
-                             f"use another --output folder")
-        info["cases"] = [c for c in CASES if c in set(old.get("cases", [])) | set(names)]
+        if any(old.get(k, {} if k == "overrides" else None) != info.get(k, {} if k == "overrides" else None)
+               for k in ("preset", "tier", "overrides", "amr", *job.about)):
+            raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}"
+                             f"{_hull_words(old)}: use another --output folder")
+        before = [c for c in old.get("cases", []) if isinstance(c, str)]
+        info["cases"] = before + [c for c in names if c not in before]
     for case in names:
         keep_foreign_file(case_path(out, case))
-    finished = [c for c in CASES if is_finished(case_path(out, c))]  # running one case finishes no other
+    order = job.order(info["cases"])
+    finished = [c for c in order if is_finished(case_path(out, c))]  # running one case finishes no other
     for case in finished:  # every case the table would read, before anything runs or is written
-        check_same_scene(case_path(out, case), case_scene(case, fidelity, tier, **(overrides or {})).source_text)
+        if job.plan is None or case in job.plan:
+            check_same_scene(case_path(out, case), job.scene(case).source_text)
+    info["cases"] = order
     info_path.write_text(json.dumps(info, indent=1))
     return finished
+
+
+def _hull_words(info: dict) -> str:
+    hull = info.get("hull") or {}
+    return f", hull {Path(str(hull.get('mesh'))).name}" if hull.get("mesh") else ""
+
+
+@dataclass(frozen=True)
+class SweepJob:
+    """What every case of one sweep shares: preset, tier, refined levels, scene overrides, the cases by name
+    (None: the paper's on B-063) and what the sweep records of itself (``about``)."""
+
+    fidelity: str
+    tier: int
+    amr: bool
+    overrides: dict
+    plan: dict | None
+    about: dict
+
+    def order(self, names) -> list:
+        """``names`` in the sweep's order: the plan's, or the paper's matrix."""
+        known = list(self.plan) if self.plan is not None else list(CASES)
+        names = set(names)
+        return [c for c in known if c in names] + sorted(names - set(known))
+
+    def scene(self, case: str):
+        return sweep_scene(case_spec(case, self.plan), self.fidelity, self.tier, self.amr, self.overrides)
+
+    def run(self, case: str, out: Path, **kw) -> Path:
+        return run_case(case, self.fidelity, self.tier, out, overrides=self.overrides, amr=self.amr, plan=self.plan,
+                        meta=self.about.get("case_meta"), **kw)
 
 
 def _cases_bar(names, progress: bool):
@@ -363,23 +427,45 @@ def _cases_bar(names, progress: bool):
 
 
 # -- command line ------------------------------------------------------------------------------------------
+#: The matrix flags of ``iceresist sweep`` and the matrix axes they set.
+MATRIX_FLAGS = {"concentration": "concentration", "knots": "speed_knots", "scale": "scale", "ice_size": "ice_size_m",
+                "ice_thickness": "ice_thickness_m", "channel_width": "channel_width_m", "ahead": "ahead"}
+
+
 def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Arguments of ``iceresist sweep``; sets ``func=cmd_sweep``."""
-    p.add_argument("--preset", default="quick", help=f"fidelity: {' | '.join(FIDELITIES)} (default quick)")
-    p.add_argument("--tier", type=int, default=1, help="1 = DEM with water models, 2 = coupled LBM-DEM")
-    p.add_argument("--cases", default="all", help=f"comma-separated case names or 'all' ({', '.join(CASES)})")
-    p.add_argument("--output", metavar="DIR", help="sweep folder (default runs/sweep-<preset>-t<tier>)")
+    p.add_argument("--preset", help=f"fidelity: {' | '.join(FIDELITIES)} (default quick)")
+    p.add_argument("--tier", type=int, help="1 = DEM with water models (default), 2 = coupled LBM-DEM")
+    p.add_argument("--cases", default="all", help=f"comma-separated case names or 'all' (the paper's: "
+                   f"{', '.join(CASES)}; a matrix's: c68-v5kn, ...)")
+    p.add_argument("--output", metavar="DIR", help="sweep folder (default runs/sweep-<preset>-t<tier>, "
+                   "runs/matrix-<hull>-<preset>-t<tier> for a matrix)")
     p.add_argument("--backend", choices=("auto", "cpu", "cuda"), default="auto")
     p.add_argument("--threads", type=int, help="CPU threads of the DEM kernels (numba)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--amr", action="store_true", help="tier 2 on the preset's refined levels: the hull, the ice and "
                    "the surface on the finest level (docs/SHIP.md)")
-    m = p.add_argument_group("your own hull (Bow A cases; the hull replaces B-063)")
-    m.add_argument("--mesh", metavar="HULL.stl", help="closed hull surface, STL or OBJ, at the preset's model "
-                   "scale (draught 0.44 m), or a built-in mesh (b063)")
+    m = p.add_argument_group("your own hull (the tank, channel and window are sized from it; docs/SHIP.md)")
+    m.add_argument("--mesh", metavar="HULL.stl", help="closed hull surface, STL or OBJ, or a built-in mesh (b063); "
+                   "alone, it runs the paper's Bow A cases")
     m.add_argument("--mesh-unit", default="m", help="unit of the mesh's coordinates: m, cm, mm, ft, in (default m)")
     m.add_argument("--mesh-bow", default="+x", help="the mesh's axis toward the bow (default +x; write --mesh-bow=-x)")
     m.add_argument("--mesh-up", default="+z", help="the mesh's upward axis (default +z)")
+    m.add_argument("--mesh-scale", type=float, metavar="S", help="the scale the mesh is drawn at: 1 full scale, 25 a "
+                   "1:25 model (default 1; 25 for b063 and for --mesh alone)")
+    m.add_argument("--draught", type=float, metavar="T", help="draught at the mesh's scale (m; default 0.44 for b063)")
+    m.add_argument("--propeller-diameter", type=float, metavar="D", help="full-scale propeller diameter (m): the table "
+                   "then gives the FSICR required engine output from R_CH and from the simulated resistance")
+    m.add_argument("--ice-class", default="IA", help="FSICR class of R_CH and the power: IA Super, IA, IB, IC")
+    x = p.add_argument_group("your own test matrix (full-scale values; comma-separated lists are axes; or --matrix)")
+    x.add_argument("--matrix", metavar="FILE.toml", help="a matrix file: [hull] and [matrix] (docs/SHIP.md)")
+    x.add_argument("--concentration", metavar="LIST", help="ice concentrations, fractions (default 0.68)")
+    x.add_argument("--knots", metavar="LIST", help="full-scale ship speeds (knots; default 5)")
+    x.add_argument("--scale", metavar="LIST", help="model scales lambda of 1:lambda (default 25)")
+    x.add_argument("--ice-size", metavar="LIST", help="full-scale ice piece edge (m; default 1.025)")
+    x.add_argument("--ice-thickness", metavar="LIST", help="full-scale ice thickness (m; default: the edge)")
+    x.add_argument("--channel-width", metavar="LIST", help="full-scale channel width (m; default across the tank)")
+    x.add_argument("--ahead", metavar="LIST", help="which end goes ahead: bow, stern or bow,stern (default bow)")
     p.set_defaults(func=cmd_sweep)
     return p
 
@@ -390,24 +476,94 @@ def set_threads(n: int | None):
     set_backend_threads(n, "--threads")
 
 
-def mesh_overrides(args) -> tuple[dict, str]:
-    """The ``[ship]`` keys of ``--mesh`` (checked here, before anything is written) and the cases to run: with a
-    mesh, ``all`` means every Bow A case."""
-    if not getattr(args, "mesh", None):
-        return {}, args.cases
-    from iceresist.scene.schema import Ship
-    from fsicr.hullmesh import MeshKeys
-    from iceresist.ship.meshhull import MeshHull, resolve_mesh_path
+def _list(flag: str, text: str | None, kind=float):
+    if text is None:
+        return None
+    try:
+        values = [kind(v.strip()) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"--{flag.replace('_', '-')}: {text!r} is not a comma-separated list of numbers; e.g. "
+                         f"--{flag.replace('_', '-')} 0.5,0.68") from None
+    if not values:
+        raise InputError(f"--{flag.replace('_', '-')}: empty; give at least one value")
+    return values
 
-    path = resolve_mesh_path(args.mesh)
-    path = str(Path(path).resolve()) if Path(path).is_file() else path
-    values = {"hull": "mesh", "mesh_file": path, "mesh_unit": args.mesh_unit, "mesh_bow": args.mesh_bow,
-              "mesh_up": args.mesh_up}
-    for key, value in values.items():
-        allowed = Ship.model_fields[key].annotation
-        if key != "mesh_file" and value not in getattr(allowed, "__args__", (value,)):
-            raise InputError(f"--{key.replace('_', '-')}: {value!r} is not one of "
-                             f"{', '.join(allowed.__args__)}")
+
+def hull_spec(args):
+    """The ``[hull]`` of the mesh flags (checked: one line naming the flag)."""
+    from iceresist.ship.matrix import HullSpec
+
+    values = {"mesh": args.mesh or "b063", "mesh_unit": args.mesh_unit, "mesh_bow": args.mesh_bow,
+              "mesh_up": args.mesh_up, "mesh_scale": args.mesh_scale, "draught_m": args.draught,
+              "propeller_diameter_m": args.propeller_diameter, "ice_class": args.ice_class}
+    try:
+        return HullSpec.model_validate({k: v for k, v in values.items() if v is not None})
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        flag = {"mesh_unit": "--mesh-unit", "mesh_bow": "--mesh-bow", "mesh_up": "--mesh-up",
+                "mesh_scale": "--mesh-scale", "draught_m": "--draught", "propeller_diameter_m": "--propeller-diameter",
+                "ice_class": "--ice-class"}.get(str(err["loc"][0]), "--mesh")
+        if err["type"] == "literal_error":
+            raise InputError(f"{flag}: {str(err['input'])[:40]!r} is not one of {err['ctx']['expected']}") from None
+        raise InputError(f"{flag}: {err['msg'].removeprefix('Value error, ')} (got {str(err['input'])[:40]!r})") from None
+
+
+def sweep_plan(args):
+    """(preset, tier, plan, about) of the command line: a matrix (``--matrix`` or the matrix flags), the paper's Bow A
+    cases on ``--mesh``, or (plan None) the paper's cases on B-063. Every mesh is read and checked here, before
+    anything is written."""
+    from iceresist.ship.matrix import matrix_from_flags, read_matrix
+
+    flags = {axis: _list(flag, getattr(args, flag), str if flag == "ahead" else float)
+             for flag, axis in MATRIX_FLAGS.items()}
+    given = [f"--{f.replace('_', '-')}" for f, a in MATRIX_FLAGS.items() if flags[a] is not None]
+    if args.matrix:
+        if given or args.mesh:
+            raise InputError(f"--matrix: the file gives the hull and the matrix; drop {', '.join(given) or '--mesh'} "
+                             f"(or give them all as flags without --matrix)")
+        matrix = read_matrix(args.matrix)
+        for flag, value in (("--preset", args.preset), ("--tier", args.tier)):
+            ours = getattr(matrix.axes, flag[2:])
+            if value is not None and value != ours:
+                raise InputError(f"{flag}: {value} but the matrix file says {ours}; set it in the file's [matrix]")
+        if args.amr and not matrix.axes.amr:
+            raise InputError("--amr: set amr = true in the matrix file's [matrix]")
+    elif given:
+        names = {axis: f"--{flag.replace('_', '-')}" for flag, axis in MATRIX_FLAGS.items()}
+        matrix = matrix_from_flags(hull_spec(args), names, preset=args.preset, tier=args.tier, amr=args.amr or None,
+                                   **{k: v for k, v in flags.items() if v is not None}, **_paper_defaults(flags))
+    else:
+        return _mesh_plan(args)
+    a = matrix.axes
+    plan = matrix.cases()
+    about = {**matrix.describe(), "case_meta": {"hull_name": matrix.hull_name, **power_inputs(matrix.hull)}}
+    return a.preset, a.tier, a.amr, plan, about, f"runs/matrix-{Path(matrix.hull.mesh).stem}-{a.preset}-t{a.tier}"
+
+
+def _paper_defaults(flags: dict) -> dict:
+    """A matrix of flags with no concentration or no speed: the paper's 68 % and 5 knots."""
+    return {k: v for k, v in (("concentration", [0.68]), ("speed_knots", [5.0])) if flags[k] is None}
+
+
+def power_inputs(hull) -> dict:
+    """What the FSICR required engine output needs of the hull (a case file's meta; none without a propeller)."""
+    out = {"ice_class": hull.ice_class}
+    if hull.propeller_diameter_m is not None:
+        out.update(Dp_m=hull.propeller_diameter_m, n_propellers=hull.propellers, propulsion=hull.propulsion)
+    return out
+
+
+def _mesh_plan(args):
+    """The paper's Bow A cases on ``--mesh`` (drawn at the preset's 1:25 unless --mesh-scale says otherwise), or the
+    paper's cases on B-063 (no --mesh)."""
+    preset = args.preset or "quick"
+    tier = 1 if args.tier is None else args.tier
+    if not args.mesh:
+        return preset, tier, args.amr, None, {}, f"runs/sweep-{preset}-t{tier}"
+    from iceresist.ship.matrix import MatrixCase
+    from iceresist.ship.meshhull import MeshHull
+
+    spec = hull_spec(args)
     cases = args.cases
     if str(cases).strip() == "all":
         cases = ",".join(c for c in CASES if get_case(c).bow == "A")
@@ -415,29 +571,48 @@ def mesh_overrides(args) -> tuple[dict, str]:
     if bow_b:
         raise InputError(f"--cases: {', '.join(bow_b)} name Bow B of B-063; with --mesh the mesh is the hull, so run "
                          f"the A cases (e.g. --cases A-c68-v1.0)")
-    draught = float(case_scene(resolve_cases(cases)[0], args.preset, args.tier).ship.draught_m)
-    MeshHull.from_file(path, draught, unit=args.mesh_unit, bow=args.mesh_bow, up=args.mesh_up,
-                       keys=MeshKeys(draught=f"--mesh (the preset's draught {draught:g} m)"))
-    return {"ship": values}, cases
+    scale = spec.mesh_scale if spec.mesh_scale is not None else 25.0
+    draught = spec.draught_m if spec.draught_m is not None else 0.44 * 25.0 / scale
+    keys = {"hull": "mesh", "mesh_file": _absolute(spec.mesh), "mesh_unit": spec.mesh_unit, "mesh_bow": spec.mesh_bow,
+            "mesh_up": spec.mesh_up, "draught_m": draught * scale / 25.0}
+    if scale != 25.0:
+        keys["mesh_scale"] = 25.0 / scale
+    from fsicr.hullmesh import MeshKeys
+
+    hull = MeshHull.from_file(keys["mesh_file"], keys["draught_m"], unit=spec.mesh_unit, bow=spec.mesh_bow,
+                              up=spec.mesh_up, scale=keys.get("mesh_scale", 1.0),
+                              keys=MeshKeys(draught="--draught"))
+    plan = {c: MatrixCase(get_case(c), keys, hull) for c in resolve_cases(cases)}
+    about = {"hull": {**spec.model_dump(), "mesh": keys["mesh_file"]},
+             "case_meta": {"hull_name": Path(spec.mesh).stem, **power_inputs(spec)}}
+    return preset, tier, args.amr, plan, about, f"runs/sweep-{preset}-t{tier}-{Path(spec.mesh).stem}"
+
+
+def _absolute(path: str) -> str:
+    from iceresist.ship.meshhull import resolve_mesh_path
+
+    p = resolve_mesh_path(path)
+    return str(Path(p).resolve()) if Path(p).is_file() else p
 
 
 def cmd_sweep(args) -> int:
-    from iceresist.ship.cases import amr_overrides
+    preset, tier, amr, plan, about, default_out = sweep_plan(args)
+    if amr and tier != 2:
+        raise InputError("--amr: refined levels are a tier-2 tank; add --tier 2")
+    if amr:
+        from iceresist.ship.cases import amr_overrides
 
-    overrides, cases = mesh_overrides(args)
-    suffix = f"-{Path(args.mesh).stem}" if overrides else ""
-    if args.amr:
-        if args.tier != 2:
-            raise InputError("--amr: refined levels are a tier-2 tank; add --tier 2")
-        for section, values in amr_overrides(args.preset).items():
-            overrides.setdefault(section, {}).update(values)
-        suffix += "-amr"
-    out = args.output or f"runs/sweep-{args.preset}-t{args.tier}{suffix}"
+        amr_overrides(preset)  # refuses a preset without refined levels, naming those with them
+    out = args.output or default_out + ("-amr" if amr else "")
     set_threads(args.threads)
-    table = run_sweep(args.preset, args.tier, out, cases, backend=args.backend,
-                      progress=not args.no_progress, overrides=overrides or None)
+    cases = args.cases if plan is None or str(args.cases).strip() != "all" else None
+    if plan is not None and cases is not None and args.mesh and not args.matrix and not about.get("axes"):
+        cases = list(plan)  # --mesh alone: the plan holds the cases asked for
+    table = run_sweep(preset, tier, out, cases, backend=args.backend, progress=not args.no_progress, amr=amr,
+                      plan=plan, about=about)
     if table is None:       # an MPI rank other than 0
         return 0
-    cols = ["case", "mean_force_N", "ci95_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR", "wall_time_s"]
+    cols = [c for c in ("case", "mean_force_N", "ci95_N", "R_sim_kN", "R_CH_FSICR_kN", "ratio_sim_FSICR",
+                        "P_sim_kW", "P_FSICR_kW", "wall_time_s") if c in table.columns]
     log.info("sweep table %s/sweep.csv:\n%s", out, table[cols].to_string(index=False, float_format="%.4g"))
     return 0

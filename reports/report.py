@@ -204,11 +204,11 @@ RUN_COLUMNS = {"case": "case", "tier": "tier", "fidelity": "preset", "cubes": "c
                "start_wave_fraction": "window in start wave", "ci_method": "CI method", "note": "note"}
 
 
-def hull_summary(hull: dict) -> tuple[str, "pd.DataFrame | None"]:
-    """The hull's name for the title, and for a mesh hull the FSICR inputs measured on it at full scale."""
+def hull_summary(hull: dict, scale: float = SCALE) -> tuple[str, "pd.DataFrame | None"]:
+    """The hull's name for the title, and for a mesh hull the FSICR inputs measured on it at full scale (1:``scale``)."""
     import pandas as pd
 
-    rows = mesh_hull_inputs(hull, SCALE)
+    rows = mesh_hull_inputs(hull, scale)
     if rows is None:
         return "B-063", None
     return f"{Path(hull.get('mesh_file', 'mesh')).stem} (mesh hull)", pd.DataFrame(rows)
@@ -216,8 +216,6 @@ def hull_summary(hull: dict) -> tuple[str, "pd.DataFrame | None"]:
 
 def write_report(sweep_dir) -> tuple[Path, Path]:
     """Write ``report.html`` and ``report.pdf`` into ``sweep_dir``; returns their paths."""
-    from matplotlib.backends.backend_pdf import PdfPages
-
     d = Path(sweep_dir)
     if not d.is_dir():
         raise InputError(f"{d}: no such sweep folder; run `iceresist sweep --output {d}` first")
@@ -229,6 +227,8 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
         raise InputError(f"{d}: no finished case yet; run `iceresist sweep --output {d}` to finish them")
     cases = {name: load_case(case_path(d, name)) for name in table.case}
     plt = _plt()
+    if "axes" in info:
+        return _write_matrix_report(d, info, table, cases, plt)
     figs = {"forces": fig_forces(plt, cases, table), "trends": fig_trends(plt, table),
             "bows": fig_bows(plt, table), "topviews": fig_topviews(plt, cases)}
     tank = fig_tank(plt, cases)
@@ -245,20 +245,31 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     env = template_env()
     html = env.get_template("report.html.j2").render(
         title=f"{info.get('preset')} preset, tier {info.get('tier')}", sweep_dir=str(d), preset=info.get("preset"),
-        tier=info.get("tier"), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS),
+        tier=info.get("tier"), generated=_now(), scale=f"{SCALE:g}", table2=_html_table(table, TABLE2_COLUMNS),
         runs=_html_table(table, RUN_COLUMNS, na_rep="–"),
         bow_ratio_sim=f"{r_sim:.3g}", bow_ratio_fsicr=f"{r_fs:.3g}", images=images, preset_note=note,
         trends=_html_table(trends, TREND_COLUMNS), hull_name=hull_name,
         hull_inputs=None if hull_inputs is None else _html_table(hull_inputs, {c: c for c in hull_inputs.columns}))
+    pages = [_pdf_table_page(plt, table, TABLE2_COLUMNS, f"Full-scale ice resistance beside FSICR (lambda = {SCALE:g}); "
+                             f"Bow B/A: sim {r_sim:.3g}, FSICR {r_fs:.3g}"),
+             _pdf_table_page(plt, trends, TREND_COLUMNS, "The paper's trends on this sweep "
+                             "(mean +- 95 % interval, model scale)")]
+    return _write(d, html, pages, figs, table, plt)
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _write(d: Path, html: str, pages: list, figs: dict, table, plt) -> tuple[Path, Path]:
+    """``report.html``, ``report.pdf`` (``pages``, the figures, the runs) and ``topviews.png`` into ``d``."""
+    from matplotlib.backends.backend_pdf import PdfPages
+
     html_path, pdf_path = d / "report.html", d / "report.pdf"
     html_path.write_text(html, encoding="utf-8")
     with PdfPages(pdf_path) as pdf:
-        pdf.savefig(_pdf_table_page(plt, table, TABLE2_COLUMNS,
-                                    f"Full-scale ice resistance beside FSICR (lambda = {SCALE:g}); "
-                                    f"Bow B/A: sim {r_sim:.3g}, FSICR {r_fs:.3g}"))
-        pdf.savefig(_pdf_table_page(plt, trends, TREND_COLUMNS, "The paper's trends on this sweep "
-                                    "(mean +- 95 % interval, model scale)"))
+        for page in pages:
+            pdf.savefig(page)
         for f in figs.values():
             pdf.savefig(f)
         pdf.savefig(_pdf_table_page(plt, table, RUN_COLUMNS, "Runs", na_rep="–"))
@@ -266,6 +277,28 @@ def write_report(sweep_dir) -> tuple[Path, Path]:
     plt.close("all")
     log.info("report: %s, %s", html_path, pdf_path)
     return html_path, pdf_path
+
+
+def _write_matrix_report(d: Path, info: dict, table, cases: dict, plt) -> tuple[Path, Path]:
+    """The report of a user's test matrix (:mod:`reports.matrix`)."""
+    from reports.matrix import fig_speed, matrix_context, matrix_pdf_pages
+
+    figs = {"speed": fig_speed(plt, table), "forces": fig_forces(plt, cases, table),
+            "topviews": fig_topviews(plt, cases)}
+    field = fig_ice_field(plt, cases)
+    if field is not None:
+        figs["ice_field"] = field
+    first = next(iter(cases.values()))
+    _, hull_inputs = hull_summary(first["model"]["hull"], float(table.scale.iloc[0]))
+    ctx = matrix_context(info, table)
+    html = template_env().get_template("matrix.html.j2").render(
+        **ctx, sweep_dir=str(d), preset=info.get("preset"), tier=info.get("tier"), generated=_now(),
+        images={k: _png64(f) for k, f in figs.items()}, runs=_html_table(table, RUN_COLUMNS, na_rep="–"),
+        preset_note=preset_note(info.get("preset"), int(info.get("tier", 1))),
+        first_scale=f"{float(table.scale.iloc[0]):g}",
+        hull_inputs=None if hull_inputs is None else _html_table(hull_inputs, {c: c for c in hull_inputs.columns}))
+    pages = matrix_pdf_pages(plt, table, f"{ctx['hull_name']}: {ctx['matrix_words']}")
+    return _write(d, html, pages, figs, table, plt)
 
 
 def add_report_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -165,35 +165,12 @@ WL, WB, WT, WD, WRAKE = 3.0, 0.3, 0.19, 0.3, 30.0
 
 
 def _raked_wigley(nx: int, nz: int):
-    """A closed mesh of the Wigley form y = (B/2)(1 - (2x/L)^2)(1 - (z/T - 1)^2) below the waterline z = T (keel at
-    z = 0), wall-sided above it to the deck at D, every section moved forward by (z - T) cot(rake): ``nx`` stations,
-    ``nz`` rows below the waterline. Exact inputs at T: L, B, LPAR = 0 (no parallel middle body), LBOW = L/2,
-    Awf = B L / 3, alpha = atan(sqrt(2) B / L), phi1 = phi2 = rake (the unraked form's sections are vertical at the
-    waterline, where d(1 - s^2)/ds = 0)."""
-    import trimesh
+    """The raked Wigley hull (validation/hull_forms.py) of ``nx`` stations and ``nz`` rows below the waterline. Exact
+    inputs at T: L, B, LPAR = 0 (no parallel middle body), LBOW = L/2, Awf = B L / 3, alpha = atan(sqrt(2) B / L),
+    phi1 = phi2 = rake (the unraked form's sections are vertical at the waterline, where d(1 - s^2)/ds = 0)."""
+    from validation.hull_forms import raked_form
 
-    x = np.linspace(-0.5 * WL, 0.5 * WL, nx)
-    z = np.concatenate([np.linspace(0.0, WT, nz + 1), np.linspace(WT, WD, 4)[1:]])
-    X, Z = np.meshgrid(x, z, indexing="ij")
-    s = np.minimum(Z - WT, 0.0) / WT
-    Y = 0.5 * WB * (1.0 - (2.0 * X / WL) ** 2) * (1.0 - s * s)
-    port = np.stack([X + (Z - WT) / math.tan(math.radians(WRAKE)), Y, Z], -1).reshape(-1, 3)
-    n, nzt = len(port), len(z)
-    i, k = np.meshgrid(np.arange(nx - 1), np.arange(nzt - 1), indexing="ij")
-    a, b = (i * nzt + k).ravel(), ((i + 1) * nzt + k).ravel()
-    side = np.concatenate([np.stack([a, b + 1, b], 1), np.stack([a, a + 1, b + 1], 1)])
-    top = np.arange(nx) * nzt + nzt - 1
-    deck = np.concatenate([np.stack([top[:-1], top[1:] + n, top[1:]], 1),
-                           np.stack([top[:-1], top[:-1] + n, top[1:] + n], 1)])
-    faces = np.concatenate([side, side[:, ::-1] + n, deck])
-    v = np.vstack([port, port * np.array([1.0, -1.0, 1.0])])
-    keep = np.abs(v[faces, 1]).max(axis=1) > 0          # the centre plane's slivers belong to neither side
-    mesh = trimesh.Trimesh(v, faces[keep], process=True)
-    mesh.update_faces(mesh.nondegenerate_faces())
-    if mesh.volume < 0:
-        mesh.invert()
-    assert mesh.is_watertight
-    return mesh
+    return raked_form(nx, nz, length=WL, beam=WB, draught=WT, depth=WD, rake_deg=WRAKE)
 
 
 def test_fsicr_inputs_of_a_refined_analytic_hull_approach_its_exact_values(tmp_path):

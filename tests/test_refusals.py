@@ -34,11 +34,15 @@ def _nothing_written(folder: Path, before: set):
     assert {p.name for p in folder.iterdir()} == before
 
 
-def _mesh_scene(folder: Path, mesh_file: str, draught_m: float = 0.4) -> Path:
+def _mesh_scene(folder: Path, mesh_file: str, draught_m: float = 0.4, tank: str = "") -> Path:
     p = folder / "hull.toml"
     p.write_text(f'[case]\nname = "A-c68-v1.0"\n[ship]\nhull = "mesh"\nmesh_file = "{mesh_file}"\n'
-                 f"draught_m = {draught_m}\n")
+                 f"draught_m = {draught_m}\n{tank}")
     return p
+
+
+#: The paper's tank, given in the scene: a case's own tank is sized from the hull (docs/SHIP.md), this one is not.
+PAPER_TANK = "[domain]\nsize_m = [11.15, 1.39, 1.39]\n[free_surface]\nwater_depth_m = 1.11\n"
 
 
 def _box_stl(path: Path, extents, centre=(0.0, 0.0, 0.0)):
@@ -123,14 +127,16 @@ def test_a_mesh_of_two_disjoint_hulls_is_refused(in_tmp, capsys):
 
 def test_a_hull_wider_than_the_tank_is_refused_with_what_fits(in_tmp, capsys):
     _box_stl(in_tmp / "wide.stl", (3.0, 2.7, 0.6))
-    rc, err = _run(["run", _mesh_scene(in_tmp, "wide.stl"), "--steps", "0", "--no-progress"], capsys)
+    rc, err = _run(["run", _mesh_scene(in_tmp, "wide.stl", tank=PAPER_TANK), "--steps", "0", "--no-progress"],
+                   capsys)
     _one_line(rc, err, "ship.mesh_file", "2.7 m wide", "narrower than 1.39 m fits")
     assert not (in_tmp / "runs").exists()
 
 
 def test_a_hull_drawing_more_than_the_water_depth_is_refused(in_tmp, capsys):
     _box_stl(in_tmp / "deep.stl", (3.0, 0.7, 1.3))
-    rc, err = _run(["run", _mesh_scene(in_tmp, "deep.stl", draught_m=1.2), "--steps", "0", "--no-progress"], capsys)
+    rc, err = _run(["run", _mesh_scene(in_tmp, "deep.stl", draught_m=1.2, tank=PAPER_TANK), "--steps", "0",
+                    "--no-progress"], capsys)
     _one_line(rc, err, "ship.draught_m", "water depth 1.11 m")
 
 

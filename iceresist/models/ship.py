@@ -18,10 +18,12 @@ import numpy as np
 
 from iceresist.errors import InputError
 from iceresist.models.base import Model
+from iceresist.ship.cases import MIN_WINDOW_HULL_LENGTHS
 from iceresist.ship.channel import ChannelLayout, channel_layout
 from iceresist.ship.hull import HullGeometry
 from iceresist.ship.icefield import IceField, ice_field
 from iceresist.ship.meshhull import MeshHull
+from iceresist.ship.sizing import check_window
 
 
 def hull_geometry(scene) -> HullGeometry | MeshHull:
@@ -29,7 +31,7 @@ def hull_geometry(scene) -> HullGeometry | MeshHull:
     sh = scene.ship
     if sh.hull == "mesh":
         return MeshHull.from_file(sh.mesh_file, sh.draught_m, unit=sh.mesh_unit, bow=sh.mesh_bow, up=sh.mesh_up,
-                                  scene_source=scene.source_name)
+                                  scale=sh.mesh_scale, scene_source=scene.source_name)
     stern = sh.stern_angle_deg
     if stern is None:
         stern = 45.0 if sh.bow_angle_deg == 30.0 else 30.0 if sh.bow_angle_deg == 45.0 else sh.bow_angle_deg
@@ -80,13 +82,15 @@ def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float,
 
 
 def steady_window_m(scene, geometry: HullGeometry, layout: ChannelLayout) -> tuple[float, float]:
-    """Stem positions (x0, x1) of the steady window (``ship.steady_window_m`` or the default of the schema)."""
+    """Stem positions (x0, x1) of the steady window (``ship.steady_window_m`` or the default of the schema). A default
+    window shorter than :data:`~iceresist.ship.cases.MIN_WINDOW_HULL_LENGTHS` waterline lengths (empty included) is
+    refused in one line naming the channel length that gives one (docs/SHIP.md, "Your own hull")."""
     if scene.ship.steady_window_m is not None:
         return tuple(float(v) for v in scene.ship.steady_window_m)
     x0, x1 = layout.start_x_m, layout.start_x_m + layout.length_m
-    if layout.length_m > geometry.waterline_length_m:
-        return x0 + geometry.waterline_length_m, x1
-    return x0 + geometry.end_length_m, x1
+    lead_in = geometry.waterline_length_m if layout.length_m > geometry.waterline_length_m else geometry.end_length_m
+    check_window((x0 + lead_in, x1), geometry.waterline_length_m, MIN_WINDOW_HULL_LENGTHS, layout.length_m, lead_in)
+    return x0 + lead_in, x1
 
 
 def check_hull_fits(scene, geometry: HullGeometry | MeshHull, domain_m, centre_y_m: float, level_m: float) -> None:

@@ -35,11 +35,23 @@ def load_case(path) -> dict:
     return {"meta": meta, "ts": ts, "bodies": bodies, "model": model}
 
 
-def mesh_r_ch_kN(hull) -> float:
-    """FSICR R_CH (kN) of a mesh hull at full scale (1:``SCALE``), class IA, from the inputs measured on it."""
+def mesh_r_ch_kN(hull, scale: float = SCALE, ice_class: str = "IA") -> float:
+    """FSICR R_CH (kN) of a mesh hull at full scale (1:``scale``), from the inputs measured on it."""
     import fsicr
 
-    return fsicr.r_ch(fsicr.Ship(name="mesh hull", **hull.fsicr_inputs(SCALE)), "IA").r_ch_N / 1e3
+    return fsicr.r_ch(fsicr.Ship(name="mesh hull", **hull.fsicr_inputs(scale)), ice_class).r_ch_N / 1e3
+
+
+def engine_power_kW(resistance_kN: float, meta: dict) -> float:
+    """FSICR required engine output (kW) for a full-scale ice resistance, P = Ke (R/1000)^1.5 / Dp (FSICR 3.2.2;
+    R in N), with the propeller of the case's meta; NaN without one (no class minimum: this is the output that
+    resistance needs)."""
+    from fsicr import formulas
+
+    if "Dp_m" not in meta:
+        return float("nan")
+    ke = formulas.ke(int(meta["n_propellers"]), str(meta["propulsion"]))
+    return float(formulas.engine_power(max(resistance_kN, 0.0) * 1e3, ke, float(meta["Dp_m"])))
 
 
 def fsicr_r_ch_kN() -> dict:
@@ -128,19 +140,28 @@ def analyse_case(path) -> dict:
     x_lo = model["channel_start_x_m"]
     x_hi = x_bow - geom.end_length_m
     final = bodies["final_positions_m"]
-    r_ch = fsicr_r_ch_kN()[meta["bow"]] if model["hull"].get("kind") != "mesh" else mesh_r_ch_kN(geom)
-    R_kN = float(force_to_full_scale(sm.mean_N, SCALE)) / 1e3
+    scale = float(meta.get("scale", SCALE))
+    ice_class = str(meta.get("ice_class", "IA"))
+    if model["hull"].get("kind") != "mesh":
+        r_ch = fsicr_r_ch_kN()[meta["bow"]]
+    else:
+        r_ch = mesh_r_ch_kN(geom, scale, ice_class)
+    R_kN = float(force_to_full_scale(sm.mean_N, scale)) / 1e3
     return {
-        "case": meta["case"], "bow": meta["bow"], "concentration": float(model["concentration"]),
+        "case": meta["case"], "hull": str(meta.get("hull_name", "B-063")), "bow": meta["bow"],
+        "concentration": float(model["concentration"]),
+        "concentration_nominal": float(meta.get("concentration_nominal", model["concentration"])),
         "knots": float(meta["knots"]), "speed_m_s": float(model["speed_m_s"]), "tier": int(meta["tier"]),
+        "scale": scale, "full_scale_knots": float(meta.get("full_scale_knots", float(meta["knots"]) * scale ** 0.5)),
         "fidelity": meta["fidelity"], "cubes": int(model["ice_cubes"]),
         "mean_force_N": sm.mean_N, "ci95_N": sm.ci_half_width_N, "std_N": sm.std_N,
         "window_x0_m": model["steady_window_m"][0], "window_x1_m": model["steady_window_m"][1],
         "window_samples": sm.n_samples, "tau_int_s": sm.tau_int_s, "ci_method": ci_note, "n_batches": int(sm.n_batches),
         # second-half over first-half mean of the window, and whether they agree (iceresist.post.window_halves)
         "half_ratio": half_ratio, "window_steady": steady,
-        "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, SCALE)) / 1e3,
-        "R_CH_FSICR_kN": r_ch, "ratio_sim_FSICR": R_kN / r_ch,
+        "R_sim_kN": R_kN, "R_sim_ci95_kN": float(force_to_full_scale(sm.ci_half_width_N, scale)) / 1e3,
+        "R_CH_FSICR_kN": r_ch, "ratio_sim_FSICR": R_kN / r_ch, "ice_class": ice_class,
+        "P_sim_kW": engine_power_kW(R_kN, meta), "P_FSICR_kW": engine_power_kW(r_ch, meta),
         "ice_free_width_m": ice_free_width_m(final, (x_lo, x_hi), model["centre_y_m"], model["cube_m"],
                                              model["channel_width_m"]),
         "floes_under_hull": floes_under_hull(final, geom.waterline_polygon(), x_bow, model["centre_y_m"],

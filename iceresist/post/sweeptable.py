@@ -46,12 +46,26 @@ def is_finished(path: Path) -> bool:
 
 
 def sweep_table(out_dir) -> pd.DataFrame:
-    """The table of every finished case in ``out_dir``, in the order of the paper's matrix
-    (:data:`iceresist.ship.cases.CASES`), one row per case (:func:`~iceresist.post.case.analyse_case`)."""
+    """The table of every finished case in ``out_dir``, one row per case (:func:`~iceresist.post.case.analyse_case`),
+    in the order of the folder's ``sweep.json`` (the sweep's matrix), else of the paper's matrix
+    (:data:`iceresist.ship.cases.CASES`)."""
+    out = Path(out_dir)
+    return pd.DataFrame([_analyse(case_path(out, c)) for c in case_order(out) if is_finished(case_path(out, c))])
+
+
+def case_order(out: Path) -> list[str]:
+    """The cases of a sweep folder in its matrix's order: its ``sweep.json`` list, else the paper's matrix."""
+    import json
+
     from iceresist.ship.cases import CASES
 
-    out = Path(out_dir)
-    return pd.DataFrame([_analyse(case_path(out, c)) for c in CASES if is_finished(case_path(out, c))])
+    try:
+        cases = json.loads((out / "sweep.json").read_text()).get("cases")
+    except (OSError, ValueError, AttributeError):
+        cases = None
+    if isinstance(cases, list) and all(isinstance(c, str) for c in cases):
+        return cases
+    return list(CASES)
 
 
 def _analyse(path: Path) -> dict:

@@ -17,9 +17,10 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from fsicr.errors import unusable_name
 
 from iceresist.errors import InputError, StabilityError
-from iceresist.scene.schema import CaseBase, Scene
+from iceresist.scene.schema import CaseBase, Scene, Ship
 from iceresist.scene.write import toml_value
 from iceresist.ship.cases import scene_data
+from iceresist.ship.meshhull import MeshHull
 
 PRESETS_PACKAGE = "iceresist.scene.presets"
 DEFAULT_PRESET = "cavity"
@@ -134,13 +135,33 @@ class _CaseOnly(BaseModel):
     case: CaseBase
 
 
-def _with_case(data: dict) -> dict:
+def _mesh_hull(data: dict, source: str) -> tuple[dict | None, "MeshHull | None"]:
+    """A ``[case]`` scene whose ``[ship]`` is a mesh: its mesh keys and the hull, read once here so the case's tank,
+    channel and window are sized around it (:func:`iceresist.ship.sizing.size_case`); (None, None) otherwise."""
+    ship = data.get("ship")
+    if not isinstance(ship, dict) or ship.get("hull") != "mesh":
+        return None, None
+    try:
+        keys = Ship.model_validate({"speed_m_s": 0.0, **{k: v for k, v in ship.items() if k in MESH_KEYS}})
+    except ValidationError:  # the scene's own check names the key in full
+        return None, None
+    hull = MeshHull.from_file(keys.mesh_file, keys.draught_m, unit=keys.mesh_unit, bow=keys.mesh_bow,
+                              up=keys.mesh_up, scale=keys.mesh_scale, scene_source=source)
+    return {k: getattr(keys, k) for k in MESH_KEYS}, hull
+
+
+#: The ``[ship]`` keys that make a mesh hull.
+MESH_KEYS = ("hull", "mesh_file", "mesh_unit", "mesh_bow", "mesh_up", "mesh_scale", "draught_m")
+
+
+def _with_case(data: dict, source: str = "scene.toml") -> dict:
     """The scene data with its ``[case]`` (if any) expanded: the case's sections
     (:func:`iceresist.ship.cases.scene_data`), each changed by the keys the file's section of that name gives."""
     if "case" not in data:
         return data
     case = _CaseOnly.model_validate(data).case
-    merged = scene_data(case.name, case.fidelity, case.tier, case.amr)
+    ship, hull = _mesh_hull(data, source)
+    merged = scene_data(case.name, case.fidelity, case.tier, case.amr, hull_keys=ship, hull=hull)
     for section, values in data.items():
         if isinstance(values, dict) and isinstance(merged.get(section), dict):
             merged[section] = {**merged[section], **values}
@@ -156,7 +177,7 @@ def parse_scene(text: str, source: str = "scene.toml") -> Scene:
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{source}: TOML syntax error: {exc}") from None
     try:
-        scene = Scene.model_validate(_with_case(data))
+        scene = Scene.model_validate(_with_case(data, source))
     except ValidationError as exc:
         raise InputError(format_validation_error(exc, source)) from None
     try:

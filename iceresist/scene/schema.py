@@ -318,6 +318,8 @@ class Ship(_Section):
     mesh_bow: Literal["+x", "-x", "+y", "-y"] = Field("+x", description="The mesh's axis toward the bow.")
     mesh_up: Literal["+x", "-x", "+y", "-y", "+z", "-z"] = Field("+z", description="The mesh's upward axis. The keel "
                                                                  "is put at z = 0 and the centreline at y = 0.")
+    mesh_scale: float = Field(1.0, gt=0, description="The mesh's lengths (in `mesh_unit`) are divided by this: 25 "
+                              "runs a full-scale mesh as a 1:25 model (`draught_m` is the model's).")
     bow_angle_deg: float = Field(30.0, gt=0, lt=90, description="Stem rake of the bow going ahead (deg): "
                                                                "30 = Bow A, 45 = Bow B.")
     stern_angle_deg: float | None = Field(None, gt=0, lt=90, description="Stem rake of the other end (deg). "

@@ -9,6 +9,7 @@ so the scene schema may check case names against :data:`CASES`.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from importlib import resources
@@ -17,6 +18,8 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from iceresist.errors import InputError
+from iceresist.ship.hull import b063_hull
+from iceresist.ship.sizing import BLOCK_CELLS, Reference, lattice_cells, size_case
 
 DATA_FILE = "cases.toml"
 
@@ -108,14 +111,24 @@ BOW_ANGLE_DEG = dict(_DATA.bow_angle_deg)
 
 @dataclass(frozen=True)
 class Case:
-    """One ship run: bow (``"A"``/``"B"``), concentration (fraction) and speed (knots, model scale)."""
+    """One ship run: bow (``"A"``/``"B"``: for a mesh hull ``"A"`` goes ahead with the mesh's bow, ``"B"`` with its
+    other end), concentration (fraction) and speed (knots at model scale, the paper's convention); a case of a
+    user's matrix (:mod:`iceresist.ship.matrix`) also carries its model scale, the ice piece's edge and thickness
+    and the channel width (m, model scale; None: the piece a cube, the channel across the tank) and its name."""
 
     bow: str
     concentration: float
     knots: float
+    scale: float = 25.0
+    ice_size_m: float | None = None
+    ice_thickness_m: float | None = None
+    channel_width_m: float | None = None
+    label: str | None = None
 
     @property
     def name(self) -> str:
+        if self.label:
+            return self.label
         return f"{self.bow}-c{round(100 * self.concentration):d}-v{self.knots:.1f}"
 
     @property
@@ -123,8 +136,22 @@ class Case:
         return self.knots * KNOT_M_S
 
     @property
+    def full_scale_knots(self) -> float:
+        """The speed at full scale (knots), by Froude scaling: V_model sqrt(scale)."""
+        return self.knots * math.sqrt(self.scale)
+
+    @property
     def bow_angle_deg(self) -> float:
         return BOW_ANGLE_DEG[self.bow]
+
+    def meta(self) -> dict:
+        """What a case file records of the case (its ``meta``), beside its scene."""
+        out = {"bow": self.bow, "concentration_nominal": self.concentration, "knots": self.knots,
+               "scale": self.scale, "full_scale_knots": self.full_scale_knots}
+        for key in ("ice_size_m", "ice_thickness_m", "channel_width_m"):
+            if getattr(self, key) is not None:
+                out[key] = getattr(self, key)
+        return out
 
 
 CASES = {c.name: c for c in (Case(r.bow, r.concentration, r.knots) for r in _DATA.cases)}
@@ -161,19 +188,58 @@ def amr_overrides(fidelity: str) -> dict:
     """The sections that put a preset's tier-2 tank on refined levels (its ``[tier2.<fidelity>.amr]``): the level-0
     tank's cells, the water depth and ``[refinement]``; merged over a tier-2 case's own (:func:`scene_data`, or
     the ``overrides`` of a sweep)."""
-    a = TIER2.get(fidelity, {}).get("amr")
-    if not a:
-        raise InputError(f"--amr: refined levels are a tier-2 tank of the presets "
-                         f"{', '.join(amr_fidelities()) or '(none)'}; use one of them with --tier 2")
+    a = _amr(fidelity)
     domain = {"cells": list(a["cells"]), **({"dx_m": a["dx_m"]} if a.get("dx_m") else {})}
     return {"domain": domain, "free_surface": {"water_depth_m": a["water_depth_m"]},
             "refinement": {k: a[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}}
 
 
-def scene_data(case: str, fidelity: str, tier: int = 1, amr: bool = False) -> dict:
-    """The scene of one case as a dict of TOML sections (validated by :class:`~iceresist.scene.schema.Scene`);
-    ``amr``: tier 2 on the refined levels of the preset's ``[tier2.<fidelity>.amr]`` (:func:`amr_overrides`)."""
-    c = get_case(case)
+def _amr(fidelity: str) -> dict:
+    a = TIER2.get(fidelity, {}).get("amr")
+    if not a:
+        raise InputError(f"--amr: refined levels are a tier-2 tank of the presets "
+                         f"{', '.join(amr_fidelities()) or '(none)'}; use one of them with --tier 2")
+    return a
+
+
+#: The reference hull of every preset: B-063 (paper table 1 at 1:25), the hull its tanks were built around.
+REFERENCE_HULL = b063_hull("A")
+#: The ice cube of every preset (m): the paper's 41 mm.
+REFERENCE_ICE_M = 0.041
+
+
+def reference(fidelity: str, tier: int = 1, amr: bool = False) -> Reference:
+    """The preset's tank, channel and ice around B-063 (:mod:`iceresist.ship.sizing`): tier 1 the paper's tank, tier 2
+    the preset's lattice (cells x cell), on refined levels its level 0."""
+    f = FIDELITIES[fidelity]
+    if tier == 1:
+        tank, depth, start = tuple(DOMAIN_M), WATER_DEPTH_M, CHANNEL_START_X_M
+    else:
+        t2 = TIER2[fidelity]
+        cells, dx, depth, start = t2["cells"], t2["dx_m"], t2["water_depth_m"], t2["channel_start_x_m"]
+        if amr:
+            a = _amr(fidelity)
+            cells, dx, depth = a["cells"], a.get("dx_m") or dx, a["water_depth_m"]
+        tank = tuple(n * dx for n in cells)
+    h = REFERENCE_HULL
+    return Reference(length_overall_m=h.length_overall_m, beam_m=h.beam_m, draught_m=h.draught_m,
+                     waterline_length_m=h.waterline_length_m, end_length_m=h.end_length_m, tank_m=tank,
+                     water_depth_m=depth, channel_start_x_m=start, channel_length_m=f["channel_length_m"],
+                     ice_size_m=REFERENCE_ICE_M)
+
+
+#: The shortest steady window a case may have, in waterline lengths of its hull: the quick preset's on B-063.
+MIN_WINDOW_HULL_LENGTHS = reference("quick").window_hull_lengths
+
+
+def scene_data(case, fidelity: str, tier: int = 1, amr: bool = False, *, hull_keys: dict | None = None,
+               hull=None) -> dict:
+    """The scene of one case (a name of :data:`CASES` or a :class:`Case`) as a dict of TOML sections (validated by
+    :class:`~iceresist.scene.schema.Scene`); ``amr``: tier 2 on the refined levels of the preset's
+    ``[tier2.<fidelity>.amr]``. ``hull``: the hull to size the tank, channel and window around
+    (:func:`iceresist.ship.sizing.size_case`; default B-063, the presets' own numbers) with ``hull_keys`` the
+    ``[ship]`` keys that make it (a mesh's file, unit, axes, scale and draught)."""
+    c = case if isinstance(case, Case) else get_case(case)
     if fidelity not in FIDELITIES:
         raise InputError(f"--preset: unknown preset {fidelity!r}; use one of {', '.join(FIDELITIES)}")
     if tier not in (1, 2):
@@ -181,24 +247,28 @@ def scene_data(case: str, fidelity: str, tier: int = 1, amr: bool = False) -> di
     if amr and tier != 2:
         raise InputError("amr: refined levels are a tier-2 tank; set tier = 2 (--tier 2)")
     f = FIDELITIES[fidelity]
-    t2 = TIER2[fidelity] if tier == 2 else None
-    channel_start = CHANNEL_START_X_M if t2 is None else t2["channel_start_x_m"]
-    start = channel_start - 0.05
-    end = channel_start + f["channel_length_m"]
-    if t2 is None:
-        domain = {"size_m": list(DOMAIN_M), "dx_m": f["dx_m"]}
+    ref = reference(fidelity, tier, amr)
+    geometry = hull if hull is not None else b063_hull(c.bow)
+    q = (c.ice_size_m or ref.ice_size_m) / ref.ice_size_m  # the ice piece over the preset's
+    sized = size_case(geometry, ref, channel_width_m=c.channel_width_m)
+    if tier == 1:
+        domain = {"size_m": list(sized.tank_m), "dx_m": _scaled(f["dx_m"], q)}
         fluid = {"nu_m2_s": 1.0e-6, "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81]}
         numerics = {"precision": "float64" if tier == 1 else "float32", "backend": "auto"}
-        depth = WATER_DEPTH_M
     else:
-        domain = {"cells": list(t2["cells"]), "dx_m": t2["dx_m"]}
+        t2 = TIER2[fidelity]
+        dx = _scaled((_amr(fidelity).get("dx_m") if amr else None) or t2["dx_m"], q)
+        domain = {"cells": lattice_cells(sized.tank_m, dx, BLOCK_CELLS if amr else 1), "dx_m": dx}
         fluid = {"nu_m2_s": t2["nu_m2_s"], "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81],
                  "operator": "cumulant"}
         numerics = {"precision": "float32", "backend": "auto", "mach": t2["mach"]}
-        depth = t2["water_depth_m"]
+    start, end = sized.start_x_m, sized.end_x_m
+    what = (f"B-063 Bow {c.bow}" if hull is None else
+            f"{getattr(hull, 'name', 'mesh hull')} ({'its bow' if c.bow == 'A' else 'its other end'} ahead, 1:{c.scale:g})")
+    ship_keys = {"hull": "b063", "bow_angle_deg": c.bow_angle_deg} if hull is None else dict(hull_keys or {})
     out = {
         "scene": {"name": f"ship_{fidelity}_t{tier}{'_amr' if amr else ''}_{c.name}",
-                  "description": f"B-063 Bow {c.bow}, {100 * c.concentration:g} % brash ice, {c.knots:g} knots "
+                  "description": f"{what}, {100 * c.concentration:g} % brash ice, {c.knots:g} knots "
                                  f"({c.speed_m_s:.3f} m/s), {fidelity} fidelity, tier {tier}"},
         "domain": {**domain,
                    "faces": {k: "wall" for k in ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")}},
@@ -206,18 +276,37 @@ def scene_data(case: str, fidelity: str, tier: int = 1, amr: bool = False) -> di
         "numerics": numerics,
         "run": {"end_time_s": round((end - start) / c.speed_m_s, 6)},
         "output": {"directory": "runs", "fields": [], "timeseries_every_steps": 1},
-        "free_surface": {"water_depth_m": depth},
-        "ship": {"hull": "b063", "bow_angle_deg": c.bow_angle_deg, "speed_m_s": round(c.speed_m_s, 6),
-                 "start_x_m": start, "tier": tier, "sphere_spacing_m": f["hull_spacing_m"],
-                 "sphere_band_m": f["hull_band_m"]},
-        "ice": {"concentration": c.concentration, "channel_length_m": f["channel_length_m"],
-                "channel_start_x_m": channel_start, "spheres_per_edge": f["spheres_per_edge"]},
-        "contact": {"stiffness_N_m": f["stiffness_N_m"], "dem_safety": f["dem_safety"],
+        "free_surface": {"water_depth_m": sized.water_depth_m},
+        "ship": {**ship_keys, "speed_m_s": round(c.speed_m_s, 6), "start_x_m": start, "tier": tier,
+                 "sphere_spacing_m": _scaled(f["hull_spacing_m"], q), "sphere_band_m": _scaled(f["hull_band_m"], q)},
+        "ice": {"concentration": c.concentration, "channel_length_m": sized.channel_length_m,
+                "channel_start_x_m": sized.channel_start_x_m, "spheres_per_edge": f["spheres_per_edge"],
+                **_ice_piece(c, sized)},
+        "contact": {"stiffness_N_m": _scaled(f["stiffness_N_m"], q * q), "dem_safety": f["dem_safety"],
                     **({"dashpot": f["dashpot"]} if f["dashpot"] != "sphere_pair" else {}),
                     "sample_interval_s": f["sample_interval_s"]},
     }
     if amr:
-        for section, values in amr_overrides(fidelity).items():
-            out.setdefault(section, {}).update(values)
-        out["scene"]["description"] += f", on {out['refinement']['levels'] + 1} refined levels"
+        refinement = {k: _amr(fidelity)[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}
+        out["refinement"] = refinement
+        out["scene"]["description"] += f", on {refinement['levels'] + 1} refined levels"
+    return out
+
+
+def _scaled(value: float, factor: float) -> float:
+    """A preset's length, stiffness, ... for another ice piece (``factor`` 1: the preset's number, untouched)."""
+    return value if factor == 1.0 else float(f"{value * factor:.6g}")
+
+
+def _ice_piece(c: Case, sized) -> dict:
+    """The ``[ice]`` keys of a case's ice piece and channel width (none for the presets' 41 mm cube across the
+    tank). A piece thinner or thicker than its edge is a square floe of one size (an ice field, no yaw)."""
+    out = {}
+    if c.ice_size_m is not None:
+        out["size_m"] = c.ice_size_m
+        if c.ice_thickness_m is not None and c.ice_thickness_m != c.ice_size_m:
+            out.update(size_distribution="uniform", size_min_m=c.ice_size_m, size_max_m=c.ice_size_m,
+                       thickness_m=c.ice_thickness_m, yaw="none")
+    if c.channel_width_m is not None:
+        out["channel_width_m"] = sized.channel_width_m
     return out

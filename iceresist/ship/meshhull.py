@@ -13,6 +13,7 @@ polyhedron and any other as a union of convex slabs along its length (:meth:`Mes
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -137,16 +138,20 @@ class MeshHull:
 
     @classmethod
     def from_file(cls, path: str, draught_m: float, *, unit: str = "m", bow: str = "+x", up: str = "+z",
-                  scene_source: str | None = None, keys: hullmesh.MeshKeys = SCENE_KEYS) -> "MeshHull":
-        """Read, check and place a hull mesh (one-line :class:`InputError` naming the key, by default the scene's,
-        on bad input)."""
+                  scale: float = 1.0, scene_source: str | None = None,
+                  keys: hullmesh.MeshKeys = SCENE_KEYS) -> "MeshHull":
+        """Read, check and place a hull mesh, its lengths divided by ``scale`` (a full-scale mesh run as a 1:25
+        model: 25) and ``draught_m`` the model's; one-line :class:`InputError` naming the key, by default the
+        scene's, on bad input. The same file read with the same options again (a sweep's cases, a scene and its
+        model) is read once."""
+        resolved = resolve_mesh_path(path, scene_source)
         try:
-            mesh = hullmesh.read_hull_mesh(resolve_mesh_path(path, scene_source), unit=unit, bow=bow, up=up,
-                                           keys=keys)
-            mesh = hullmesh.to_stem_frame(mesh, draught_m, keys=keys)
-            return cls(mesh, float(draught_m), name=Path(path).stem)
-        except FsicrInputError as exc:
-            raise InputError(str(exc)) from None
+            st = Path(resolved).stat()
+            stamp = (st.st_mtime_ns, st.st_size)
+        except (OSError, ValueError):
+            stamp = None  # a built-in name, or a path the reader refuses in one line
+        return _read_placed(cls, resolved, stamp, float(draught_m), unit, bow, up, float(scale), keys,
+                            Path(path).stem)
 
     # -- convex pieces for the fluid (tier 2) -----------------------------------------------------------
     def convex_pieces(self, slabs: int) -> list[np.ndarray]:
@@ -285,7 +290,8 @@ class MeshHull:
         """The hull's entry in a run's metadata."""
         return {"kind": "mesh", "mesh_file": self.mesh.meta.get("file", ""), "mesh_sha256": self.sha256(),
                 "mesh_unit": self.mesh.meta.get("unit", "m"), "mesh_bow": self.mesh.meta.get("bow", "+x"),
-                "mesh_up": self.mesh.meta.get("up", "+z"), "triangles": int(len(self.mesh.faces)),
+                "mesh_up": self.mesh.meta.get("up", "+z"),
+                "mesh_scale": float(self.mesh.meta.get("scale", 1.0)), "triangles": int(len(self.mesh.faces)),
                 "length_overall_m": self.length_overall_m, "beam_m": self.beam_m, "draught_m": self.draught_m,
                 "parallel_length_m": self.parallel_length_m, "end_length_m": self.end_length_m,
                 "waterline_length_m": self.waterline_length_m, "freeboard_m": self.freeboard_m,
@@ -316,3 +322,18 @@ class HullRecord:
 
     def fsicr_inputs(self, scale: float = 25.0) -> dict:
         return scaled_inputs(self.data["fsicr_inputs_model_scale"], scale)
+
+
+@functools.lru_cache(maxsize=4)
+def _read_placed(cls, resolved: str, stamp, draught_m: float, unit: str, bow: str, up: str, scale: float,
+                 keys: hullmesh.MeshKeys, name: str) -> MeshHull:
+    """:meth:`MeshHull.from_file`, remembered for the last few (file, modification time, options)."""
+    try:
+        mesh = hullmesh.read_hull_mesh(resolved, unit=unit, bow=bow, up=up, keys=keys)
+        if scale != 1.0:
+            mesh.vertices = mesh.vertices / scale
+            mesh.meta["scale"] = scale
+        mesh = hullmesh.to_stem_frame(mesh, draught_m, keys=keys)
+        return cls(mesh, draught_m, name=name)
+    except FsicrInputError as exc:
+        raise InputError(str(exc)) from None

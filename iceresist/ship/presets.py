@@ -27,10 +27,12 @@ __all__ = ["CASES", "CHANNEL_START_X_M", "DOMAIN_M", "FIDELITIES", "FIDELITY_NOT
            "WATER_DEPTH_M", "Case", "case_names", "case_scene", "get_case", "scene_data", "to_toml"]
 
 
-def case_scene(case: str, fidelity: str, tier: int = 1, amr: bool = False, **overrides) -> Scene:
-    """A validated :class:`~iceresist.scene.schema.Scene` of one case (``amr``: tier 2 on the preset's refined
-    levels); ``overrides`` replace section keys, e.g. ``ice={"channel_length_m": 0.3}``."""
-    data = scene_data(case, fidelity, tier, amr)
+def case_scene(case, fidelity: str, tier: int = 1, amr: bool = False, *, hull=None, hull_keys: dict | None = None,
+               **overrides) -> Scene:
+    """A validated :class:`~iceresist.scene.schema.Scene` of one case (a name or a :class:`Case`; ``amr``: tier 2 on
+    the preset's refined levels; ``hull`` with its ``[ship]`` keys ``hull_keys``: a mesh hull the tank is sized
+    around); ``overrides`` replace section keys, e.g. ``ice={"channel_length_m": 0.3}``."""
+    data = scene_data(case, fidelity, tier, amr, hull_keys=hull_keys, hull=hull)
     for section, values in overrides.items():
         data.setdefault(section, {}).update(values)
     scene = Scene.model_validate(data)

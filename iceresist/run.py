@@ -122,4 +122,10 @@ def cmd_run(args) -> int:
     result = run_model(model, scene, h5_path, chk_path, stop=stop, outputs=outputs, pickup=pickup,
                        lattice_units=scene.is_lattice, progress=not args.no_progress and parallel.rank() == 0,
                        build_s=time.perf_counter() - t_start)
+    if result.sim.completed and parallel.rank() == 0:
+        from iceresist.post.case import window_summary
+
+        summary = window_summary(h5_path)
+        if summary:
+            log.info("%s: %s", scene.scene.name, summary)
     return 1 if result.sim.diverged else 0

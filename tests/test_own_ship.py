@@ -168,7 +168,8 @@ def test_a_ci_sized_matrix_gives_full_scale_fsicr_and_power_and_a_report_naming_
                                                                                         monkeypatch, capsys):
     """The slender hull drawn at 1:25 run as a 1:100 model (0.75 m) at 5 kn, 68 %, with a 3 m propeller, from a
     matrix file: the table's full-scale resistance is the model mean x 100^3, R_CH is FSICR's for the mesh's
-    inputs at 1:100, the powers are Ke (R/1000)^1.5 / Dp; the report's title names the hull and the matrix."""
+    inputs at 1:100, the powers are Ke (R/1000)^1.5 / Dp; a run's closing sentence gives the table's mean; the
+    report's title names the hull and the matrix."""
     import fsicr
     from fsicr import formulas
     from iceresist.post.sweeptable import sweep_table
@@ -192,6 +193,10 @@ def test_a_ci_sized_matrix_gives_full_scale_fsicr_and_power_and_a_report_naming_
     assert row.P_FSICR_kW == pytest.approx(ke * r_ch ** 1.5 / 3.0, rel=1e-9)
     assert row.P_sim_kW == pytest.approx(ke * max(row.R_sim_kN, 0.0) ** 1.5 / 3.0, rel=1e-9)
     assert math.isfinite(row.mean_force_N) and row.mean_force_N > 0
+    from iceresist.post.case import window_summary
+
+    said = window_summary(tmp_path / "m" / "cases" / "c68-v5kn-s100.h5")  # what `iceresist run` ends with
+    assert f": {row.mean_force_N:.3g} +- {row.ci95_N:.2g} N at model scale" in said, said
     assert cli.main(["report", "m"]) == 0
     html = (tmp_path / "m" / "report.html").read_text()
     assert "<h1>Slender trial in a brash-ice channel: test matrix of 1 case</h1>" in html

@@ -181,6 +181,34 @@ def analyse_case(path) -> dict:
     }
 
 
+def window_summary(path) -> str | None:
+    """One sentence on a ship run's result file: its mean ice resistance over the steady window with the 95 %
+    interval (model scale, and full scale at the run's scale), or why there is none; None for a scene without a ship."""
+    from iceresist.io.hdf5 import RunFile
+    from iceresist.post.resistance import ice_resistance_from_timeseries
+
+    with RunFile(path, "r") as rf:
+        model, meta, ts = rf.meta_object("model"), rf.meta, rf.timeseries()
+    if not isinstance(model, dict) or "steady_window_m" not in model or "Fx_N" not in ts:
+        return None
+    x0, x1 = (float(v) for v in model["steady_window_m"])
+    t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]
+    if not len(x) or float(x[-1]) < x1 - 1e-6:
+        return (f"no mean ice resistance: the stem reached x = {float(x[-1]) if len(x) else float('nan'):.3f} m, "
+                f"short of the steady window's end at {x1:.3f} m (run to the end, or --pickup)")
+    try:
+        sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1))
+        how = ""
+    except InputError:
+        sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1), n_batches=FALLBACK_BATCHES,
+                                            warn_short_batches=False)
+        how = f", {FALLBACK_BATCHES} batches: the window is short against the force's correlation time"
+    scale = float(meta.get("scale", SCALE))
+    return (f"mean ice resistance over the steady window (stem x = {x0:.3f} to {x1:.3f} m): {sm.mean_N:.3g} +- "
+            f"{sm.ci_half_width_N:.2g} N at model scale, {sm.mean_N * scale ** 3 / 1e3:.3g} kN at 1:{scale:g} "
+            f"(95 % interval{how})")
+
+
 def hull_of_model(model: dict):
     """The :class:`~iceresist.ship.hull.HullGeometry` of a case file's model description, or for a mesh hull its
     :class:`~iceresist.ship.meshhull.HullRecord`."""

@@ -449,10 +449,11 @@ motion = "free"
 
 
 #: A ship scene on the user's own hull, for docs/SCENES.md; tests/test_mesh_hull.py runs it.
-MESH_EXAMPLE = """# Your own hull in the quick tier-1 case: the case's tank, ice and contact law, the hull from a mesh. The mesh is
-# a closed surface (STL or OBJ) at model scale; its path is relative to this file ("b063" is the shipped B-063
-# model with Bow A at +x). The reader puts the keel at z = 0, the centreline at y = 0 and the stem at the
-# waterline at x = 0; FSICR inputs are measured on it at draught_m (docs/FSICR.md).
+MESH_EXAMPLE = """# Your own hull in the quick tier-1 case: the case's ice and contact law, the hull from a mesh, and the tank,
+# channel and steady window sized from the hull (docs/SHIP.md, "Your own hull"). The mesh is a closed surface (STL or
+# OBJ); its path is relative to this file ("b063" is the shipped B-063 model with Bow A at +x); mesh_scale divides
+# its lengths (25 runs a full-scale mesh as a 1:25 model). The reader puts the keel at z = 0, the centreline at
+# y = 0 and the stem at the waterline at x = 0; FSICR inputs are measured on it at draught_m (docs/FSICR.md).
 [case]
 name = "A-c68-v1.0"
 fidelity = "quick"
@@ -464,7 +465,8 @@ mesh_file = "b063"            # e.g. "my_hull.stl"
 mesh_unit = "m"               # m, cm, mm, ft, in
 mesh_bow = "+x"               # the mesh's axis toward the bow
 mesh_up = "+z"                # the mesh's upward axis
-draught_m = 0.44
+mesh_scale = 1                # the mesh's lengths / this = the model's
+draught_m = 0.44              # the model's
 """
 
 

@@ -391,50 +391,105 @@ def distance_to_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray
     return np.minimum(out, max(within, 0.0) if np.isinf(out).any() else np.inf)
 
 
-def _convex_edge_points(verts: np.ndarray, faces: np.ndarray, spacing: float, radius: float) -> list:
-    """Sphere centres at each corner and along each convex edge of a mesh, one radius from every face that meets
-    there (the corners and edges of the solid shrunk by one radius, as :func:`convex_polyhedron` samples them):
-    the stem keeps its sharpness."""
+#: An edge or corner of a mesh is a feature (it gets its own spheres) where its faces' normals turn by more than this
+#: (deg). Face spheres set back one radius from faces that turn by theta leave the envelope r (1/cos(theta/2) - 1)
+#: inside the corner: 1.5 % of a radius at 20 deg, so a finely meshed curved surface needs none of its own.
+FEATURE_ANGLE_DEG = 20.0
+
+
+def _face_normals(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
     normals = np.cross(verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]])
     lengths = np.linalg.norm(normals, axis=1)
-    normals = normals / np.where(lengths > 0, lengths, 1.0)[:, None]
+    return normals / np.where(lengths > 0, lengths, 1.0)[:, None]
+
+
+def _convex_edge_points(verts: np.ndarray, faces: np.ndarray, spacing: float, radius: float) -> np.ndarray:
+    """Sphere centres at each corner and along each convex feature edge of a mesh (its faces turning by more than
+    :data:`FEATURE_ANGLE_DEG`), one radius from every face that meets there (the corners and edges of the solid
+    shrunk by one radius, as :func:`convex_polyhedron` samples them): the stem keeps its sharpness."""
+    normals = _face_normals(verts, faces)
+    cos_feature = np.cos(np.radians(FEATURE_ANGLE_DEG))
+    # corners: vertices whose faces' normals spread by more than the feature angle about their mean
+    fv, ff = faces.ravel(), np.repeat(np.arange(len(faces)), 3)
+    mean = np.zeros_like(verts)
+    np.add.at(mean, fv, normals[ff])
+    mean /= np.maximum(np.linalg.norm(mean, axis=1), 1e-300)[:, None]
+    spread = np.ones(len(verts))
+    np.minimum.at(spread, fv, np.einsum("ij,ij->i", normals[ff], mean[fv]))
+    corners = np.flatnonzero(spread < np.cos(np.radians(0.5 * FEATURE_ANGLE_DEG)))
+    out = []
+    if len(corners):
+        order = np.argsort(fv, kind="stable")
+        starts = np.searchsorted(fv[order], corners)
+        ends = np.searchsorted(fv[order], corners, side="right")
+        for vtx, a, b in zip(corners, starts, ends):
+            ns = np.unique(np.round(normals[ff[order[a:b]]], 9), axis=0)
+            d = np.linalg.lstsq(ns, np.full(len(ns), -radius), rcond=None)[0]
+            if np.linalg.norm(d) < 4.0 * radius:
+                out.append(verts[vtx] + d)
+    # edges shared by two faces that turn convexly by more than the feature angle
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     owner = np.tile(np.arange(len(faces)), 3)
     order = np.lexsort((edges[:, 1], edges[:, 0]))
     edges, owner = edges[order], owner[order]
-    same = (edges[1:] == edges[:-1]).all(axis=1)
-    out = []
-    # each corner: the point one radius from every face that meets there (least squares where more than three do)
-    for vtx in range(len(verts)):
-        ns = np.unique(np.round(normals[(faces == vtx).any(axis=1)], 9), axis=0)
-        if len(ns) >= 2:
-            d = np.linalg.lstsq(ns, np.full(len(ns), -radius), rcond=None)[0]
-            if np.linalg.norm(d) < 4.0 * radius:
-                out.append(verts[vtx] + d)
-    for k in np.flatnonzero(same):
-        (a, b), f1, f2 = edges[k], owner[k], owner[k + 1]
-        n1, n2 = normals[f1], normals[f2]
-        cos = float(n1 @ n2)
-        if cos > 1.0 - 1e-9 or cos < -0.9:  # flat, or a knife edge whose inward offset runs off
-            continue
-        other = verts[faces[f2]].mean(axis=0)
-        if (other - verts[a]) @ n1 > 1e-12 * spacing:  # concave: the faces' own spheres meet there
-            continue
-        d = -radius * (n1 + n2) / (1.0 + cos)
-        m = max(1, int(np.ceil(np.linalg.norm(verts[b] - verts[a]) / spacing)))
-        for t in np.arange(m + 1) / m:
-            out.append(verts[a] + t * (verts[b] - verts[a]) + d)
-    return out
+    k = np.flatnonzero((edges[1:] == edges[:-1]).all(axis=1))
+    a, b, f1, f2 = edges[k, 0], edges[k, 1], owner[k], owner[k + 1]
+    n1, n2 = normals[f1], normals[f2]
+    cos = np.einsum("ij,ij->i", n1, n2)
+    convex = np.einsum("ij,ij->i", verts[faces[f2]].mean(axis=1) - verts[a], n1) <= 1e-12 * spacing
+    sharp = (cos < cos_feature) & (cos >= -0.9) & convex  # not a knife edge, whose inward offset runs off
+    a, b, n1, n2, cos = a[sharp], b[sharp], n1[sharp], n2[sharp], cos[sharp]
+    d = -radius * (n1 + n2) / (1.0 + cos)[:, None]
+    m = np.maximum(1, np.ceil(np.linalg.norm(verts[b] - verts[a], axis=1) / spacing).astype(np.int64))
+    e = np.repeat(np.arange(len(m)), m + 1)
+    t = (np.arange(len(e)) - np.repeat(np.cumsum(m + 1) - (m + 1), m + 1)) / m[e]
+    along = verts[a][e] + t[:, None] * (verts[b] - verts[a])[e] + d[e]
+    return np.concatenate([np.asarray(out, dtype=float).reshape(-1, 3), along])
+
+
+def _face_points(verts: np.ndarray, faces: np.ndarray, spacing: float, radius: float) -> np.ndarray:
+    """Sphere places on the faces, each set back one radius along its face's inward normal, thinned to one per cube of
+    half a spacing (:func:`_one_per_cube`), so the count goes with the surface's area, not with the faces: a face of
+    two spacings or more sampled by :func:`_sample_triangle`, a face of half a spacing to two by its corners, edge
+    midpoints and centroid, a smaller one (a fine mesh's) by its centroid."""
+    tri = verts[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    ok = norm > 0
+    inward = -radius * n / np.where(ok, norm, 1.0)[:, None]
+    size = np.linalg.norm(tri - tri[:, [1, 2, 0]], axis=2).max(axis=1)
+    pts = [np.asarray(_sample_triangle(*tri[k], spacing)) + inward[k] for k in np.flatnonzero(ok & (size >= 2 * spacing))]
+    mid = ok & (size < 2.0 * spacing) & (size >= 0.5 * spacing)
+    if mid.any():
+        t = tri[mid]
+        seven = np.concatenate([t, 0.5 * (t + t[:, [1, 2, 0]]), t.mean(axis=1)[:, None, :]], axis=1)
+        pts.append((seven + inward[mid][:, None, :]).reshape(-1, 3))
+    fine = ok & (size < 0.5 * spacing)
+    pts.append(tri[fine].mean(axis=1) + inward[fine])
+    return _one_per_cube(np.concatenate(pts), 0.5 * spacing)
+
+
+def _one_per_cube(points: np.ndarray, edge: float) -> np.ndarray:
+    """The first of ``points`` in each cube of a lattice of ``edge``, in their order."""
+    if not len(points):
+        return points
+    cell = np.floor((points - points.min(axis=0)) / edge).astype(np.int64)
+    dims = cell.max(axis=0) + 1
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    _, first = np.unique(key, return_index=True)
+    return points[np.sort(first)]
 
 
 def mesh_solid(vertices_m, faces, density_kg_m3: float, spacing_m: float, sample_spacing_m: float | None = None,
-               name: str = "hull") -> RigidShape:
+               name: str = "hull", z_max_m: float = np.inf) -> RigidShape:
     """A solid of any shape given as a closed, outward triangle mesh (e.g. a ship hull in ship coordinates).
 
     Mass properties from signed tetrahedra. Spheres of radius ``spacing/2`` are placed on every face, about
     ``spacing`` apart, and set back along the face's inward normal by one radius, so their envelope is the
     surface with rounded edges (as :func:`convex_polyhedron` does for a convex solid). Volume samples: a cubic
-    lattice of ``sample_spacing_m`` inside the mesh.
+    lattice of ``sample_spacing_m`` inside the mesh. ``z_max_m``: spheres are only wanted up to this height (a hull's
+    band above its waterline), so no place higher than it plus a spacing is made or tested; mass properties are the
+    whole solid's.
     """
     verts = np.asarray(vertices_m, dtype=float)
     faces = np.asarray(faces, dtype=np.int64)
@@ -451,18 +506,14 @@ def mesh_solid(vertices_m, faces, density_kg_m3: float, spacing_m: float, sample
     inertia_model = np.trace(c_com) * np.eye(3) - c_com
     moments, axes = _principal_frame(inertia_model)
 
-    pts = []
-    for tri in verts[faces]:
-        n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
-        norm = np.linalg.norm(n)
-        if norm == 0:
-            continue
-        pts.extend(np.asarray(_sample_triangle(*tri, spacing)) - radius * n / norm)
-    edge_pts = _convex_edge_points(verts, faces, spacing, radius)
-    cand = np.array(edge_pts + pts)  # the edges' first: the de-duplication keeps them
+    # the edges' first: the de-duplication keeps them
+    low = faces[verts[faces][:, :, 2].min(axis=1) <= z_max_m + spacing]   # the faces the wanted spheres lie on
+    cand = np.concatenate([_convex_edge_points(verts, low, spacing, radius), _face_points(verts, low, spacing, radius)])
+    cand = cand[cand[:, 2] <= z_max_m + spacing]
     # set back from every face, not only their own: near an edge a point moved in from one face lies outside or
     # too near the other, and goes (before the de-duplication, so it cannot push out a good neighbour)
-    keep = inside_mesh(cand, verts, faces) & (distance_to_mesh(cand, verts, faces, radius) >= 0.98 * radius)
+    near = faces[verts[faces][:, :, 2].min(axis=1) <= z_max_m + 2.0 * spacing]  # all within a radius of a place
+    keep = inside_mesh(cand, verts, faces) & (distance_to_mesh(cand, verts, near, radius) >= 0.98 * radius)
     if keep.mean() < 0.25:
         raise InputError(f"sphere spacing {spacing} m is too coarse for hull mesh {name}: {np.sum(~keep)} of "
                          f"{len(cand)} sphere places fall outside it or too near another face; use a spacing below "

@@ -49,7 +49,8 @@ def hull_shape(geometry: HullGeometry | MeshHull, spacing_m: float, band_m: floa
     from iceresist.dem import convex_polyhedron, mesh_solid
 
     if isinstance(geometry, MeshHull) and not geometry.is_convex:
-        shape = mesh_solid(geometry.vertices(), geometry.faces, density_kg_m3, spacing_m, name="hull")
+        shape = mesh_solid(geometry.vertices(), geometry.faces, density_kg_m3, spacing_m, name="hull",
+                           z_max_m=geometry.draught_m + band_m)
     else:
         shape = convex_polyhedron(geometry.vertices(), density_kg_m3, spacing_m, name="hull")
     model_z = (shape.model_com_m + shape.sphere_offsets_m @ shape.model_to_body.T)[:, 2]

@@ -123,6 +123,9 @@ class MeshHull:
     draught_m: float
     name: str = "mesh hull"
     inputs: dict = field(init=False)
+    #: the mesh's edges and the excess test's lattice, found once (a fine mesh's take seconds)
+    _edges: tuple | None = field(default=None, init=False, repr=False)
+    _lattice: tuple | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
         self.inputs = hullmesh.measure(self.mesh, self.draught_m, keys=SCENE_KEYS)
@@ -157,22 +160,35 @@ class MeshHull:
     def convex_pieces(self, slabs: int) -> list[np.ndarray]:
         """The hull cut into ``slabs`` equal slabs along x, each slab's part as the vertices of its convex hull
         (the mesh's vertices in the slab and its edges' crossings of the two cut planes)."""
-        v, f = self.mesh.vertices, self.mesh.faces
-        edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
-        a, b = v[edges[:, 0]], v[edges[:, 1]]
+        from scipy.spatial import ConvexHull
+
+        v = self.mesh.vertices
+        a, b = self._edge_ends()
+        lo, hi = np.minimum(a[:, 0], b[:, 0]), np.maximum(a[:, 0], b[:, 0])
         cuts = np.linspace(v[:, 0].min(), v[:, 0].max(), slabs + 1)
         crossings = []
         for xc in cuts:
-            t = (xc - a[:, 0]) / np.where(b[:, 0] != a[:, 0], b[:, 0] - a[:, 0], np.inf)
-            on = (t >= 0) & (t <= 1) & (b[:, 0] != a[:, 0])
-            pts = a[on] + t[on, None] * (b[on] - a[on])
+            on = (lo <= xc) & (xc <= hi) & (lo < hi)     # only the edges across the plane
+            aa, bb = a[on], b[on]
+            pts = aa + ((xc - aa[:, 0]) / (bb[:, 0] - aa[:, 0]))[:, None] * (bb - aa)
             pts[:, 0] = xc
             crossings.append(pts)
         pieces = []
         for k in range(slabs):
-            inside = v[(v[:, 0] >= cuts[k]) & (v[:, 0] <= cuts[k + 1])]
-            pieces.append(np.vstack([inside, crossings[k], crossings[k + 1]]))
+            pts = np.vstack([v[(v[:, 0] >= cuts[k]) & (v[:, 0] <= cuts[k + 1])], crossings[k], crossings[k + 1]])
+            pieces.append(pts[ConvexHull(pts).vertices] if len(pts) > 64 else pts)
         return pieces
+
+    def _edge_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """The ends of every edge of the mesh, once (a fine mesh's 1.5 M edges take seconds to find)."""
+        if self._edges is None:
+            f = self.mesh.faces
+            e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+            key = np.unique(e[:, 0] * np.int64(len(self.mesh.vertices)) + e[:, 1])
+            n = np.int64(len(self.mesh.vertices))
+            v = self.mesh.vertices
+            self._edges = (v[key // n], v[key % n])
+        return self._edges
 
     def union_excess(self, pieces: list[np.ndarray], samples: int = 40) -> float:
         """How much more the union of the pieces' convex hulls holds than the mesh, as a fraction of the mesh's
@@ -181,16 +197,20 @@ class MeshHull:
 
         from iceresist.dem.bodies import inside_mesh
 
-        v = self.mesh.vertices
-        lo, hi = v.min(axis=0), v.max(axis=0)
-        h = float(np.max(hi - lo)) / samples
-        g = np.stack(np.meshgrid(*[np.arange(lo[k] + h / 2, hi[k], h) for k in range(3)], indexing="ij"), -1)
-        p = g.reshape(-1, 3)
-        in_mesh = inside_mesh(p, v, self.mesh.faces)
+        cached = self._lattice
+        if cached is None or cached[0] != samples:  # the lattice and what of it the mesh holds, once per hull
+            v = self.mesh.vertices
+            lo, hi = v.min(axis=0), v.max(axis=0)
+            h = float(np.max(hi - lo)) / samples
+            g = np.stack(np.meshgrid(*[np.arange(lo[k] + h / 2, hi[k], h) for k in range(3)], indexing="ij"), -1)
+            p = g.reshape(-1, 3)
+            self._lattice = cached = (samples, p, inside_mesh(p, v, self.mesh.faces))
+        _, p, in_mesh = cached
         in_union = np.zeros(len(p), dtype=bool)
         for piece in pieces:
             eq = ConvexHull(piece).equations
-            in_union |= (p @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 1e-12
+            near = np.flatnonzero((p[:, 0] >= piece[:, 0].min()) & (p[:, 0] <= piece[:, 0].max()))  # its slab's
+            in_union[near] |= (p[near] @ eq[:, :3].T + eq[:, 3]).max(axis=1) <= 1e-12
         return float((in_union & ~in_mesh).sum() / max(in_mesh.sum(), 1))
 
     def fluid_pieces(self, tolerance: float = 0.01, most: int = 256) -> tuple[list[np.ndarray], float]:

@@ -122,7 +122,7 @@ def cmd_run(args) -> int:
     result = run_model(model, scene, h5_path, chk_path, stop=stop, outputs=outputs, pickup=pickup,
                        lattice_units=scene.is_lattice, progress=not args.no_progress and parallel.rank() == 0,
                        build_s=time.perf_counter() - t_start)
-    if result.sim.completed and parallel.rank() == 0:
+    if scene.ship is not None and getattr(result.sim, "completed", False) and parallel.rank() == 0:
         from iceresist.post.case import window_summary
 
         summary = window_summary(h5_path)

@@ -197,12 +197,15 @@ def window_summary(path) -> str | None:
         return (f"no mean ice resistance: the stem reached x = {float(x[-1]) if len(x) else float('nan'):.3f} m, "
                 f"short of the steady window's end at {x1:.3f} m (run to the end, or --pickup)")
     try:
-        sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1))
-        how = ""
-    except InputError:
-        sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1), n_batches=FALLBACK_BATCHES,
-                                            warn_short_batches=False)
-        how = f", {FALLBACK_BATCHES} batches: the window is short against the force's correlation time"
+        try:
+            sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1))
+            how = ""
+        except InputError:
+            sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1), n_batches=FALLBACK_BATCHES,
+                                                warn_short_batches=False)
+            how = f", {FALLBACK_BATCHES} batches: the window is short against the force's correlation time"
+    except InputError as exc:  # a window the record cannot average (outside the track, too few samples)
+        return f"no mean ice resistance: {exc}"
     scale = float(meta.get("scale", SCALE))
     return (f"mean ice resistance over the steady window (stem x = {x0:.3f} to {x1:.3f} m): {sm.mean_N:.3g} +- "
             f"{sm.ci_half_width_N:.2g} N at model scale, {sm.mean_N * scale ** 3 / 1e3:.3g} kN at 1:{scale:g} "

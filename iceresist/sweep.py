@@ -445,7 +445,7 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--amr", action="store_true", help="tier 2 on the preset's refined levels: the hull, the ice and "
                    "the surface on the finest level (docs/SHIP.md)")
-    m = p.add_argument_group("your own hull (the tank, channel and window are sized from it; docs/SHIP.md)")
+    m = p.add_argument_group("your own hull (the tank, channel and window are sized from it; docs/OWN_SHIP.md)")
     m.add_argument("--mesh", metavar="HULL.stl", help="closed hull surface, STL or OBJ, or a built-in mesh (b063); "
                    "alone, it runs the paper's Bow A cases")
     m.add_argument("--mesh-unit", default="m", help="unit of the mesh's coordinates: m, cm, mm, ft, in (default m)")
@@ -458,7 +458,7 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    "then gives the FSICR required engine output from R_CH and from the simulated resistance")
     m.add_argument("--ice-class", default="IA", help="FSICR class of R_CH and the power: IA Super, IA, IB, IC")
     x = p.add_argument_group("your own test matrix (full-scale values; comma-separated lists are axes; or --matrix)")
-    x.add_argument("--matrix", metavar="FILE.toml", help="a matrix file: [hull] and [matrix] (docs/SHIP.md)")
+    x.add_argument("--matrix", metavar="FILE.toml", help="a matrix file: [hull] and [matrix] (docs/OWN_SHIP.md)")
     x.add_argument("--concentration", metavar="LIST", help="ice concentrations, fractions (default 0.68)")
     x.add_argument("--knots", metavar="LIST", help="full-scale ship speeds (knots; default 5)")
     x.add_argument("--scale", metavar="LIST", help="model scales lambda of 1:lambda (default 25)")

@@ -1,4 +1,4 @@
-"""Your own ship in your own test matrix (docs/SHIP.md, "Your own hull" and "Your own test matrix"): the tank,
+"""Your own ship in your own test matrix (docs/OWN_SHIP.md): the tank,
 channel and window sized from the hull (B-063 keeps the presets' numbers, every hull gets the quick window in hull
 lengths), the matrix's cases at model scale, refusals in one line, and a CI-sized matrix run to its report."""
 

@@ -85,7 +85,7 @@ def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float,
 def steady_window_m(scene, geometry: HullGeometry, layout: ChannelLayout) -> tuple[float, float]:
     """Stem positions (x0, x1) of the steady window (``ship.steady_window_m`` or the default of the schema). A default
     window shorter than :data:`~iceresist.ship.cases.MIN_WINDOW_HULL_LENGTHS` waterline lengths (empty included) is
-    refused in one line naming the channel length that gives one (docs/SHIP.md, "Your own hull")."""
+    refused in one line naming the channel length that gives one (docs/OWN_SHIP.md)."""
     if scene.ship.steady_window_m is not None:
         return tuple(float(v) for v in scene.ship.steady_window_m)
     x0, x1 = layout.start_x_m, layout.start_x_m + layout.length_m

@@ -450,7 +450,7 @@ motion = "free"
 
 #: A ship scene on the user's own hull, for docs/SCENES.md; tests/test_mesh_hull.py runs it.
 MESH_EXAMPLE = """# Your own hull in the quick tier-1 case: the case's ice and contact law, the hull from a mesh, and the tank,
-# channel and steady window sized from the hull (docs/SHIP.md, "Your own hull"). The mesh is a closed surface (STL or
+# channel and steady window sized from the hull (docs/OWN_SHIP.md). The mesh is a closed surface (STL or
 # OBJ); its path is relative to this file ("b063" is the shipped B-063 model with Bow A at +x); mesh_scale divides
 # its lengths (25 runs a full-scale mesh as a 1:25 model). The reader puts the keel at z = 0, the centreline at
 # y = 0 and the stem at the waterline at x = 0; FSICR inputs are measured on it at draught_m (docs/FSICR.md).

@@ -1,6 +1,6 @@
 """A user's test matrix around their own hull: ``iceresist sweep --matrix FILE.toml`` or the matrix flags.
 
-A matrix file (docs/SHIP.md, "Your own test matrix")::
+A matrix file (docs/OWN_SHIP.md)::
 
     [hull]
     mesh = "my_hull.stl"        # a path relative to this file, or "b063" (the shipped B-063 mesh at 1:25)
@@ -214,7 +214,7 @@ def read_matrix(path) -> Matrix:
         text = p.read_text(encoding="utf-8")
     except (OSError, ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"--matrix: cannot read {str(path)[:80]!r} ({type(exc).__name__}); give a matrix TOML file "
-                         f"(docs/SHIP.md, \"Your own test matrix\")") from None
+                         f"(docs/OWN_SHIP.md)") from None
     try:
         data = _MatrixFile.model_validate(tomllib.loads(text))
     except tomllib.TOMLDecodeError as exc:

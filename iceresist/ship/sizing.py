@@ -1,4 +1,4 @@
-"""The tank, the ice channel and the steady window of a ship case, sized from the hull (docs/SHIP.md, "Your own hull").
+"""The tank, the ice channel and the steady window of a ship case, sized from the hull (docs/OWN_SHIP.md).
 
 The paper's tank was built around B-063 (3.5 m long, 0.7 m beam, 0.44 m draught at 1:25). Any other hull gets the
 same tank in proportion to its own dimensions, so that its blockage, its depth over draught and the room behind its

@@ -255,7 +255,7 @@ def run_sweep(fidelity: str, tier: int, out_dir, cases=None, *, backend: str = "
         raise InputError(f"--preset: unknown preset {fidelity!r}; use one of {', '.join(FIDELITIES)}")
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
-    names = list(plan) if plan is not None and cases in (None, "all") else resolve_cases(cases, plan)
+    names = resolve_cases(cases, plan)
     job = SweepJob(fidelity, tier, amr, overrides or {}, plan, about or {})
     comm = parallel.world()
     if comm is not None:
@@ -368,7 +368,7 @@ def _prepare_sweep(job: "SweepJob", out: Path, names: list) -> list:
     info_path = out / "sweep.json"
     if info_path.is_file():
         old = read_sweep_info(info_path)
-        if any(old.get(k, {} if k == "overrides" else None) != info.get(k, {} if k == "overrides" else None)
+        if any(old.get(k, {} if k == "overrides" else None) != info.get(k)
                for k in ("preset", "tier", "overrides", "amr", *job.about)):
             raise InputError(f"{out}: holds a sweep with preset {old.get('preset')!r}, tier {old.get('tier')}"
                              f"{_hull_words(old)}: use another --output folder")
@@ -560,8 +560,8 @@ def _mesh_plan(args):
     tier = 1 if args.tier is None else args.tier
     if not args.mesh:
         return preset, tier, args.amr, None, {}, f"runs/sweep-{preset}-t{tier}"
-    from iceresist.ship.matrix import MatrixCase
-    from iceresist.ship.meshhull import MeshHull
+    from fsicr.hullmesh import MeshKeys
+    from iceresist.ship.matrix import MatrixCase, hull_at
 
     spec = hull_spec(args)
     cases = args.cases
@@ -571,17 +571,9 @@ def _mesh_plan(args):
     if bow_b:
         raise InputError(f"--cases: {', '.join(bow_b)} name Bow B of B-063; with --mesh the mesh is the hull, so run "
                          f"the A cases (e.g. --cases A-c68-v1.0)")
-    scale = spec.mesh_scale if spec.mesh_scale is not None else 25.0
-    draught = spec.draught_m if spec.draught_m is not None else 0.44 * 25.0 / scale
-    keys = {"hull": "mesh", "mesh_file": _absolute(spec.mesh), "mesh_unit": spec.mesh_unit, "mesh_bow": spec.mesh_bow,
-            "mesh_up": spec.mesh_up, "draught_m": draught * scale / 25.0}
-    if scale != 25.0:
-        keys["mesh_scale"] = 25.0 / scale
-    from fsicr.hullmesh import MeshKeys
-
-    hull = MeshHull.from_file(keys["mesh_file"], keys["draught_m"], unit=spec.mesh_unit, bow=spec.mesh_bow,
-                              up=spec.mesh_up, scale=keys.get("mesh_scale", 1.0),
-                              keys=MeshKeys(draught="--draught"))
+    drawn = spec.mesh_scale if spec.mesh_scale is not None else 25.0  # the preset's model scale
+    spec = spec.model_copy(update={"mesh_scale": drawn, "draught_m": spec.draught_m or 0.44 * 25.0 / drawn})
+    keys, hull = hull_at(spec, _absolute(spec.mesh), 25.0, keys=MeshKeys(draught="--draught"))
     plan = {c: MatrixCase(get_case(c), keys, hull) for c in resolve_cases(cases)}
     about = {"hull": {**spec.model_dump(), "mesh": keys["mesh_file"]},
              "case_meta": {"hull_name": Path(spec.mesh).stem, **power_inputs(spec)}}
@@ -605,10 +597,7 @@ def cmd_sweep(args) -> int:
         amr_overrides(preset)  # refuses a preset without refined levels, naming those with them
     out = args.output or default_out + ("-amr" if amr else "")
     set_threads(args.threads)
-    cases = args.cases if plan is None or str(args.cases).strip() != "all" else None
-    if plan is not None and cases is not None and args.mesh and not args.matrix and not about.get("axes"):
-        cases = list(plan)  # --mesh alone: the plan holds the cases asked for
-    table = run_sweep(preset, tier, out, cases, backend=args.backend, progress=not args.no_progress, amr=amr,
+    table = run_sweep(preset, tier, out, args.cases, backend=args.backend, progress=not args.no_progress, amr=amr,
                       plan=plan, about=about)
     if table is None:       # an MPI rank other than 0
         return 0

@@ -5,9 +5,7 @@ holds a matrix; reads only what the sweep wrote."""
 
 from __future__ import annotations
 
-import numpy as np
-
-from reports.common import html_table, pdf_table_page
+from reports.common import html_table
 
 #: The matrix table: full scale first (what the naval architect signs), model scale after.
 MATRIX_COLUMNS = {"case": "case", "concentration_nominal": "concentration", "concentration": "covered", "full_scale_knots": "speed [kn]",
@@ -83,11 +81,3 @@ def matrix_context(info: dict, table) -> dict:
             "propeller": (f"{hull['propeller_diameter_m']:g} m propeller, {hull.get('propellers', 1)} x "
                           f"{hull.get('propulsion', 'cp')}") if hull.get("propeller_diameter_m") else "",
             "matrix_table": html_table(table, MATRIX_COLUMNS, na_rep="–")}
-
-
-def matrix_pdf_pages(plt, table, title: str) -> list:
-    return [pdf_table_page(plt, table, MATRIX_COLUMNS, title, na_rep="–")]
-
-
-def finite(values) -> bool:
-    return bool(np.isfinite(np.asarray(values, dtype=float)).any())

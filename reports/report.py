@@ -281,7 +281,7 @@ def _write(d: Path, html: str, pages: list, figs: dict, table, plt) -> tuple[Pat
 
 def _write_matrix_report(d: Path, info: dict, table, cases: dict, plt) -> tuple[Path, Path]:
     """The report of a user's test matrix (:mod:`reports.matrix`)."""
-    from reports.matrix import fig_speed, matrix_context, matrix_pdf_pages
+    from reports.matrix import MATRIX_COLUMNS, fig_speed, matrix_context
 
     figs = {"speed": fig_speed(plt, table), "forces": fig_forces(plt, cases, table),
             "topviews": fig_topviews(plt, cases)}
@@ -297,7 +297,7 @@ def _write_matrix_report(d: Path, info: dict, table, cases: dict, plt) -> tuple[
         preset_note=preset_note(info.get("preset"), int(info.get("tier", 1))),
         first_scale=f"{float(table.scale.iloc[0]):g}",
         hull_inputs=None if hull_inputs is None else _html_table(hull_inputs, {c: c for c in hull_inputs.columns}))
-    pages = matrix_pdf_pages(plt, table, f"{ctx['hull_name']}: {ctx['matrix_words']}")
+    pages = [_pdf_table_page(plt, table, MATRIX_COLUMNS, f"{ctx['hull_name']}: {ctx['matrix_words']}", na_rep="–")]
     return _write(d, html, pages, figs, table, plt)
 
 

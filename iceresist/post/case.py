@@ -110,7 +110,7 @@ def analyse_case(path) -> dict:
     """One table row from a finished case file (see :func:`iceresist.post.sweeptable.sweep_table` for the
     columns). What limits the row's interval or its steadiness check is said in its ``note`` column (empty when
     nothing does), not logged."""
-    from iceresist.post.resistance import ice_resistance_from_timeseries, window_halves
+    from iceresist.post.resistance import window_halves
     from iceresist.post.scaling import force_to_full_scale
 
     case = load_case(path)
@@ -118,14 +118,11 @@ def analyse_case(path) -> dict:
     t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]  # row 0 is the state before the first step
     window = tuple(model["steady_window_m"])
     notes = []
-    try:
-        sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1)
-        ci_note = "batch means"
-    except InputError as exc:  # a window shorter than 10 batches of 5 tau_int: fewer batches, said in the table
-        sm = ice_resistance_from_timeseries(t, fx, x, window_m=window, motion_direction=+1,
-                                            n_batches=FALLBACK_BATCHES, warn_short_batches=False)
+    sm, short = window_mean(t, fx, x, window)
+    ci_note = "batch means"
+    if short is not None:  # a window shorter than 10 batches of 5 tau_int: fewer batches, said in the table
         ci_note = f"{FALLBACK_BATCHES} batches (window short against tau_int)"
-        notes.append(f"{exc}; using {FALLBACK_BATCHES} batches")
+        notes.append(f"{short}; using {FALLBACK_BATCHES} batches")
     if sm.interval_too_narrow:
         notes.append(f"batches of {sm.batch_length} samples are shorter than {MIN_BATCH_LENGTH_TAU:.0f} tau_int = "
                      f"{MIN_BATCH_LENGTH_TAU * sm.tau_int_samples:.3g} samples; the interval is likely too narrow")
@@ -181,11 +178,23 @@ def analyse_case(path) -> dict:
     }
 
 
+def window_mean(t_s, Fx_N, x_bow_m, window_m) -> tuple:
+    """The steady-window mean of a ship's record (:func:`~iceresist.post.resistance.ice_resistance_from_timeseries`)
+    and None, or, where the window is shorter than the automatic batches need, the mean over
+    :data:`FALLBACK_BATCHES` batches and why. A window the record cannot average raises InputError."""
+    from iceresist.post.resistance import ice_resistance_from_timeseries
+
+    try:
+        return ice_resistance_from_timeseries(t_s, Fx_N, x_bow_m, window_m=window_m, motion_direction=+1), None
+    except InputError as exc:
+        return ice_resistance_from_timeseries(t_s, Fx_N, x_bow_m, window_m=window_m, motion_direction=+1,
+                                              n_batches=FALLBACK_BATCHES, warn_short_batches=False), str(exc)
+
+
 def window_summary(path) -> str | None:
     """One sentence on a ship run's result file: its mean ice resistance over the steady window with the 95 %
     interval (model scale, and full scale at the run's scale), or why there is none; None for a scene without a ship."""
     from iceresist.io.hdf5 import RunFile
-    from iceresist.post.resistance import ice_resistance_from_timeseries
 
     with RunFile(path, "r") as rf:
         model, meta, ts = rf.meta_object("model"), rf.meta, rf.timeseries()
@@ -193,19 +202,17 @@ def window_summary(path) -> str | None:
         return None
     x0, x1 = (float(v) for v in model["steady_window_m"])
     t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]
-    if not len(x) or float(x[-1]) < x1 - 1e-6:
-        return (f"no mean ice resistance: the stem reached x = {float(x[-1]) if len(x) else float('nan'):.3f} m, "
+    if not len(x):  # nothing stepped (--steps 0): nothing to say
+        return None
+    if float(x[-1]) < x1 - 1e-6:
+        return (f"no mean ice resistance: the stem reached x = {float(x[-1]):.3f} m, "
                 f"short of the steady window's end at {x1:.3f} m (run to the end, or --pickup)")
     try:
-        try:
-            sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1))
-            how = ""
-        except InputError:
-            sm = ice_resistance_from_timeseries(t, fx, x, window_m=(x0, x1), n_batches=FALLBACK_BATCHES,
-                                                warn_short_batches=False)
-            how = f", {FALLBACK_BATCHES} batches: the window is short against the force's correlation time"
+        sm, short = window_mean(t, fx, x, (x0, x1))
     except InputError as exc:  # a window the record cannot average (outside the track, too few samples)
         return f"no mean ice resistance: {exc}"
+    how = "" if short is None else f", {FALLBACK_BATCHES} batches: the window is short against the force's " \
+                                   f"correlation time"
     scale = float(meta.get("scale", SCALE))
     return (f"mean ice resistance over the steady window (stem x = {x0:.3f} to {x1:.3f} m): {sm.mean_N:.3g} +- "
             f"{sm.ci_half_width_N:.2g} N at model scale, {sm.mean_N * scale ** 3 / 1e3:.3g} kN at 1:{scale:g} "

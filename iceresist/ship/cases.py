@@ -254,7 +254,7 @@ def scene_data(case, fidelity: str, tier: int = 1, amr: bool = False, *, hull_ke
     if tier == 1:
         domain = {"size_m": list(sized.tank_m), "dx_m": _scaled(f["dx_m"], q)}
         fluid = {"nu_m2_s": 1.0e-6, "rho_kg_m3": 1000.0, "gravity_m_s2": [0.0, 0.0, -9.81]}
-        numerics = {"precision": "float64" if tier == 1 else "float32", "backend": "auto"}
+        numerics = {"precision": "float64", "backend": "auto"}
     else:
         t2 = TIER2[fidelity]
         dx = _scaled((_amr(fidelity).get("dx_m") if amr else None) or t2["dx_m"], q)

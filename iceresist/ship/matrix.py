@@ -40,7 +40,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from iceresist.errors import InputError
-from iceresist.ship.cases import FIDELITIES, KNOT_M_S, REFERENCE_ICE_M, Case
+from iceresist.ship.cases import FIDELITIES, REFERENCE_ICE_M, Case
 from iceresist.ship.meshhull import MeshHull, resolve_mesh_path
 
 #: The paper's scale and full-scale ice edge: the defaults of a matrix.
@@ -167,16 +167,7 @@ class Matrix:
         for scale, ahead, edge, thick, width, conc, knots in itertools.product(
                 a.scale, a.ahead, a.ice_size_m, a.ice_thickness_m, a.channel_width_m, a.concentration, a.speed_knots):
             name = case_name(conc, knots, scale, edge, thick, width, ahead)
-            factor = self.hull.drawn_at / scale  # mesh lengths -> model lengths
-            ship = {"hull": "mesh", "mesh_file": self.mesh_path, "mesh_unit": self.hull.mesh_unit,
-                    "mesh_bow": self.hull.mesh_bow if ahead == "bow" else OTHER_END[self.hull.mesh_bow],
-                    "mesh_up": self.hull.mesh_up, "mesh_scale": _round(1.0 / factor),
-                    "draught_m": _round(self.hull.mesh_draught_m * factor)}
-            if ship["mesh_scale"] == 1.0:
-                del ship["mesh_scale"]
-            hull = MeshHull.from_file(ship["mesh_file"], ship["draught_m"], unit=ship["mesh_unit"],
-                                      bow=ship["mesh_bow"], up=ship["mesh_up"], scale=ship.get("mesh_scale", 1.0))
-            hull.name = self.hull_name
+            ship, hull = hull_at(self.hull, self.mesh_path, scale, ahead, name=self.hull_name)
             case = Case(bow="A" if ahead == "bow" else "B", concentration=conc,
                         knots=_round(knots / math.sqrt(scale)), scale=scale, ice_size_m=_round(edge / scale),
                         ice_thickness_m=None if thick is None else _round(thick / scale),
@@ -187,6 +178,22 @@ class Matrix:
     def describe(self) -> dict:
         """What a sweep folder records of its matrix (``sweep.json``): the hull and the axes."""
         return {"hull": {**self.hull.model_dump(), "mesh": self.mesh_path}, "axes": self.axes.model_dump()}
+
+
+def hull_at(spec: HullSpec, mesh_path: str, scale: float, ahead: str = "bow", *, name: str | None = None,
+            keys=None) -> tuple[dict, MeshHull]:
+    """The ``[ship]`` keys and the read hull of ``spec``'s mesh (at ``mesh_path``) as a 1:``scale`` model going ahead
+    with ``ahead`` ("bow" or "stern": the mesh's bow axis turned); ``keys``: the names bad input is reported under."""
+    factor = spec.drawn_at / scale  # mesh lengths -> model lengths
+    ship = {"hull": "mesh", "mesh_file": mesh_path, "mesh_unit": spec.mesh_unit,
+            "mesh_bow": spec.mesh_bow if ahead == "bow" else OTHER_END[spec.mesh_bow], "mesh_up": spec.mesh_up,
+            "mesh_scale": _round(1.0 / factor), "draught_m": _round(spec.mesh_draught_m * factor)}
+    if ship["mesh_scale"] == 1.0:
+        del ship["mesh_scale"]
+    hull = MeshHull.from_file(mesh_path, ship["draught_m"], unit=spec.mesh_unit, bow=ship["mesh_bow"],
+                              up=spec.mesh_up, scale=ship.get("mesh_scale", 1.0), name=name,
+                              **({"keys": keys} if keys is not None else {}))
+    return ship, hull
 
 
 def _round(x: float) -> float:
@@ -244,8 +251,3 @@ def _first_error(exc: ValidationError) -> str:
     more = f" [and {len(exc.errors()) - 1} more]" if len(exc.errors()) > 1 else ""
     got = f" (got {err['input']!r})" if "input" in err and not isinstance(err["input"], dict) else ""
     return f"{where}: {err['msg'].removeprefix('Value error, ')}{got[:80]}{more}"
-
-
-def speed_m_s(knots_full: float, scale: float) -> float:
-    """Model speed (m/s) of a full-scale speed in knots: Froude scaling."""
-    return knots_full * KNOT_M_S / math.sqrt(scale)

@@ -142,7 +142,7 @@ class MeshHull:
     @classmethod
     def from_file(cls, path: str, draught_m: float, *, unit: str = "m", bow: str = "+x", up: str = "+z",
                   scale: float = 1.0, scene_source: str | None = None,
-                  keys: hullmesh.MeshKeys = SCENE_KEYS) -> "MeshHull":
+                  keys: hullmesh.MeshKeys = SCENE_KEYS, name: str | None = None) -> "MeshHull":
         """Read, check and place a hull mesh, its lengths divided by ``scale`` (a full-scale mesh run as a 1:25
         model: 25) and ``draught_m`` the model's; one-line :class:`InputError` naming the key, by default the
         scene's, on bad input. The same file read with the same options again (a sweep's cases, a scene and its
@@ -154,7 +154,7 @@ class MeshHull:
         except (OSError, ValueError):
             stamp = None  # a built-in name, or a path the reader refuses in one line
         return _read_placed(cls, resolved, stamp, float(draught_m), unit, bow, up, float(scale), keys,
-                            Path(path).stem)
+                            name or Path(path).stem)
 
     # -- convex pieces for the fluid (tier 2) -----------------------------------------------------------
     def convex_pieces(self, slabs: int) -> list[np.ndarray]:

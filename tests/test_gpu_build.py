@@ -19,8 +19,7 @@ EXPECTED = {
     "pool_wet", "pool_fill", "lbm_stream_collide", "block_phases", "block_phases_near",
     "mark", "links", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
     "near_events", "fill",
-    "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero2", "count_k", "chunk_sum", "scan_sums",
-    "chunk_scan", "scatter", "level_transfer", "ghost_phase", "bulk_roles", "bulk_settle", "halo_pack", "halo_unpack",
+    "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero", "count_k", "scan_buckets", "scatter", "level_transfer", "ghost_phase", "bulk_roles", "bulk_settle", "halo_pack", "halo_unpack",
 }
 
 

@@ -25,7 +25,8 @@ then ``--records`` builds and times it as above: ``python -m validation.bench sh
 the coupled LBM step of the case timed part by part (every kernel launch under its label,
 :func:`iceresist.backends.launch.profiling`; what is left is host NumPy and Python between launches), then the
 pure fused cumulant LBM step (:class:`~iceresist.lbm.solver.LBMSolver`, no free surface, no bodies) on a box of
-the same cells, and the ratio of the two: ``python -m validation.bench ship --preset quick --compare-pure``.
+the same cells, and the ratio of the two: ``python -m validation.bench ship --preset quick --compare-pure``. Then
+the launches of one coupled step with the host's time to issue them, and a whole record with its diagnostics.
 """
 
 from __future__ import annotations
@@ -210,12 +211,15 @@ def compare_pure(scene, backend: str, records: int, by_label: bool = False) -> l
         total = time.perf_counter() - t0
     steps = records * model.lbm_steps_per_record
     profiled_total = total
+    unreplayed = None
     if model.target.is_cuda:
-        # profiling synchronises the device after every launch: the whole step is timed again without it
-        t0 = time.perf_counter()
-        model.step(records)
-        fluid.synchronize()
-        total = time.perf_counter() - t0
+        # profiling synchronises the device after every launch: the whole step is timed again without it, kernel
+        # by kernel and replayed as CUDA graphs (iceresist.backends.graphs; a record first to capture them)
+        replay, model.replay.enabled = model.replay.enabled, False
+        unreplayed = _timed_steps(model, records)
+        model.replay.enabled = replay
+        model.step(1)
+        total = _timed_steps(model, records)
     common = {"backend": model.target.name, "precision": model.precision, "cells": model.cells, "steps": steps}
     parts: dict = {}
     for label, (sec, n) in prof.items():
@@ -233,13 +237,64 @@ def compare_pure(scene, backend: str, records: int, by_label: bool = False) -> l
         rows.append({"name": "coupled step, profiled (a synchronisation after each launch)", **common,
                      "seconds": profiled_total, "s_per_step": profiled_total / steps})
     coupled = total / steps
+    if unreplayed is not None:
+        rows.append({"name": "coupled step, kernel by kernel (no CUDA graphs)", **common, "seconds": unreplayed,
+                     "s_per_step": unreplayed / steps, "mlups": model.cells * steps / unreplayed / 1e6})
     rows.append({"name": "coupled step", **common, "seconds": total, "s_per_step": coupled, "share": 1.0,
-                 "mlups": model.cells / coupled / 1e6})
+                 "mlups": model.cells / coupled / 1e6, "graph_replays": model.replay.hits,
+                 "graph_captures": model.replay.captures, "steps_launched_one_by_one": model.replay.direct})
     pure = pure_step_seconds(model.shape_cells, fluid.tau, fluid.operator, model.precision, model.target)
     rows.append({"name": "pure fused LBM step", **common, "s_per_step": pure, "mlups": model.cells / pure / 1e6,
                  "shape": "x".join(str(n) for n in model.shape_cells)})
     rows.append({"name": "ratio coupled / pure", **common, "ratio": coupled / pure})
+    rows.extend(launch_rows(model, common, coupled))
     return rows
+
+
+def _timed_steps(model, records: int) -> float:
+    """Seconds of ``records`` records of the model's coupled steps, the device drained before and after."""
+    fluid = model.fb.fluid.fluid
+    fluid.synchronize()
+    t0 = time.perf_counter()
+    model.step(records)
+    fluid.synchronize()
+    return time.perf_counter() - t0
+
+
+def launch_rows(model, common: dict, coupled_s: float, steps: int = 5) -> list[dict]:
+    """Rows: the launches of one coupled step (:func:`iceresist.backends.launch.tallying`) with the host's time to
+    issue it (the Python and the launches, no wait for the device: on a GPU the step's floor when the device is
+    quicker), and a whole record as a run makes it (its coupled steps, ``diagnostics``, the watchdog's probe, the
+    finite check) against its coupled steps alone."""
+    from iceresist.backends.launch import tallying
+
+    fluid = model.fb.fluid.fluid
+    fluid.synchronize()
+    with tallying() as tally:
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            model.fb.step(1, accumulate_contacts=True)
+        host = (time.perf_counter() - t0) / steps
+    fluid.synchronize()
+    t0 = time.perf_counter()
+    for _ in range(2 * steps):     # replayed (where graphs are on): the host's time per step then
+        model.replay.run(model._coupled_step)
+    host_replayed = (time.perf_counter() - t0) / (2 * steps)
+    fluid.synchronize()
+    t0 = time.perf_counter()
+    model.step(1)
+    model.diagnostics()
+    model.watchdog_probe()
+    model.is_finite()
+    fluid.synchronize()
+    record = time.perf_counter() - t0
+    n = model.lbm_steps_per_record
+    return [{"name": "launches per coupled step", **common, "launches_per_step": tally.total / steps,
+             "syncs_per_step": tally.syncs / steps, "substeps": model.dem.last_substeps,
+             "host_s_per_step": host, "host_share": host / coupled_s,
+             "host_s_per_step_replayed": host_replayed},
+            {"name": "record with its diagnostics", **common, "lbm_steps": n, "s_per_record": record,
+             "s_diagnostics": record - n * coupled_s, "share_diagnostics": 1.0 - n * coupled_s / record}]
 
 
 def run(args):

@@ -4,7 +4,10 @@
 #   cuda   the tests that launch CUDA kernels, on the device
 #   mpi    `mpirun -n 2` with backend = "cuda": the cavity and the floating cube (needs mpirun and the iceresist
 #          script beside the interpreter: the `mpi` extra and `pip install -e .`)
-#   ship   the coupled quick tier-2 step launcher by launcher, beside the pure fused LBM step
+#   ship   the coupled quick tier-2 step launcher by launcher, beside the pure fused LBM step, with and without
+#          CUDA graphs; the launches of a step and a whole record with its diagnostics
+#   graphs the tests of the step replayed as a CUDA graph, the DEM launchers and the launch budget, on the device
+#   case   the whole quick tier-2 case A-c68-v1.0 (iceresist run, backend cuda) with its records: wall time
 #   amr    the block-refined LBM on two and three levels, per level, beside the uniform finest grid
 #   lbm    the fused LBM at 256^3 against the device's copy bandwidth
 #   rest   the other tests of the CI selection
@@ -15,7 +18,7 @@
 set -u
 OUT=${1:-gpu-check}
 shift || true
-SECTIONS=${*:-cuda mpi ship amr lbm rest}
+SECTIONS=${*:-cuda mpi ship graphs case amr lbm rest}
 PYTHON=${PYTHON:-python3}
 LIMIT=${SECTION_TIMEOUT:+timeout $SECTION_TIMEOUT}
 mkdir -p "$OUT"
@@ -41,6 +44,15 @@ for section in $SECTIONS; do
     ship) $LIMIT "$PYTHON" -m validation.bench ship --preset quick --backend cuda --precision float32 --compare-pure \
             --by-label --records 3 --json > "$OUT/ship.json" 2> "$OUT/ship.err"
           echo "exit $?"; cat "$OUT/ship.json"; tail -3 "$OUT/ship.err" ;;
+    graphs) $LIMIT "$PYTHON" -m pytest -v -p no:cacheprovider -m "gpu or not gpu" tests/test_graphs.py \
+            tests/test_dem_cuda.py tests/test_launch_budget.py -rfE > "$OUT/pytest_graphs.log" 2>&1
+          echo "exit $?"; tail -6 "$OUT/pytest_graphs.log" ;;
+    case) work=$(mktemp -d)      # the result file stays out of OUT
+          printf '[case]\nname = "A-c68-v1.0"\nfidelity = "quick"\ntier = 2\n' > "$work/case_t2.toml"
+          start=$(date +%s)
+          $LIMIT "$PYTHON" -m iceresist run "$work/case_t2.toml" --backend cuda --no-progress --output "$work/run" \
+            --force > "$OUT/case.log" 2>&1
+          echo "exit $? after $(( $(date +%s) - start )) s"; grep -E "wall time|mean ice" "$OUT/case.log" | tail -3 ;;
     amr)  $LIMIT "$PYTHON" -m validation.bench amr --backend cuda --precision float32 --n 64 --steps 20 --levels 1 --levels 2 --json \
             > "$OUT/amr.json" 2> "$OUT/amr.err"
           echo "exit $?"; cat "$OUT/amr.json"; tail -3 "$OUT/amr.err" ;;
@@ -50,6 +62,6 @@ for section in $SECTIONS; do
     rest) $LIMIT "$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" \
             -k "not (cuda or gpu or transfer)" -rfE > "$OUT/pytest_rest.log" 2>&1
           echo "exit $?"; tail -4 "$OUT/pytest_rest.log" ;;
-    *)    echo "unknown section '$section': use cuda, mpi, ship, amr, lbm or rest"; exit 2 ;;
+    *)    echo "unknown section '$section': use cuda, mpi, ship, graphs, case, amr, lbm or rest"; exit 2 ;;
   esac
 done

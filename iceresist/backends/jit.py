@@ -107,6 +107,8 @@ class Target:
 
     def synchronize(self):
         """Wait for the device (CUDA); a no-op on the CPU."""
+        if self.is_cuda:
+            launch.note_sync()
         if self.is_cuda and not _HOST_STAND_IN:
             cuda_api().synchronize()
 

@@ -60,14 +60,102 @@ _RECORDER = None
 _ARG_WATCH = None
 
 
+#: Set by :func:`tallying`: the :class:`LaunchTally` every CUDA launch and device synchronisation is counted in.
+_TALLY = None
+
+
+class LaunchTally:
+    """``launches[kernel name]`` and ``syncs`` (device synchronisations) counted within :func:`tallying`."""
+
+    def __init__(self):
+        from collections import Counter
+
+        self.launches: Counter = Counter()
+        self.syncs = 0
+
+    @property
+    def total(self) -> int:
+        return sum(self.launches.values())
+
+    def __str__(self) -> str:
+        return ", ".join(f"{n} x {name}" for name, n in self.launches.most_common()) + f"; {self.syncs} syncs"
+
+
+@contextlib.contextmanager
+def tallying():
+    """Within: every CUDA launch (by the kernel's name, a launch of no blocks not counted) and every device
+    synchronisation the engine asks for is counted into the yielded :class:`LaunchTally`: the launch budget of a
+    coupled step (docs/PERFORMANCE.md), counted on the CUDA simulator or while the GPU build check traces."""
+    global _TALLY
+    saved, _TALLY = _TALLY, LaunchTally()
+    try:
+        yield _TALLY
+    finally:
+        _TALLY = saved
+
+
+def note_sync():
+    """Count a device synchronisation within :func:`tallying`; within :func:`recording` the launches noted so far
+    are made first."""
+    if _TALLY is not None:
+        _TALLY.syncs += 1
+    if _RECORDING is not None:
+        _RECORDING.flush()
+
+
+class Recording:
+    """The launches noted within :func:`recording`: ``calls`` ``[(kernel, grid, threads, args)]`` in order;
+    ``flushed`` once a copy or synchronisation made them early (:meth:`flush`)."""
+
+    def __init__(self):
+        self.calls: list = []
+        self.flushed = False
+
+    def flush(self, *_):
+        """Make the launches noted so far (before a copy or a synchronisation that must see their results)."""
+        make(self.take())
+        self.flushed = True
+
+    def take(self) -> list:
+        calls, self.calls = self.calls, []
+        return calls
+
+
+#: Set by :func:`recording`: the :class:`Recording` CUDA launches are noted in instead of being made.
+_RECORDING = None
+
+
+@contextlib.contextmanager
+def recording():
+    """Within: every CUDA launch is noted in the yielded :class:`Recording`, not made (a step to be replayed as a
+    CUDA graph, :mod:`iceresist.backends.graphs`); the caller makes them (:func:`make`) or replays them."""
+    global _RECORDING
+    saved, _RECORDING = _RECORDING, Recording()
+    try:
+        yield _RECORDING
+    finally:
+        _RECORDING = saved
+
+
+def make(calls):
+    """Make the noted launches ``calls`` one by one, in order."""
+    for kernel, grid, threads, args in calls:
+        kernel[grid, threads](*args)
+
+
 def cuda_launch(kernel, grid: int, threads: int, *args):
     """Launch ``kernel[grid, threads](*args)``; a grid of no blocks launches nothing."""
     if _ARG_WATCH is not None:
         _ARG_WATCH(args)
+    if _TALLY is not None and grid:
+        _TALLY.launches[getattr(kernel, "kernel_name", device_name(kernel))] += 1
     if _RECORDER is not None:
         _RECORDER(kernel, threads, args)
     elif grid:
-        kernel[grid, threads](*args)
+        if _RECORDING is not None:
+            _RECORDING.calls.append((kernel, grid, threads, args))
+        else:
+            kernel[grid, threads](*args)
 
 
 #: Set by :func:`profiling`: ``{label: [seconds, launches]}``, and the device synchronisation after each launch.

@@ -6,7 +6,7 @@ build check, :class:`~iceresist.backends.jit.HostStandIn`):
 
 * ``upload``: a host array copied to the device (``cuda.to_device``, ``DeviceNDArray.copy_to_device`` of a host
   array; a device-to-device copy is not counted);
-* ``download``: a device array copied to the host (``copy_to_host``);
+* ``download``: a device array copied to the host (``copy_to_host``), with its bytes (``nbytes``, ``largest``);
 * ``implicit``: a host array handed to a kernel launch, which numba-cuda copies to the device and back.
 
 Each entry also keeps where it was made (file:line of the first engine frame), so a test that fails names the
@@ -39,10 +39,14 @@ class TransferCount:
     def __init__(self):
         self.counts: Counter = Counter()
         self.sites: Counter = Counter()
+        self.nbytes: Counter = Counter()
+        self.largest: Counter = Counter()
 
-    def add(self, kind: str):
+    def add(self, kind: str, nbytes: int = 0):
         self.counts[kind] += 1
         self.sites[(kind, _site())] += 1
+        self.nbytes[kind] += int(nbytes)
+        self.largest[kind] = max(self.largest[kind], int(nbytes))
 
     def total(self) -> int:
         return sum(self.counts.values())
@@ -70,8 +74,9 @@ def _device_array_classes() -> list:
 
 
 @contextlib.contextmanager
-def counting():
-    """Within: every copy between host and device is counted into the yielded :class:`TransferCount`."""
+def counting(before=None):
+    """Within: every copy between host and device is counted into the yielded :class:`TransferCount`; ``before``
+    (where given) is called with the kind before each copy, a device-to-device one (``"copy"``) included."""
     from numba import cuda
 
     tally = TransferCount()
@@ -86,12 +91,17 @@ def counting():
         to_host, to_device = cls.copy_to_host, cls.copy_to_device
 
         def copy_to_host(self, *a, _f=to_host, **k):
-            tally.add("download")
+            tally.add("download", getattr(self, "nbytes", 0))
+            if before is not None:
+                before("download")
             return _f(self, *a, **k)
 
         def copy_to_device(self, ary, *a, _f=to_device, **k):
-            if jit.is_host_array(ary) and not nested[0]:
+            host = jit.is_host_array(ary)
+            if host and not nested[0]:
                 tally.add("upload")
+            if before is not None:
+                before("upload" if host else "copy")
             return _f(self, ary, *a, **k)
 
         patch(cls, "copy_to_host", copy_to_host)
@@ -112,6 +122,8 @@ def counting():
         def to_device(a, *args, _f=upload, **k):
             if jit.is_host_array(a):
                 tally.add("upload")
+                if before is not None:
+                    before("upload")
             nested[0] += 1
             try:
                 return _f(a, *args, **k)
@@ -124,6 +136,8 @@ def counting():
         for a in args:
             if jit.is_host_array(a):
                 tally.add("implicit")
+                if before is not None:
+                    before("implicit")
 
     saved_watch = launch._ARG_WATCH
     launch._ARG_WATCH = watch

@@ -45,10 +45,12 @@ KEY_MODULES = ("iceresist.dem.kernels", "iceresist.dem.contact", "iceresist.dem.
 GATHER_ARGS = ["h", "do_kick", "bfirst", "bcount", "sforce", "storque", "mass", "kin", "ext", "env", "pos",
                "quat", "vel", "omega", "angmom", "volume", "blen", "bhalf", "vfirst", "vcount", "voff", "vvol",
                "bcontact", "bcsum", "force", "torque", "inv_meff"]
+COUNT_ARGS = ["hp", "hn", "scount"]
 
 
 def build_items(target, real):
-    """Per-item device functions ``drift``, ``place``, ``contact``, ``gather`` for a target and precision."""
+    """Per-item device functions ``drift``, ``place``, ``contact``, ``gather``, ``count`` for a target and
+    precision."""
     zero, half, one = real(0), real(0.5), real(1)
     sqrt = math.sqrt
     rotate, rotate_inv, mul, free_rotor, spin_world, omega_world = build_quaternion(target, real)
@@ -280,23 +282,51 @@ def build_items(target, real):
         senergy[i] = en
 
     @target.device
+    def sphere_sum(a, s0, s1):
+        """(sum of a[s, 0], a[s, 1], a[s, 2] over s0 <= s < s1) in four interleaved partial sums: a body of many
+        spheres (the hull's thousands) is summed by one thread, and four independent sums keep four rows' loads in
+        flight at once instead of one after the other (on a GPU each waits a memory latency)."""
+        x0 = zero
+        y0 = zero
+        z0 = zero
+        x1 = zero
+        y1 = zero
+        z1 = zero
+        x2 = zero
+        y2 = zero
+        z2 = zero
+        x3 = zero
+        y3 = zero
+        z3 = zero
+        s = s0
+        while s + 4 <= s1:
+            x0 += a[s, 0]
+            y0 += a[s, 1]
+            z0 += a[s, 2]
+            x1 += a[s + 1, 0]
+            y1 += a[s + 1, 1]
+            z1 += a[s + 1, 2]
+            x2 += a[s + 2, 0]
+            y2 += a[s + 2, 1]
+            z2 += a[s + 2, 2]
+            x3 += a[s + 3, 0]
+            y3 += a[s + 3, 1]
+            z3 += a[s + 3, 2]
+            s += 4
+        while s < s1:
+            x0 += a[s, 0]
+            y0 += a[s, 1]
+            z0 += a[s, 2]
+            s += 1
+        return (x0 + x1) + (x2 + x3), (y0 + y1) + (y2 + y3), (z0 + z1) + (z2 + z3)
+
+    @target.device
     def gather(b, h, do_kick, bfirst, bcount, sforce, storque, mass, kin, ext, env, pos, quat, vel, omega, angmom,
                volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff):
         """ext[b] = (F_fluid, M_fluid); env = (water level, rho_w, C_d, C_a, water on, g_x, g_y, g_z);
         bcontact[b] = (contact force, contact torque); a kicking call (a sub-step) adds bcontact[b] to bcsum[b]."""
-        fx = zero
-        fy = zero
-        fz = zero
-        tx = zero
-        ty = zero
-        tz = zero
-        for s in range(bfirst[b], bfirst[b] + bcount[b]):
-            fx += sforce[s, 0]
-            fy += sforce[s, 1]
-            fz += sforce[s, 2]
-            tx += storque[s, 0]
-            ty += storque[s, 1]
-            tz += storque[s, 2]
+        fx, fy, fz = sphere_sum(sforce, bfirst[b], bfirst[b] + bcount[b])
+        tx, ty, tz = sphere_sum(storque, bfirst[b], bfirst[b] + bcount[b])
         bcontact[b, 0] = fx
         bcontact[b, 1] = fy
         bcontact[b, 2] = fz
@@ -345,7 +375,16 @@ def build_items(target, real):
                 angmom[b, 1] += hh * ty
                 angmom[b, 2] += hh * tz
 
-    return drift, place, contact, gather
+    @target.device
+    def count(i, hp, hn, scount):
+        """scount[i] = the contacts of sphere i in its history slots, a sphere partner once and a wall twice (the
+        sum over the spheres is then twice the contacts: each pair is seen from both spheres)."""
+        n = 0
+        for k in range(min(hn[i], hp.shape[1])):
+            n += 1 if hp[i, k] >= 0 else 2
+        scount[i] = n
+
+    return drift, place, contact, gather, count
 
 
 #: CPU launches with fewer items than this run on one thread, per launcher. A launch on all threads waits
@@ -353,7 +392,7 @@ def build_items(target, real):
 #: placing 10k spheres takes 0.2 ms and their contacts about 6 ms on one thread, so the cheap per-body and
 #: per-sphere passes stay on one thread at any realistic size, and the contact pass uses all threads only where
 #: its one-thread time (about 0.6 us per sphere) clearly exceeds two such waits.
-PARALLEL_FROM = {"drift": 1 << 20, "place": 1 << 20, "gather": 1 << 20, "contact": 1 << 15}
+PARALLEL_FROM = {"drift": 1 << 20, "place": 1 << 20, "gather": 1 << 20, "contact": 1 << 15, "count": 1 << 20}
 
 
 def use_parallel(kind: str, n: int) -> bool:
@@ -362,15 +401,16 @@ def use_parallel(kind: str, n: int) -> bool:
 
 
 def build_launchers(target, real):
-    """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather`` and ``sort`` (grid).
+    """Return a dict of launchers ``drift``, ``place``, ``contact``, ``gather``, ``count`` and ``sort`` (grid).
 
     Each item runs over bodies or spheres (:class:`~iceresist.backends.launch.ItemLauncher`, labelled
     ``dem_<kind>``); on the CPU one prange kernel serves every launch and, below ``PARALLEL_FROM[kind]`` items,
     runs with one thread (no wait for the workers; the prange build ran the contact pass about 1.5x faster on one
     thread than a plain ``range`` loop did). It compiles on its first call, from the on-disk kernel cache
     (:mod:`iceresist.backends.cache`) where that is on."""
-    items = dict(zip(("drift", "place", "contact", "gather"), build_items(target, real)))
-    args = {"drift": DRIFT_ARGS, "place": PLACE_ARGS, "contact": CONTACT_ARGS, "gather": GATHER_ARGS}
+    items = dict(zip(("drift", "place", "contact", "gather", "count"), build_items(target, real)))
+    args = {"drift": DRIFT_ARGS, "place": PLACE_ARGS, "contact": CONTACT_ARGS, "gather": GATHER_ARGS,
+            "count": COUNT_ARGS}
     key = None if target.is_cuda else cache.fingerprint(np.dtype(real).name, KEY_MODULES)
     launchers = {kind: ItemLauncher(target, item, args[kind], label=f"dem_{kind}", cache_key=key,
                                     parallel=partial(use_parallel, kind))

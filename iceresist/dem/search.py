@@ -6,8 +6,10 @@ table of about two buckets per sphere, so the domain is unbounded and memory is 
 bucket (counts, exclusive prefix sum, scatter) gives ``start`` and ``count`` per bucket and the sorted sphere
 indices. Since two cells can share a bucket, the contact kernel checks each candidate's own cell.
 
-CPU: one serial pass (O(spheres + buckets), small beside the contact kernel). CUDA: atomic counts, a chunked
-three-pass scan and an atomic scatter (the order inside a bucket is then not fixed).
+CPU: one serial pass (O(spheres + buckets), small beside the contact kernel). CUDA: four launches (docs/PERFORMANCE.md,
+the launch budget): counts zeroed, atomic counts, the exclusive scan in one thread block (each thread sums a run of
+buckets, the block scans the run sums in shared memory, each thread writes its run's starts and zeroes its
+cursors), and an atomic scatter (the order inside a bucket is then not fixed).
 """
 
 from __future__ import annotations
@@ -23,8 +25,9 @@ from iceresist.backends.launch import cuda_launch
 cuda = cuda_api()  # cuda.grid / cuda.atomic inside the kernels below (a module global, for the simulator)
 
 P1, P2, P3 = 73856093, 19349663, 83492791
-SCAN_CHUNK = 256
 THREADS = 128
+#: Threads of the one thread block that scans the bucket counts (a power of two).
+SCAN_THREADS = 512
 
 
 def table_size(n_spheres: int) -> int:
@@ -76,11 +79,10 @@ def build_grid_sort(target: Target):
         return cache.cpu_function(sort_cpu)
 
     @target.kernel(threads=THREADS)
-    def zero2(nb, a, b):
+    def zero(nb, a):
         i = cuda.grid(1)
         if i < nb:
             a[i] = 0
-            b[i] = 0
 
     @target.kernel(threads=THREADS)
     def count_k(n, key, count):
@@ -88,32 +90,32 @@ def build_grid_sort(target: Target):
         if i < n:
             cuda.atomic.add(count, key[i], 1)
 
-    @target.kernel(threads=THREADS)
-    def chunk_sum(nchunk, count, sums):
-        c = cuda.grid(1)
-        if c < nchunk:
-            s = 0
-            for b in range(c * SCAN_CHUNK, min((c + 1) * SCAN_CHUNK, count.shape[0])):
-                s += count[b]
-            sums[c] = s
-
-    @target.kernel(threads=THREADS)
-    def scan_sums(nchunk, sums):
-        if cuda.grid(1) == 0:
-            run = 0
-            for c in range(nchunk):
-                s = sums[c]
-                sums[c] = run
-                run += s
-
-    @target.kernel(threads=THREADS)
-    def chunk_scan(nchunk, count, sums, start):
-        c = cuda.grid(1)
-        if c < nchunk:
-            run = sums[c]
-            for b in range(c * SCAN_CHUNK, min((c + 1) * SCAN_CHUNK, count.shape[0])):
-                start[b] = run
-                run += count[b]
+    @target.kernel(threads=SCAN_THREADS)
+    def scan_buckets(nb, count, start, cursor):
+        """start = exclusive prefix sum of count, cursor = 0; one block of SCAN_THREADS threads (Hillis and Steele
+        1986 on the threads' run sums)."""
+        t = cuda.threadIdx.x
+        per = (nb + SCAN_THREADS - 1) // SCAN_THREADS
+        lo = min(t * per, nb)
+        hi = min(lo + per, nb)
+        own = 0
+        for b in range(lo, hi):
+            own += count[b]
+        part = cuda.shared.array(SCAN_THREADS, np.int32)
+        part[t] = own
+        cuda.syncthreads()
+        d = 1
+        while d < SCAN_THREADS:
+            v = part[t - d] if t >= d else 0
+            cuda.syncthreads()
+            part[t] += v
+            cuda.syncthreads()
+            d *= 2
+        run = part[t] - own
+        for b in range(lo, hi):
+            start[b] = run
+            cursor[b] = 0
+            run += count[b]
 
     @target.kernel(threads=THREADS)
     def scatter(n, key, start, cursor, order):
@@ -123,22 +125,14 @@ def build_grid_sort(target: Target):
             p = cuda.atomic.add(cursor, k, 1)
             order[start[k] + p] = i
 
-    sums_cache = {}
-
     def grid(n):
         return ((n + THREADS - 1) // THREADS, THREADS)
 
     def sort_cuda(n, key, start, count, cursor, order):
         nb = count.shape[0]
-        nchunk = (nb + SCAN_CHUNK - 1) // SCAN_CHUNK
-        if nchunk not in sums_cache:
-            sums_cache[nchunk] = target.to_device(np.zeros(nchunk, dtype=np.int32))
-        sums = sums_cache[nchunk]
-        cuda_launch(zero2, *grid(nb), nb, count, cursor)
+        cuda_launch(zero, *grid(nb), nb, count)
         cuda_launch(count_k, *grid(n), n, key, count)
-        cuda_launch(chunk_sum, *grid(nchunk), nchunk, count, sums)
-        cuda_launch(scan_sums, 1, 1, nchunk, sums)
-        cuda_launch(chunk_scan, *grid(nchunk), nchunk, count, sums, start)
+        cuda_launch(scan_buckets, 1, SCAN_THREADS, nb, count, start, cursor)
         cuda_launch(scatter, *grid(n), n, key, start, cursor, order)
 
     return sort_cuda

@@ -100,7 +100,8 @@ class DEMSystem:
         self._bodies: list[_Body] = []
         self._walls: list[np.ndarray] = []
         self._built = False
-        self._dirty = True
+        self._dirty = True          # no sphere contact forces yet: place, sort and contact before the first kick
+        self._loads_stale = False   # the body forces lack new external loads: sum them again before the kick
         self.time_s = 0.0
         self.substeps_taken = 0
         self.last_substeps = 0
@@ -139,7 +140,7 @@ class DEMSystem:
         self.water = water
         if self._built:
             self._put("env", self._env_row())
-            self._dirty = True
+            self._loads_stale = True
 
     def set_external(self, body: int, force_N=None, torque_N_m=None):
         """Hold F_fluid and M_fluid (paper eqs. 13-14) on a body over the sub-steps of the following steps."""
@@ -150,7 +151,7 @@ class DEMSystem:
             if torque_N_m is not None:
                 ext[body, 3:] = torque_N_m
             self._put("ext", ext)
-            self._dirty = True
+            self._loads_stale = True
         else:
             if force_N is not None:
                 self._bodies[body].ext_force = np.asarray(force_N, dtype=float)
@@ -171,7 +172,7 @@ class DEMSystem:
                 body.ext_force, body.ext_torque = force_N[b].copy(), torque_N_m[b].copy()
             return
         self._put("ext", np.concatenate([force_N, torque_N_m], axis=1))
-        self._dirty = True
+        self._loads_stale = True
 
     def device(self, name: str):
         """The target array ``name`` of the system (``pos``, ``quat``, ``vel``, ``omega``, ``ext``, ...; shapes as
@@ -182,9 +183,9 @@ class DEMSystem:
         return self._d[name]
 
     def external_loads_changed(self):
-        """The external loads (``device("ext")``) were written on the target: the next step re-evaluates the
-        forces before its first kick."""
-        self._dirty = True
+        """The external loads (``device("ext")``) were written on the target: the next step sums the body forces
+        again (the stored sphere contact forces with the new loads) before its first kick."""
+        self._loads_stale = True
 
     # ------------------------------------------------------------------ build
     @property
@@ -265,6 +266,7 @@ class DEMSystem:
         h["senergy"] = np.zeros(ns, dtype=real)
         h["snew"] = np.zeros(ns, dtype=np.int64)
         h["sover"] = np.zeros(ns, dtype=np.int64)
+        h["scount"] = np.zeros(ns, dtype=np.int64)
         walls = np.array(self._walls, dtype=real) if self._walls else np.zeros((1, 6), dtype=real)
         h["walls"] = walls
         h["params"] = np.array([self.ice_ice.row(), self.ice_ship.row()], dtype=real)
@@ -333,7 +335,7 @@ class DEMSystem:
 
     def _forces(self, h: float, kick: int):
         d, k, r = self._d, self._k, self.real
-        nb, ns = self.n_bodies, len(self._h["srad"])
+        ns = len(self._h["srad"])
         k["place"](ns, d["soff"], d["sbody"], d["pos"], d["quat"], d["xs"], d["key"], r(self._inv_cell),
                    np.int64(self._mask))
         k["sort"](ns, d["key"], d["start"], d["count"], d["cursor"], d["order"])
@@ -345,10 +347,16 @@ class DEMSystem:
                      d["walls"], np.int64(len(self._walls)), d["params"], r(h), *old, *new, d["sforce"],
                      d["storque"], d["senergy"], d["snew"], d["sover"])
         self._cur = nxt
-        k["gather"](nb, r(h), np.int64(kick), d["bfirst"], d["bcount"], d["sforce"], d["storque"], d["mass"],
-                    d["kin"], d["ext"], d["env"], d["pos"], d["quat"], d["vel"], d["omega"], d["angmom"], d["volume"],
-                    d["blen"], d["bhalf"], d["vfirst"], d["vcount"], d["voff"], d["vvol"], d["bcontact"], d["bcsum"],
-                    d["force"], d["torque"], d["inv_meff"])
+        self._gather(h, kick)
+
+    def _gather(self, h: float, kick: int):
+        """Body forces from the sphere contact forces, the external loads and the water; a kick (``kick`` 1)
+        also half-kicks the velocities and adds the contact loads to the sub-step sums."""
+        d, r = self._d, self.real
+        self._k["gather"](self.n_bodies, r(h), np.int64(kick), d["bfirst"], d["bcount"], d["sforce"], d["storque"],
+                          d["mass"], d["kin"], d["ext"], d["env"], d["pos"], d["quat"], d["vel"], d["omega"],
+                          d["angmom"], d["volume"], d["blen"], d["bhalf"], d["vfirst"], d["vcount"], d["voff"],
+                          d["vvol"], d["bcontact"], d["bcsum"], d["force"], d["torque"], d["inv_meff"])
 
     def _substep(self, h: float):
         d, r = self._d, self.real
@@ -361,7 +369,13 @@ class DEMSystem:
         if not self._built:
             self._build()
         self._forces(0.0, 0)
-        self._dirty = False
+        self._dirty = self._loads_stale = False
+
+    def _regather(self):
+        """The body forces again from the sphere contact forces of the last sub-step and the loads now (new
+        external loads, water): the spheres have not moved since, so their contacts need no second evaluation."""
+        self._gather(0.0, 0)
+        self._loads_stale = False
 
     def step(self, dt_s: float, substeps: int | None = None, accumulate: bool = False) -> int:
         """Advance by ``dt_s`` seconds in sub-steps (automatic from the stiffness, or ``substeps`` forced).
@@ -389,6 +403,8 @@ class DEMSystem:
                     f"use substeps >= {need} (or leave substeps unset), a smaller dt_s, or softer contacts")
         if self._dirty:
             self.prime()
+        elif self._loads_stale:
+            self._regather()
         h = dt_s / n
         if not accumulate:
             self.target.fill(self._d["bcsum"], 0)
@@ -418,7 +434,7 @@ class DEMSystem:
         out["time_s"] = np.float64(self.time_s)
         out["substeps_taken"] = np.int64(self.substeps_taken)
         out["last_substeps"] = np.int64(self.last_substeps)
-        out["primed"] = np.int8(0 if self._dirty else 1)
+        out["primed"] = np.int8(0 if self._dirty else 2 if self._loads_stale else 1)
         return out
 
     def load_state(self, state: dict):
@@ -437,7 +453,8 @@ class DEMSystem:
         self.time_s = float(state["time_s"])
         self.substeps_taken = int(state["substeps_taken"])
         self.last_substeps = int(state["last_substeps"])
-        self._dirty = not bool(state["primed"])
+        primed = int(state["primed"])  # 0: contacts to evaluate; 1: forces current; 2: loads to sum again
+        self._dirty, self._loads_stale = primed == 0, primed == 2
 
     def _load(self, key, name, value):
         value = np.asarray(value)
@@ -486,12 +503,9 @@ class DEMSystem:
         m = self._h["mass"].astype(float)
         v = self.velocities
         e = 0.5 * (m[dyn] * (v[dyn] ** 2).sum(axis=1)).sum()
-        q, L = self.quaternions, self.angular_momenta
-        inertia = self._h["inertia"].astype(float)
-        for b in np.flatnonzero(dyn):
-            lb = matrix_from_quaternion(q[b]).T @ L[b]
-            e += 0.5 * (lb**2 / inertia[b]).sum()
-        return float(e)
+        q, L = self.quaternions[dyn], self.angular_momenta[dyn]
+        lb = np.einsum("bji,bj->bi", matrix_from_quaternion(q), L)     # angular momentum in the body frame
+        return float(e + 0.5 * (lb ** 2 / self._h["inertia"][dyn].astype(float)).sum())
 
     def potential_energy(self) -> float:
         """Elastic energy stored in the contact springs plus gravity (-m g.x) of the dynamic bodies, J."""
@@ -531,11 +545,13 @@ class DEMSystem:
         return self.contact_force_on(body)
 
     def contact_count(self) -> int:
-        """Contacts now: sphere pairs once, sphere-wall contacts once."""
-        hp, hn = self._get("hp_" + self._cur), self._get("hn_" + self._cur)
-        used = np.arange(hp.shape[1])[None, :] < hn[:, None]
-        p = hp[used]
-        return int((p >= 0).sum() // 2 + (p < 0).sum())
+        """Contacts now: sphere pairs once, sphere-wall contacts once (counted per sphere on the target: one
+        integer per sphere is read, not the contact history)."""
+        if not self._built:
+            self._build()
+        d = self._d
+        self._k["count"](len(self._h["srad"]), d["hp_" + self._cur], d["hn_" + self._cur], d["scount"])
+        return int(self._get("scount").sum() // 2)
 
     def collision_count(self) -> int:
         """Contacts begun since the start (sphere pairs and sphere-wall), a count of collisions."""

@@ -37,6 +37,7 @@ from iceresist.backends.launch import BlockLauncher, CellLauncher, copy_into
 from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
 from iceresist.freesurface.bulk import FrozenBulk
+from iceresist.freesurface.columns import SurfaceColumns
 from iceresist.freesurface.extension import extension_launcher, extend_velocity
 from iceresist.freesurface.layout import HALO1_SIDE, HAS_GAS, HAS_LIQUID, build_halo_or, build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
@@ -367,6 +368,7 @@ class FreeSurfaceFluid:
         self._phases = self._to_target(np.zeros(self.nblocks, np.int8))
         self._near = self._to_target(np.zeros(self.nblocks, np.int8))
         self._probe = None  # the watchdog's FluidProbe, made at the first probe()
+        self._columns = None  # the surface height map's SurfaceColumns, made at the first surface_height()
         self._bulk = FrozenBulk(self.phase, exchange=self._exchange_blocks) if frozen_bulk else None
         #: The :class:`~iceresist.parallel.decomposition.Decomposition` of a fluid split over MPI ranks (set by its
         #: owner), or None. On several ranks the dense views (:meth:`phi`, :meth:`macroscopic`, :meth:`velocity`,
@@ -600,7 +602,12 @@ class FreeSurfaceFluid:
         a body covers (GHOST) counts as phi = 1, so the surface runs over the top of a floating body (within half
         a cell) rather than through the phi that the coupling mirrors into it; a column through a body that
         stands out of the water then reads the body's top. Only the layers of blocks that can hold the crossing
-        are made dense (:func:`surface_window`)."""
+        are made dense (:func:`surface_window`); on one process the columns are walked on the target
+        (:mod:`iceresist.freesurface.columns`) and only the map is read."""
+        if self.decomp is None:
+            if self._columns is None:
+                self._columns = SurfaceColumns(self.forest, self.target)
+            return self._columns.height(self.phase.phi, self.fluid.flags, covered_as_water)
         phi = self.phase.phi_host().astype(np.float64)
         if covered_as_water:
             phi[(np.asarray(self._host(self.fluid.flags)) & FL.GHOST) != 0] = 1.0

@@ -34,6 +34,7 @@ from abc import abstractmethod
 
 import numpy as np
 
+from iceresist.backends.graphs import StepReplay
 from iceresist.errors import InputError
 from iceresist.models.base import array_bytes
 from iceresist.models.fluid import check_block_shape, resolve_target
@@ -223,6 +224,8 @@ class Tier2Model(Tier2Ship):
         self._force_last = np.zeros(3)
         self._fluid_mean = np.zeros(3)
         self.water_volume0_m3 = self.fb.water_volume_m3()
+        #: on a GPU (one process) the coupled step is replayed as a CUDA graph (:mod:`iceresist.backends.graphs`)
+        self.replay = StepReplay(self.target, enabled=self.decomp is None)
         log.info("tier 2: %d cells %s, dx %.4g m, dt %.4g s (%d per record), tau %.6g, g_lattice %.3g, "
                  "ship %.3g cells/step; %s, %d hull spheres", self.cells, self.shape_cells, dx,
                  self.lbm_dt_s, self.lbm_steps_per_record, tau, g_lat, self.speed_m_s * self.lbm_dt_s / dx,
@@ -250,7 +253,7 @@ class Tier2Model(Tier2Ship):
             self.fb.coupling.reset_fluid_load_sum()
             subs = 0
             for _ in range(self.lbm_steps_per_record):
-                self.fb.step(1, accumulate_contacts=True)
+                self.replay.run(self._coupled_step)
                 subs += self.dem.last_substeps
             self._iteration += 1
             self.lbm_steps += self.lbm_steps_per_record
@@ -258,6 +261,9 @@ class Tier2Model(Tier2Ship):
             self._force_mean = self.dem.contact_sum_on(hb)[:3] / max(subs, 1)
             self._fluid_mean = self.fb.coupling.take_fluid_load_sum()[hb, :3] / self.lbm_steps_per_record
         self._force_last = self.dem.ice_force_on(hb)
+
+    def _coupled_step(self):
+        self.fb.step(1, accumulate_contacts=True)
 
     def fields(self) -> dict:
         """Dense fields (physical units): rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge

@@ -98,6 +98,13 @@ class Target:
         else:
             a[...] = value
 
+    def fill3(self, a, va, b, vb, c, vc):
+        """:meth:`fill` of three target arrays at once: one launch on CUDA."""
+        if self.is_cuda:
+            launch.fill3(self, a, va, b, vb, c, vc)
+        else:
+            a[...], b[...], c[...] = va, vb, vc
+
     def copy(self, dst, src):
         """Copy the target array ``src`` into ``dst`` (same shape) on the target: device to device on CUDA."""
         if self.is_cuda:

@@ -461,6 +461,27 @@ def fill(target, a, value):
     _filler(target)(int(a.size), flat, a.dtype.type(value))
 
 
+def _fill3_item(i, a, va, b, vb, c, vc):
+    if i < a.size:
+        a[i] = va
+    if i < b.size:
+        b[i] = vb
+    if i < c.size:
+        c[i] = vc
+
+
+@lru_cache(maxsize=None)
+def _filler3(target):
+    return ItemLauncher(target, target.device(_fill3_item), ("a", "va", "b", "vb", "c", "vc"), label="fill")
+
+
+def fill3(target, a, va, b, vb, c, vc):
+    """:func:`fill` of three contiguous target arrays (any sizes and types) in one launch."""
+    flat = [x.reshape(x.size) for x in (a, b, c)]
+    _filler3(target)(max(int(x.size) for x in (a, b, c)), flat[0], a.dtype.type(va), flat[1], b.dtype.type(vb),
+                     flat[2], c.dtype.type(vc))
+
+
 def build_accumulate(target):
     """``accumulate(a, i, j, v)``: a[i, j] += v; atomic on CUDA (where threads share the row)."""
     if target.is_cuda:

@@ -266,14 +266,14 @@ class FluidStructureCoupling:
             self._lay_out_rows()
         rows, nb = len(self._rows), self.forest.nblocks
         d["box"], d["box_prev"] = d["box_prev"], d["box"]
+        d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]
+        # the step's resets in one launch: active blocks, the cells' owners now, the blocks' cover events
+        t.fill3(d["active"], 0, d["owner"], -1, d["evt"], 0)
         self._body_rows(d["rows"], rows, d["body"], d["bint"], d["box"])
-        t.fill(d["active"], 0)
         s["active_rows"](rows, d["rows"], d["bint"], d["box_prev"], np.int64(self._boxes_valid), d["grid"],
                          d["nblocks3"], d["block_map"], d["active"])
         self._boxes_valid = True
         body, bint, active = d["body"], d["bint"], d["active"]
-        d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]
-        t.fill(d["owner"], -1)
         f, flags = self.solver.state, self.solver.flags
         k["mark"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
         if not self._placed:        # first step with a free surface: the bodies are placed, not moved in
@@ -281,7 +281,6 @@ class FluidStructureCoupling:
             self._placed = True
         Fx, Fy, Fz = (real(v) for v in self.solver.force)
         evt = d["evt"]
-        t.fill(evt, 0)
         # On the CPU the refill visits only the active blocks where a cell changed cover (a body's box holds many
         # blocks where none did: the quick hull's 1 600); on CUDA, where the step is bound by its launches, the
         # refill's threads of the other blocks return at once instead.

@@ -53,6 +53,7 @@ SCRIPT = textwrap.dedent("""
     s.add_body(sphere(0.01, 1000.0), (0.0205, 0, 0), (-0.5, 0, 0))
     s.add_wall((-0.05, 0, 0), (1, 0, 0))
     s.step(0.001)
+    s.contact_count()
     stats = {n: [len(f.kernel.stats.cache_hits), len(f.kernel.stats.cache_misses)]
              for n, f in s._k.items() if n != "sort"}
     print(json.dumps({"stats": stats, "x": s.positions[:, 0].tolist()}))
@@ -70,7 +71,7 @@ def test_second_process_loads_the_dem_kernels_from_the_cache(capsys):
     env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), env.get("PYTHONPATH", "")])
     run = subprocess.run([sys.executable, "-c", SCRIPT], env=env, check=True, capture_output=True, text=True)
     there = json.loads(run.stdout.strip().splitlines()[-1])
-    assert set(there["stats"]) == {"drift", "place", "contact", "gather"}
+    assert set(there["stats"]) == {"drift", "place", "contact", "gather", "count"}
     for name, (hits, misses) in there["stats"].items():
         assert hits == 1 and misses == 0, name  # loaded, not compiled
     assert there["x"] == here["x"]

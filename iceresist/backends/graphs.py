@@ -36,6 +36,8 @@ log = logging.getLogger(__name__)
 
 #: Graphs kept per replayed step (least recently used dropped): the two buffer parities and a few shapes.
 CACHE = 8
+#: Signatures met once that are remembered (then forgotten all at once).
+SEEN = 64
 
 
 def graphs_wanted() -> bool:
@@ -92,6 +94,8 @@ class StepReplay:
                 while len(self._graphs) > CACHE:
                     self._graphs.popitem(last=False)
         if entry is None:
+            if len(self._seen) >= SEEN:     # signatures that never came back: forget them
+                self._seen.clear()
             self._seen.add(sig)
             launch.make(calls)
             self.direct += 1

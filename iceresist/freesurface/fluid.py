@@ -369,7 +369,8 @@ class FreeSurfaceFluid:
         self._near = self._to_target(np.zeros(self.nblocks, np.int8))
         self._probe = None  # the watchdog's FluidProbe, made at the first probe()
         self._columns = None  # the surface height map's SurfaceColumns, made at the first surface_height()
-        self._bulk = FrozenBulk(self.phase, exchange=self._exchange_blocks) if frozen_bulk else None
+        self._bulk = (FrozenBulk(self.phase, exchange=self._exchange_blocks, split=lambda: self.decomp is not None)
+                      if frozen_bulk else None)
         #: The :class:`~iceresist.parallel.decomposition.Decomposition` of a fluid split over MPI ranks (set by its
         #: owner), or None. On several ranks the dense views (:meth:`phi`, :meth:`macroscopic`, :meth:`velocity`,
         #: :meth:`liquid`, :meth:`surface_height`) are the whole domain's on rank 0 and None on the other ranks

@@ -17,9 +17,9 @@ from iceresist.backends.buildcheck import REGISTER_FILE, float64_ops
 EXPECTED = {
     "f_update", "h_stream", "h_collide", "h_init", "velocity", "reflag", "extension", "water_volume", "probe",
     "pool_wet", "pool_fill", "lbm_stream_collide", "block_phases", "block_phases_near",
-    "mark", "links", "refill_fs", "redistribute_fs", "body_rows", "active_rows", "row_sums", "fluid_loads",
+    "mark", "links", "refill_fs", "redistribute_fs", "body_rows", "row_sums", "fluid_loads",
     "near_events", "fill",
-    "dem_drift", "dem_place", "dem_contact", "dem_gather", "zero", "count_k", "scan_buckets", "scatter", "level_transfer", "ghost_phase", "bulk_roles", "bulk_settle", "halo_pack", "halo_unpack",
+    "dem_drift", "dem_place", "dem_contact", "dem_gather", "scan_buckets", "scatter", "level_transfer", "ghost_phase", "bulk_roles", "bulk_settle", "halo_pack", "halo_unpack",
 }
 
 

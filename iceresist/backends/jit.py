@@ -98,12 +98,12 @@ class Target:
         else:
             a[...] = value
 
-    def fill3(self, a, va, b, vb, c, vc):
-        """:meth:`fill` of three target arrays at once: one launch on CUDA."""
+    def fill4(self, a, va, b, vb, c, vc, d, vd):
+        """:meth:`fill` of four target arrays at once: one launch on CUDA."""
         if self.is_cuda:
-            launch.fill3(self, a, va, b, vb, c, vc)
+            launch.fill4(self, a, va, b, vb, c, vc, d, vd)
         else:
-            a[...], b[...], c[...] = va, vb, vc
+            a[...], b[...], c[...], d[...] = va, vb, vc, vd
 
     def copy(self, dst, src):
         """Copy the target array ``src`` into ``dst`` (same shape) on the target: device to device on CUDA."""

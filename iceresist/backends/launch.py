@@ -461,25 +461,56 @@ def fill(target, a, value):
     _filler(target)(int(a.size), flat, a.dtype.type(value))
 
 
-def _fill3_item(i, a, va, b, vb, c, vc):
+def _fill4_item(i, a, va, b, vb, c, vc, d, vd):
     if i < a.size:
         a[i] = va
     if i < b.size:
         b[i] = vb
     if i < c.size:
         c[i] = vc
+    if i < d.size:
+        d[i] = vd
 
 
 @lru_cache(maxsize=None)
-def _filler3(target):
-    return ItemLauncher(target, target.device(_fill3_item), ("a", "va", "b", "vb", "c", "vc"), label="fill")
+def _filler4(target):
+    return ItemLauncher(target, target.device(_fill4_item), ("a", "va", "b", "vb", "c", "vc", "d", "vd"),
+                        label="fill")
 
 
-def fill3(target, a, va, b, vb, c, vc):
-    """:func:`fill` of three contiguous target arrays (any sizes and types) in one launch."""
-    flat = [x.reshape(x.size) for x in (a, b, c)]
-    _filler3(target)(max(int(x.size) for x in (a, b, c)), flat[0], a.dtype.type(va), flat[1], b.dtype.type(vb),
-                     flat[2], c.dtype.type(vc))
+def fill4(target, a, va, b, vb, c, vc, d, vd):
+    """:func:`fill` of four contiguous target arrays (any sizes and types) in one launch."""
+    arrays = (a, b, c, d)
+    flat = [x.reshape(x.size) for x in arrays]
+    _filler4(target)(max(int(x.size) for x in arrays), flat[0], a.dtype.type(va), flat[1], b.dtype.type(vb),
+                     flat[2], c.dtype.type(vc), flat[3], d.dtype.type(vd))
+
+
+@lru_cache(maxsize=None)
+def build_block_sum6(real, threads: int):
+    """CUDA device function ``block_sum6(t, a0, ..., a5)``: the six sums of the values of the ``threads`` threads of
+    a thread block (``t`` its thread index; ``threads`` a power of two), returned to every thread: a tree in shared
+    memory, always added in the same order (the same sums on every run, unlike atomics). Every thread of the block
+    must call it."""
+    if threads & (threads - 1):
+        raise ValueError(f"block_sum6 needs a power of two threads, not {threads}")
+    ns = {"cuda": cuda_api(), "real": real, "T": int(threads)}   # cuda: a global, for the simulator
+    exec("def block_sum6(t, a0, a1, a2, a3, a4, a5):\n"
+         "    sh = cuda.shared.array((6, T), real)\n"
+         "    sh[0, t] = a0\n    sh[1, t] = a1\n    sh[2, t] = a2\n"
+         "    sh[3, t] = a3\n    sh[4, t] = a4\n    sh[5, t] = a5\n"
+         "    cuda.syncthreads()\n"
+         "    d = T // 2\n"
+         "    while d > 0:\n"
+         "        if t < d:\n"
+         "            for a in range(6):\n"
+         "                sh[a, t] += sh[a, t + d]\n"
+         "        cuda.syncthreads()\n"
+         "        d //= 2\n"
+         "    out = (sh[0, 0], sh[1, 0], sh[2, 0], sh[3, 0], sh[4, 0], sh[5, 0])\n"
+         "    cuda.syncthreads()\n"
+         "    return out\n", ns)
+    return cuda_api().jit(ns["block_sum6"], device=True)
 
 
 def build_accumulate(target):

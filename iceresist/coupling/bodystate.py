@@ -10,13 +10,15 @@ Four per-item passes keep a coupled step on the device: nothing per body crosses
   rows gives row j of m the run ``run_of`` of its box's cells (``bint[r, 10:12]``, cells counted x fastest) and
   the planes that run touches as the row's box. The first row of a body writes the whole box to ``box[body]``.
 * ``active_row(r, ...)``: flags ``active[block] = 1`` for every block the row's cell box of this step and of the
-  previous one touch, dilated by one cell (the blocks where cells may be covered or uncovered).
+  previous one touch, dilated by one cell (the blocks where cells may be covered or uncovered). A step runs both
+  passes of a row in one item, ``body_row_active`` (each reads only the ``bint`` row its own item wrote).
 * ``row_sums(k, ...)`` (one item per body): F_s(t), M_s(t) (eqs. 18-19, lattice units) and the link count of
   body k summed over its rows into ``now[k]``, ``links[k]``; the rows are zeroed for the next links pass;
 * ``fluid_loads(k, ...)`` (one item per body): F_fluid = (F_s(t) + F_s(t - dt)) / 2 and M_fluid likewise
   (eqs. 20-21) in newtons and newton metres into ``fluid[k]``, added to ``fluid_sum[k]`` (records average it),
   and written as the DEM's external load (eqs. 13-14) less the buoyancy ``buoy[k]`` = rho_f V g (zero where the
-  fluid carries the hydrostatic pressure); ``fprev[k]`` keeps F_s(t) for the next step.
+  fluid carries the hydrostatic pressure); ``fprev[k]`` keeps F_s(t) for the next step. On one process a step runs
+  both body passes of a body in one item, ``row_loads`` (no sum over ranks between them).
 
 ``rows[r] = (body, run, runs)`` lists the launch rows (:func:`iceresist.coupling.coupler.tile_rows`).
 ``conv`` (float64): origin x, y, z (m), dx (m), dt / dx (s/m), dt (s). ``grid`` (int64): nx, ny, nz, and 1 for
@@ -31,13 +33,17 @@ import numpy as np
 
 BODY_ROW_ARGS = ("rows", "pos", "quat", "vel", "omega", "shape_int", "par_lat", "half_lat", "conv", "grid", "body",
                  "bint", "box")
-ACTIVE_ROW_ARGS = ("rows", "bint", "box_prev", "has_prev", "grid", "nblocks3", "block_map", "active")
+#: ``body_row`` then ``active_row`` of the same row: one launch of a step.
+BODY_ROW_ACTIVE_ARGS = BODY_ROW_ARGS + ("box_prev", "has_prev", "nblocks3", "block_map", "active")
 ROW_SUMS_ARGS = ("row_ptr", "row_idx", "bforce", "btorque", "nlinks", "now", "links")
 FLUID_LOADS_ARGS = ("now", "has_prev", "fprev", "load_scale", "buoy", "ext", "fluid", "fluid_sum")
+#: ``row_sums`` then ``fluid_loads`` of the same body: one launch of a step on one process.
+ROW_LOADS_ARGS = ROW_SUMS_ARGS + FLUID_LOADS_ARGS[1:]
 
 
 def build_body_state(target, real):
-    """Compile the device functions ``(body_row, active_row, row_sums, fluid_loads)`` (module docstring)."""
+    """Compile the device functions ``(body_row, body_row_active, row_sums, fluid_loads, row_loads)`` (module
+    docstring)."""
     int64, int32, f64 = np.int64, np.int32, np.float64
 
     def run_of(plane, nz, j, m):
@@ -141,6 +147,14 @@ def build_body_state(target, real):
                 mark_blocks(box_prev[k, 0], box_prev[k, 1], box_prev[k, 2] + s // plane, box_prev[k, 3],
                             box_prev[k, 4], box_prev[k, 2] + (e - 1) // plane, grid, nblocks3, block_map, active)
 
+    body_row_dev = target.device(body_row)
+    active_row_dev = target.device(active_row)
+
+    def body_row_active(r, rows, pos, quat, vel, omega, shape_int, par_lat, half_lat, conv, grid, body, bint, box,
+                        box_prev, has_prev, nblocks3, block_map, active):
+        body_row_dev(r, rows, pos, quat, vel, omega, shape_int, par_lat, half_lat, conv, grid, body, bint, box)
+        active_row_dev(r, rows, bint, box_prev, has_prev, grid, nblocks3, block_map, active)
+
     def row_sums(k, row_ptr, row_idx, bforce, btorque, nlinks, now, links):
         k = int64(k)
         fx, fy, fz, mx, my, mz = f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0)
@@ -181,8 +195,15 @@ def build_body_state(target, real):
             fluid[k, a] = load
             fluid_sum[k, a] += load
 
-    return (target.device(body_row), target.device(active_row), target.device(row_sums),
-            target.device(fluid_loads))
+    row_sums_dev = target.device(row_sums)
+    fluid_loads_dev = target.device(fluid_loads)
+
+    def row_loads(k, row_ptr, row_idx, bforce, btorque, nlinks, now, links, has_prev, fprev, load_scale, buoy, ext,
+                  fluid, fluid_sum):
+        row_sums_dev(k, row_ptr, row_idx, bforce, btorque, nlinks, now, links)
+        fluid_loads_dev(k, now, has_prev, fprev, load_scale, buoy, ext, fluid, fluid_sum)
+
+    return (body_row_dev, target.device(body_row_active), row_sums_dev, fluid_loads_dev, target.device(row_loads))
 
 
 def build_event_mask(target):
@@ -252,6 +273,67 @@ def build_reach_mask(target):
     return target.device(reach_mask)
 
 
+#: Threads of the CUDA ``row_loads``'s thread block per body (:func:`build_row_loads_cuda`).
+ROW_THREADS = 64
+
+
+def build_row_loads_cuda(target, fluid_loads):
+    """CUDA: the launch ``row_loads(n, *ROW_LOADS_ARGS)`` with one thread block of :data:`ROW_THREADS` threads per
+    body: the threads sum (and zero) strided runs of the body's rows, a shared-memory tree adds their sums in a fixed
+    order, and thread 0 writes ``now``, ``links`` and the fluid loads (``fluid_loads``). The hull's hundreds of rows
+    are then summed by 64 threads, not one."""
+    from iceresist.backends.jit import cuda_api
+    from iceresist.backends.launch import build_block_sum6, cuda_launch, profiled
+
+    f64 = np.float64
+    block_sum6 = build_block_sum6(f64, ROW_THREADS)
+    nt, zero = ROW_THREADS, f64(0.0)
+    ns = {"cuda": cuda_api(), "block_sum6": block_sum6, "body_loads": fluid_loads, "nt": nt, "zero": zero,
+          "int64": np.int64, "f64": f64}   # cuda: a global of the kernel, for the simulator
+    exec("""def fluid_loads(n, row_ptr, row_idx, bforce, btorque, nlinks, now, links, has_prev, fprev, load_scale, buoy,
+                ext, fluid, fluid_sum):
+    k = cuda.blockIdx.x
+    t = cuda.threadIdx.x
+    fx = zero
+    fy = zero
+    fz = zero
+    mx = zero
+    my = zero
+    mz = zero
+    nl = zero
+    for i in range(row_ptr[k] + t, row_ptr[k + 1], nt):
+        r = row_idx[i]
+        fx += bforce[r, 0]
+        fy += bforce[r, 1]
+        fz += bforce[r, 2]
+        mx += btorque[r, 0]
+        my += btorque[r, 1]
+        mz += btorque[r, 2]
+        nl += f64(nlinks[r, 0])
+        for a in range(3):
+            bforce[r, a] = zero
+            btorque[r, a] = zero
+        nlinks[r, 0] = 0
+    fx, fy, fz, mx, my, mz = block_sum6(t, fx, fy, fz, mx, my, mz)
+    nl, _, _, _, _, _ = block_sum6(t, nl, zero, zero, zero, zero, zero)
+    if t == 0:
+        now[k, 0] = fx
+        now[k, 1] = fy
+        now[k, 2] = fz
+        now[k, 3] = mx
+        now[k, 4] = my
+        now[k, 5] = mz
+        links[k] = int64(nl)
+        body_loads(k, now, has_prev, fprev, load_scale, buoy, ext, fluid, fluid_sum)
+""", ns)
+    kern = target.kernel(ns["fluid_loads"], threads=nt)   # the build check and the launch budget name it so
+
+    def launch(n, *args):
+        cuda_launch(kern, int(n), nt, np.int64(n), *args)
+
+    return profiled("fluid_loads", launch)
+
+
 _LAUNCHERS: dict = {}
 
 #: Modules whose source decides the compiled body-state launchers (the key of their on-disk kernel cache).
@@ -259,9 +341,9 @@ KEY_MODULES = ("iceresist.coupling.bodystate", "iceresist.freesurface.layout")
 
 
 def body_state_launchers(target, real) -> dict:
-    """``{"body_rows", "active_rows", "row_sums", "fluid_loads", "near_events", "changed_blocks"}``: launchers
-    over launch rows, launch rows, bodies, bodies and forest blocks (the last two), cached per target and
-    precision. ``near_events`` gathers the event flags of each block and its 26 neighbours into a bit mask
+    """``{"body_rows", "row_sums", "fluid_loads", "row_loads", "near_events", "changed_blocks"}``: launchers over
+    launch rows (``body_row`` and ``active_row`` of each), bodies (three) and forest blocks (the last two), cached
+    per target and precision. ``near_events`` gathers the event flags of each block and its 26 neighbours into a bit mask
     (:func:`build_event_mask`; the blocks a redistribution reaches); ``changed_blocks`` flags the active blocks
     where a cell changed cover (:func:`build_changed_blocks`)."""
     key = (target.name, target.simulator, np.dtype(real).name)
@@ -269,15 +351,17 @@ def body_state_launchers(target, real) -> dict:
         from iceresist.backends import cache
         from iceresist.backends.launch import BlockLauncher
 
-        body_row, active_row, row_sums, fluid_loads = build_body_state(target, real)
+        _, body_row_active, row_sums, fluid_loads, row_loads = build_body_state(target, real)
         near = build_event_mask(target)
         changed = build_changed_blocks(target)
         k = None if target.is_cuda else cache.fingerprint(f"body_state|{np.dtype(real).name}", KEY_MODULES)
         _LAUNCHERS[key] = {
-            "body_rows": BlockLauncher(target, body_row, BODY_ROW_ARGS, label="body_rows", cache_key=k),
-            "active_rows": BlockLauncher(target, active_row, ACTIVE_ROW_ARGS, label="active_rows", cache_key=k),
+            "body_rows": BlockLauncher(target, body_row_active, BODY_ROW_ACTIVE_ARGS, label="body_rows",
+                                       cache_key=k),
             "row_sums": BlockLauncher(target, row_sums, ROW_SUMS_ARGS, label="row_sums", cache_key=k),
             "fluid_loads": BlockLauncher(target, fluid_loads, FLUID_LOADS_ARGS, label="fluid_loads", cache_key=k),
+            "row_loads": (build_row_loads_cuda(target, fluid_loads) if target.is_cuda else
+                          BlockLauncher(target, row_loads, ROW_LOADS_ARGS, label="fluid_loads", cache_key=k)),
             "near_events": BlockLauncher(target, near, ("evt", "nbr", "near"), label="near_events", cache_key=k),
             "changed_blocks": BlockLauncher(target, changed, ("active", "owner", "owner_prev", "full", "changed"),
                                             label="changed_blocks", cache_key=k),

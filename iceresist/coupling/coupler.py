@@ -168,7 +168,9 @@ class FluidStructureCoupling:
                    "fluid_sum": dev(np.zeros((n, 6))), "links": dev(np.zeros(n, np.int64)),
                    "active": dev(np.zeros(nb, np.int8)), "changed": dev(np.zeros(nb, np.int8)),
                    "evt": dev(np.zeros(nb, np.int32)),
-                   "near": dev(np.zeros(nb, np.int32))}
+                   "near": dev(np.zeros(nb, np.int32)),
+                   # the CUDA link list's count (kernels.LIST_ARGS); its rows are sized by _lay_out_rows
+                   "ncells": dev(np.zeros(2, np.int64))}
         self._k = coupling_launchers(self.target, self.real,
                                      None if self.surface is None else self.surface.phase.lat)
         self._s = body_state_launchers(self.target, self.real)
@@ -231,11 +233,33 @@ class FluidStructureCoupling:
             return None
         return self._rows[:, 0]
 
-    def _body_rows(self, rows_d, nrows, body, bint, box):
+    def _body_rows(self, rows_d, nrows, body, bint, box, has_prev=False):
+        """Each launch row's body in lattice units and its box (``body``, ``bint``, ``box``), and ``active`` on the
+        blocks its box of now and (``has_prev``) of the last step touch: one launch."""
         dem, d = self.dem, self._d
         self._s["body_rows"](nrows, rows_d, dem.device("pos"), dem.device("quat"), dem.device("vel"),
                              dem.device("omega"), d["shape_int"], d["par_lat"], d["half_lat"], d["conv"], d["grid"],
-                             body, bint, box)
+                             body, bint, box, d["box_prev"], np.int64(has_prev), d["nblocks3"], d["block_map"],
+                             d["active"])
+
+    def link_list_capacity(self) -> int:
+        """Cells the CUDA link list holds (:func:`iceresist.coupling.kernels.build_link_list`): the most cells of
+        the bodies' cell boxes in any orientation, each box at most 2 |h| + 5 cells along an axis (h the half
+        extents in cells) and no longer than the domain; the covered cells a links pass visits are a part of them."""
+        n = np.asarray(self.forest.shape_cells, dtype=np.int64)
+        side = 2 * np.ceil(np.linalg.norm(self._half_lat, axis=1)).astype(np.int64) + 5
+        return int(np.minimum(side[:, None], n[None, :]).prod(axis=1).sum())
+
+    def check_link_list(self):
+        """Raise where a links pass since the start found more cells than the CUDA link list holds (they were left
+        out of it): cannot happen with :meth:`link_list_capacity`; the models check it once a record, with the
+        watchdog's probe or the diagnostics (one read of two numbers)."""
+        if not self.target.is_cuda:
+            return
+        over = int(self._host(self._d["ncells"])[1])
+        if over:
+            raise RuntimeError(f"the coupling's link list of {self.link_list_capacity()} cells overflowed by {over} "
+                               "cells: their links were left out (an engine fault; please report it with the scene)")
 
     def _lay_out_rows(self):
         """The launch rows and the arrays sized by them; the slabs per body (where not set) from the cell boxes
@@ -256,26 +280,31 @@ class FluidStructureCoupling:
         d["body"], d["bint"] = dev(np.zeros((r, 21), real)), dev(np.zeros((r, 12), np.int32))
         d["bforce"], d["btorque"] = dev(np.zeros((r, 3))), dev(np.zeros((r, 3)))
         d["nlinks"] = dev(np.zeros((r, 1), np.int64))
+        if self.target.is_cuda and "cells" not in d:
+            cap = self.link_list_capacity()
+            d["cells"], d["svals"] = dev(np.zeros((cap, 2), np.int32)), dev(np.zeros(cap, real))
         self._rows = rows
 
     # ------------------------------------------------------------------ the step
-    def update_boundaries(self):
-        """Passes 1-4 of a coupling step (module docstring): cells, refill, mass, links and F_s(t), M_s(t)."""
+    def update_boundaries(self, sums: bool = True):
+        """Passes 1-4 of a coupling step (module docstring): cells, refill, mass, links and F_s(t), M_s(t).
+        ``sums=False`` (one process): the links' rows are left for :meth:`step` to sum with the fluid loads in
+        one launch."""
         d, k, s, real, t = self._d, self._k, self._s, self.real, self.target
         if self._rows is None:
             self._lay_out_rows()
         rows, nb = len(self._rows), self.forest.nblocks
         d["box"], d["box_prev"] = d["box_prev"], d["box"]
         d["owner"], d["owner_prev"] = d["owner_prev"], d["owner"]
-        # the step's resets in one launch: active blocks, the cells' owners now, the blocks' cover events
-        t.fill3(d["active"], 0, d["owner"], -1, d["evt"], 0)
-        self._body_rows(d["rows"], rows, d["body"], d["bint"], d["box"])
-        s["active_rows"](rows, d["rows"], d["bint"], d["box_prev"], np.int64(self._boxes_valid), d["grid"],
-                         d["nblocks3"], d["block_map"], d["active"])
+        # the step's resets in one launch: active blocks, the cells' owners now, the blocks' cover events, the
+        # count of the link list (its overflow count kept)
+        t.fill4(d["active"], 0, d["owner"], -1, d["evt"], 0, d["ncells"][:1], 0)
+        self._body_rows(d["rows"], rows, d["body"], d["bint"], d["box"], has_prev=self._boxes_valid)
         self._boxes_valid = True
         body, bint, active = d["body"], d["bint"], d["active"]
         f, flags = self.solver.state, self.solver.flags
-        k["mark"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"])
+        listed = (d["cells"], d["svals"], d["ncells"]) if t.is_cuda else ()
+        k["mark"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], *listed)
         if not self._placed:        # first step with a free surface: the bodies are placed, not moved in
             t.copy(d["owner_prev"], d["owner"])
             self._placed = True
@@ -309,12 +338,18 @@ class FluidStructureCoupling:
             k["poison"](nb, active, d["flags0"], d["owner"], d["owner_prev"], f)
         # with a free surface the same walk mirrors phi into the covered cells near the surface
         mirror = () if self.surface is None else (self.surface.phase.phi,)
-        k["links"](rows, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
+        walk = ((len(d["svals"]), d["ncells"], d["cells"], d["svals"]) if t.is_cuda else (rows,))  # the list: CUDA
+        k["links"](*walk, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
                    d["bforce"], d["btorque"], d["nlinks"], flags, d["film"], np.int64(self.nowned), *mirror)
-        s["row_sums"](self.n, d["row_ptr"], d["row_idx"], d["bforce"], d["btorque"], d["nlinks"], d["now"],
-                      d["links"])
+        if not sums:
+            return
+        s["row_sums"](self.n, *self._row_args())
         if self.decomp is not None:
             self._sum_over_ranks()
+
+    def _row_args(self) -> tuple:
+        d = self._d
+        return d["row_ptr"], d["row_idx"], d["bforce"], d["btorque"], d["nlinks"], d["now"], d["links"]
 
     def step(self, n: int = 1, accumulate_contacts: bool = False):
         """``n`` coupled steps: boundaries and forces, one LBM step, DEM over dt with F_fluid held (eqs. 20-21);
@@ -323,13 +358,19 @@ class FluidStructureCoupling:
         The body state, the loads and the flags of the blocks to visit stay on the target: a step moves no array
         between host and device."""
         d, dem = self._d, self.dem
+        one = self.decomp is None
         for _ in range(int(n)):
-            self.update_boundaries()
+            # one process: the rows' sums wait for the fluid loads (one launch); several: summed over the ranks
+            self.update_boundaries(sums=not one)
             if self.after_boundaries is not None:
                 self.after_boundaries()
             (self.solver if self.surface is None else self.surface).step(1)
-            self._s["fluid_loads"](self.n, d["now"], np.int64(self._fprev_valid), d["fprev"], d["load_scale"],
-                                   d["buoy"], dem.device("ext"), d["fluid"], d["fluid_sum"])
+            loads = (np.int64(self._fprev_valid), d["fprev"], d["load_scale"], d["buoy"], dem.device("ext"),
+                     d["fluid"], d["fluid_sum"])
+            if one:
+                self._s["row_loads"](self.n, *self._row_args(), *loads)
+            else:
+                self._s["fluid_loads"](self.n, d["now"], *loads)
             self._fprev_valid = True
             dem.external_loads_changed()
             dem.step(self.units.dt_s, accumulate=accumulate_contacts)

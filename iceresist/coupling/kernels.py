@@ -29,7 +29,8 @@ Passes of one coupling step, each a launch:
    unchanged; the share goes into the rest population. Gathering (each cell writes only itself) makes it race-free;
    a cell whose 26 neighbours lie in no block with such a cell returns at once (the 27-bit ``near`` mask per block,
    :func:`iceresist.coupling.bodystate.build_event_mask`);
-4. ``links`` (per body over its cell box): for every covered cell y and direction q with a fluid cell
+4. ``links`` (per body over its cell box; on CUDA over the list of the covered cells near the surface that
+   ``mark`` appends to, :func:`build_link_list`): for every covered cell y and direction q with a fluid cell
    x = y + c_q, the link distance q_d in (0, 1] from x to the surface along -c_q (in closed form for spheres,
    boxes, convex polyhedra and their unions, :func:`iceresist.coupling.cellfunctions.build_link_root`), the
    interpolated bounce-back population of eq. (16) with the wall velocity
@@ -61,7 +62,8 @@ import math
 import numpy as np
 
 from iceresist.backends import cache
-from iceresist.backends.launch import ActiveLauncher, BodyLauncher, build_accumulate
+from iceresist.backends.jit import cuda_api as jit_cuda_api
+from iceresist.backends.launch import ActiveLauncher, BodyLauncher, ItemLauncher, build_accumulate
 from iceresist.coupling.bodystate import build_reach_mask
 from iceresist.coupling.cellfunctions import (MIRROR_DEPTH, build_geometry_functions, build_link_root,
                                               build_refill_functions)
@@ -88,6 +90,9 @@ REFILL_FS_ARGS = REFILL_ARGS + ("phi", "h", "valid")
 REDIST_FS_ARGS = ("active", "near", "borigin", "grid", "block_map", "flags0", "flags", "owner", "owner_prev", "f",
                   "phi", "h", "valid")
 LINK_FS_ARGS = LINK_ARGS + ("phi",)
+#: The CUDA link list (:func:`build_link_list`): ``cells[i] = (row, cell of the row's box run)`` (int32),
+#: ``svals[i]`` its signed distance, ``ncells[0]`` the cells listed this step (ncells[1]: those beyond the list).
+LIST_ARGS = ("cells", "svals", "ncells")
 #: Covered cells deeper than this (lattice units of signed distance) have no neighbour outside their body, so
 #: the links pass skips them (no link, no contact film).
 FILM_DEPTH = 2.0
@@ -419,6 +424,84 @@ KEY_MODULES = ("iceresist.coupling.kernels", "iceresist.coupling.runs", "iceresi
                "iceresist.grid.flags", "iceresist.lattice", "iceresist.lbm.boundary", "iceresist.freesurface.hlattice")
 
 
+def build_link_list(target, real, links_at, free_surface: bool):
+    """CUDA: ``(mark_listed, links_listed)``, the ``mark`` visit that also lists the covered cells the links pass acts
+    on, and the links pass over that list (one thread per listed cell instead of a walk over every cell of each
+    body's box, where most threads of a warp found nothing to do).
+
+    * ``mark_listed(k, gx, gy, gz, *MARK_ARGS, *LIST_ARGS)``: ``mark``; a cell it covers at a signed distance the
+      links pass acts on (above -FILM_DEPTH, or with a free surface at least -MIRROR_DEPTH for the mirror) takes
+      the next place of the list (an atomic count, so the order of the list is not fixed; a cell is listed once
+      per row of its body that visits it, as the box walk visits it);
+    * ``links_listed(i, ncells, cells, svals, *LINK_ARGS[, phi])``: ``links_at`` of listed cell i with its stored
+      signed distance (the bodies have not moved since ``mark``).
+
+    A cell beyond the list's length is counted in ``ncells[1]`` and not listed: the coupling sizes the list so
+    that this cannot happen and reports it if it does (:meth:`FluidStructureCoupling.check_link_list`)."""
+    lookup, sdf_at, _ = build_geometry_functions(target, real)
+    ns = {"cuda": jit_cuda_api()}   # a global of the function, so that the simulator can swap it
+    exec("def claim(a, j):\n    return cuda.atomic.add(a, j, 1)\n", ns)
+    claim = target.device(ns["claim"])
+    zero, half = real(0.0), real(0.5)
+    fdepth, mdepth = real(FILM_DEPTH), real(MIRROR_DEPTH)
+    fluid = FL.FLUID
+    fs = bool(free_surface)
+    int32, int64 = np.int32, np.int64
+    dev = target.device
+
+    @dev
+    def mark_listed(k, gx, gy, gz, bint, body, planes, grid, block_map, flags0, owner, cells, svals, ncells):
+        b, c = lookup(gx, gy, gz, grid, block_map)
+        if b < 0:
+            return
+        if (flags0[b, c] & fluid) == 0:
+            return
+        s = sdf_at(k, real(gx) + half, real(gy) + half, real(gz) + half, body, bint, planes, grid)
+        if s >= zero:
+            return
+        owner[b, c] = k
+        if s > -fdepth or (fs and s >= -mdepth):
+            i = claim(ncells, 0)
+            if i < cells.shape[0]:
+                nx = int64(bint[k, 6]) - bint[k, 3] + 1
+                ny = int64(bint[k, 7]) - bint[k, 4] + 1
+                cells[i, 0] = int32(k)
+                cells[i, 1] = int32((gx - bint[k, 3]) + nx * ((gy - bint[k, 4]) + ny * (gz - bint[k, 5])))
+                svals[i] = s
+            else:
+                claim(ncells, 1)
+
+    @dev
+    def listed(i, ncells, cells, bint):
+        """(row, gx, gy, gz) of listed cell i; row -1 past the end of this step's list."""
+        if i >= min(int64(ncells[0]), int64(cells.shape[0])):
+            return int64(-1), int64(0), int64(0), int64(0)
+        k = int64(cells[i, 0])
+        j = int64(cells[i, 1])
+        nx = int64(bint[k, 6]) - bint[k, 3] + 1
+        ny = int64(bint[k, 7]) - bint[k, 4] + 1
+        return k, bint[k, 3] + j % nx, bint[k, 4] + (j // nx) % ny, bint[k, 5] + j // (nx * ny)
+
+    if fs:
+        @dev
+        def links_listed(i, ncells, cells, svals, bint, body, planes, grid, block_map, flags0, owner, f, bforce,
+                         btorque, nlinks, flags, film, nowned, phi):
+            k, gx, gy, gz = listed(i, ncells, cells, bint)
+            if k >= 0:
+                links_at(k, gx, gy, gz, svals[i], bint, body, planes, grid, block_map, flags0, owner, f, bforce,
+                         btorque, nlinks, flags, film, nowned, phi)
+    else:
+        @dev
+        def links_listed(i, ncells, cells, svals, bint, body, planes, grid, block_map, flags0, owner, f, bforce,
+                         btorque, nlinks, flags, film, nowned):
+            k, gx, gy, gz = listed(i, ncells, cells, bint)
+            if k >= 0:
+                links_at(k, gx, gy, gz, svals[i], bint, body, planes, grid, block_map, flags0, owner, f, bforce,
+                         btorque, nlinks, flags, film, nowned)
+
+    return mark_listed, links_listed
+
+
 def variant_of(real, h_lattice=None, free_surface: bool = False) -> str:
     """The key of a launcher family: precision, free-surface flag and h lattice."""
     return f"{np.dtype(real).name}|fs={bool(free_surface)}|{None if h_lattice is None else h_lattice.name}"
@@ -438,15 +521,17 @@ def coupling_launchers(target, real, h_lattice=None):
         k = None if target.is_cuda else cache.fingerprint(variant_of(real, h_lattice, fs), KEY_MODULES)
         mark, links, refill, redist, poison, links_at = build_visits(target, real, free_surface=fs)
         link_args = LINK_FS_ARGS if fs else LINK_ARGS
-        launchers = {
-            "mark": (BodyLauncher(target, mark, MARK_ARGS, label="mark") if target.is_cuda else
-                     BodyLauncher(target, build_mark_run(real, MARK_ARGS), MARK_ARGS, per_row=True, label="mark",
-                                  cache_key=k)),
-            "links": (BodyLauncher(target, links, link_args, label="links") if target.is_cuda else
-                      BodyLauncher(target, build_link_run(real, links_at, link_args, LINK_DEPTH), link_args,
-                                   per_row=True, label="links", cache_key=k)),
-            "poison": ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k),
-        }
+        if target.is_cuda:     # mark lists the cells the links pass visits (build_link_list)
+            mark_listed, links_listed = build_link_list(target, real, links_at, fs)
+            launchers = {"mark": BodyLauncher(target, mark_listed, MARK_ARGS + LIST_ARGS, label="mark"),
+                         "links": ItemLauncher(target, links_listed, ("ncells", "cells", "svals") + link_args,
+                                               label="links")}
+        else:
+            launchers = {"mark": BodyLauncher(target, build_mark_run(real, MARK_ARGS), MARK_ARGS, per_row=True,
+                                              label="mark", cache_key=k),
+                         "links": BodyLauncher(target, build_link_run(real, links_at, link_args, LINK_DEPTH),
+                                               link_args, per_row=True, label="links", cache_key=k)}
+        launchers["poison"] = ActiveLauncher(target, poison, POISON_ARGS, label="poison", cache_key=k)
         if not fs:
             launchers["refill"] = ActiveLauncher(target, refill, REFILL_ARGS, label="refill", cache_key=k)
             launchers["redistribute"] = ActiveLauncher(target, redist, REDIST_ARGS, label="redistribute",

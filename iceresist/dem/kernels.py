@@ -5,14 +5,16 @@ DLM free rotor of :mod:`iceresist.dem.quaternion` for the rotation; paper eqs. 1
 
 1. ``drift`` (per body): v += h/2 F / (m + m_a), L += h/2 T, x += h v, free rotor over h, omega = R I^-1 R^T L;
    a kinematic body moves with its prescribed velocity and angular velocity instead;
-2. ``place`` (per sphere): world centre of each sphere and its cell-hash bucket;
+2. ``place`` (per sphere): world centre of each sphere and its cell-hash bucket (on CUDA also counted into the
+   bucket's tally, the grid sort's first pass);
 3. grid sort (:mod:`iceresist.dem.search`);
 4. ``contact`` (per sphere): gathers the contact forces on itself from the 27 neighbour cells and the walls,
    re-matches the tangential history by partner id, writes force, torque about its body's centre of mass
    and elastic energy; the pair is always evaluated from the lower sphere index so both partners compute
    bitwise the same force (Newton's third law holds exactly);
 5. ``gather`` (per body): sums its spheres' forces and torques (gather, no scatter), adds gravity, the held
-   external force/torque (F_fluid, M_fluid) and tier-1 hydrodynamics, and kicks v and L by the second half step.
+   external force/torque (F_fluid, M_fluid) and tier-1 hydrodynamics, and kicks v and L by the second half step
+   (on CUDA a thread block per body sums its spheres, :func:`build_gather_cuda`).
 
 The CPU launcher runs the item in a ``prange`` loop; the CUDA launcher gives each item one thread.
 """
@@ -25,15 +27,18 @@ from functools import partial
 import numpy as np
 
 from iceresist.backends import cache
-from iceresist.backends.launch import ItemLauncher, profiled
+from iceresist.backends.jit import cuda_api
+from iceresist.backends.launch import ItemLauncher, build_block_sum6, cuda_launch, profiled
 from iceresist.dem.contact import build_contact_force
 from iceresist.dem.hydro import build_hydro_force
 from iceresist.dem.quaternion import build_quaternion
-from iceresist.dem.search import build_cell_hash, build_cell_index, build_grid_sort
+from iceresist.dem.search import build_cell_hash, build_cell_index, build_grid_sort, build_tally
+
+cuda = cuda_api()  # cuda.blockIdx / cuda.threadIdx in the CUDA gather (a module global, for the simulator)
 
 DRIFT_ARGS = ["h", "pos", "vel", "vpred", "quat", "angmom", "omega", "inertia", "inv_meff", "kin", "pvel",
               "pomega", "force", "torque"]
-PLACE_ARGS = ["soff", "sbody", "pos", "quat", "xs", "key", "inv_cell", "mask"]
+PLACE_ARGS = ["soff", "sbody", "pos", "quat", "xs", "key", "inv_cell", "mask", "tally"]
 CONTACT_ARGS = ["xs", "srad", "sbody", "pos", "vpred", "omega", "inv_mdamp", "kin", "mat", "start", "count",
                 "order", "mask", "inv_cell", "walls", "n_walls", "params", "h",
                 "hp_old", "hxi_old", "hn_old", "hp_new", "hxi_new", "hn_new", "sforce", "storque", "senergy",
@@ -58,6 +63,7 @@ def build_items(target, real):
     hydro_force = build_hydro_force(target, real, rotate)
     cell_hash = build_cell_hash(target)
     cell_index = build_cell_index(target)
+    tally_sphere = build_tally(target)
 
     @target.device
     def drift(b, h, pos, vel, vpred, quat, angmom, omega, inertia, inv_meff, kin, pvel, pomega, force, torque):
@@ -100,7 +106,7 @@ def build_items(target, real):
         quat[b, 3] = qz
 
     @target.device
-    def place(i, soff, sbody, pos, quat, xs, key, inv_cell, mask):
+    def place(i, soff, sbody, pos, quat, xs, key, inv_cell, mask, tally):
         b = sbody[i]
         rx, ry, rz = rotate(quat[b, 0], quat[b, 1], quat[b, 2], quat[b, 3], soff[i, 0], soff[i, 1], soff[i, 2])
         x = pos[b, 0] + rx
@@ -109,7 +115,9 @@ def build_items(target, real):
         xs[i, 0] = x
         xs[i, 1] = y
         xs[i, 2] = z
-        key[i] = cell_hash(cell_index(x, inv_cell), cell_index(y, inv_cell), cell_index(z, inv_cell), mask)
+        k = cell_hash(cell_index(x, inv_cell), cell_index(y, inv_cell), cell_index(z, inv_cell), mask)
+        key[i] = k
+        tally_sphere(tally, k)
 
     @target.device
     def point_velocity(b, pos, vel, omega, px, py, pz):
@@ -327,6 +335,13 @@ def build_items(target, real):
         bcontact[b] = (contact force, contact torque); a kicking call (a sub-step) adds bcontact[b] to bcsum[b]."""
         fx, fy, fz = sphere_sum(sforce, bfirst[b], bfirst[b] + bcount[b])
         tx, ty, tz = sphere_sum(storque, bfirst[b], bfirst[b] + bcount[b])
+        body_loads(b, fx, fy, fz, tx, ty, tz, h, do_kick, mass, kin, ext, env, pos, quat, vel, omega, angmom, volume,
+                   blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff)
+
+    @target.device
+    def body_loads(b, fx, fy, fz, tx, ty, tz, h, do_kick, mass, kin, ext, env, pos, quat, vel, omega, angmom, volume,
+                   blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff):
+        """``gather`` of body b once its spheres' contact force (fx, fy, fz) and torque (tx, ty, tz) are summed."""
         bcontact[b, 0] = fx
         bcontact[b, 1] = fy
         bcontact[b, 2] = fz
@@ -384,7 +399,51 @@ def build_items(target, real):
             n += 1 if hp[i, k] >= 0 else 2
         scount[i] = n
 
-    return drift, place, contact, gather, count
+    return drift, place, contact, gather, count, body_loads
+
+
+#: Threads of the CUDA gather's thread block per body (:func:`build_gather_cuda`).
+GATHER_THREADS = 64
+
+
+def build_gather_cuda(target, real, body_loads):
+    """CUDA: the launch ``gather(n, *GATHER_ARGS)`` with one thread block of :data:`GATHER_THREADS` threads per
+    body: the threads sum strided runs of the body's spheres, a shared-memory tree adds their sums (in a fixed
+    order: the same sums on every run), and thread 0 finishes the body (``body_loads``). The hull's thousands of
+    spheres are then summed by 64 threads, not one."""
+    block_sum6 = build_block_sum6(real, GATHER_THREADS)
+    zero = real(0)
+    nt = GATHER_THREADS
+
+    def dem_gather(n, h, do_kick, bfirst, bcount, sforce, storque, mass, kin, ext, env, pos, quat, vel, omega,
+                   angmom, volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff):
+        b = cuda.blockIdx.x
+        t = cuda.threadIdx.x
+        s0 = bfirst[b]
+        fx = zero
+        fy = zero
+        fz = zero
+        tx = zero
+        ty = zero
+        tz = zero
+        for s in range(s0 + t, s0 + bcount[b], nt):
+            fx += sforce[s, 0]
+            fy += sforce[s, 1]
+            fz += sforce[s, 2]
+            tx += storque[s, 0]
+            ty += storque[s, 1]
+            tz += storque[s, 2]
+        fx, fy, fz, tx, ty, tz = block_sum6(t, fx, fy, fz, tx, ty, tz)
+        if t == 0:
+            body_loads(b, fx, fy, fz, tx, ty, tz, h, do_kick, mass, kin, ext, env, pos, quat, vel, omega, angmom,
+                       volume, blen, bhalf, vfirst, vcount, voff, vvol, bcontact, bcsum, force, torque, inv_meff)
+
+    kern = target.kernel(dem_gather, threads=nt)
+
+    def launch(n, *args):
+        cuda_launch(kern, int(n), nt, np.int64(n), *args)
+
+    return profiled("dem_gather", launch)
 
 
 #: CPU launches with fewer items than this run on one thread, per launcher. A launch on all threads waits
@@ -408,7 +467,8 @@ def build_launchers(target, real):
     runs with one thread (no wait for the workers; the prange build ran the contact pass about 1.5x faster on one
     thread than a plain ``range`` loop did). It compiles on its first call, from the on-disk kernel cache
     (:mod:`iceresist.backends.cache`) where that is on."""
-    items = dict(zip(("drift", "place", "contact", "gather", "count"), build_items(target, real)))
+    *fns, body_loads = build_items(target, real)
+    items = dict(zip(("drift", "place", "contact", "gather", "count"), fns))
     args = {"drift": DRIFT_ARGS, "place": PLACE_ARGS, "contact": CONTACT_ARGS, "gather": GATHER_ARGS,
             "count": COUNT_ARGS}
     key = None if target.is_cuda else cache.fingerprint(np.dtype(real).name, KEY_MODULES)
@@ -416,4 +476,6 @@ def build_launchers(target, real):
                                     parallel=partial(use_parallel, kind))
                  for kind, item in items.items()}
     launchers["sort"] = profiled("dem_sort", build_grid_sort(target))
+    if target.is_cuda:      # a thread block per body (the hull's spheres summed in parallel)
+        launchers["gather"] = build_gather_cuda(target, real, body_loads)
     return launchers

@@ -6,10 +6,12 @@ table of about two buckets per sphere, so the domain is unbounded and memory is 
 bucket (counts, exclusive prefix sum, scatter) gives ``start`` and ``count`` per bucket and the sorted sphere
 indices. Since two cells can share a bucket, the contact kernel checks each candidate's own cell.
 
-CPU: one serial pass (O(spheres + buckets), small beside the contact kernel). CUDA: four launches (docs/PERFORMANCE.md,
-the launch budget): counts zeroed, atomic counts, the exclusive scan in one thread block (each thread sums a run of
-buckets, the block scans the run sums in shared memory, each thread writes its run's starts and zeroes its
-cursors), and an atomic scatter (the order inside a bucket is then not fixed).
+CPU: one serial pass (O(spheres + buckets), small beside the contact kernel). CUDA: the spheres are counted into
+``tally`` by the pass that finds their buckets (``place``, :func:`build_tally`), then two launches
+(docs/PERFORMANCE.md, the launch budget): the exclusive scan in one thread block (each thread sums a run of buckets,
+the block scans the run sums in shared memory, each thread writes its run's starts and counts and zeroes its tallies
+and cursors, so ``tally`` is zero again for the next sort without a launch of its own), and an atomic scatter (the
+order inside a bucket is then not fixed).
 """
 
 from __future__ import annotations
@@ -57,8 +59,23 @@ def build_cell_index(target: Target):
     return cell_index
 
 
-def sort_cpu(n, key, start, count, cursor, order):
-    """Serial counting sort of sphere indices by bucket (the CPU body of :func:`build_grid_sort`)."""
+def build_tally(target: Target):
+    """``tally_sphere(tally, k)``: on CUDA one more sphere in bucket ``k`` (an atomic count, the sort's first pass
+    made by the pass that finds the bucket); on the CPU nothing (the serial sort counts)."""
+    if target.is_cuda:
+        ns = {"cuda": cuda_api()}   # a global of the function, so that the simulator can swap it
+        exec("def tally_sphere(tally, k):\n    cuda.atomic.add(tally, k, 1)\n", ns)
+        return target.device(ns["tally_sphere"])
+
+    def tally_sphere(tally, k):
+        pass
+
+    return target.device(tally_sphere)
+
+
+def sort_cpu(n, key, start, count, cursor, order, tally):
+    """Serial counting sort of sphere indices by bucket (the CPU body of :func:`build_grid_sort`; ``tally`` is
+    not used)."""
     count[:] = 0
     for i in range(n):
         count[key[i]] += 1
@@ -74,33 +91,22 @@ def sort_cpu(n, key, start, count, cursor, order):
 
 
 def build_grid_sort(target: Target):
-    """``sort(n, key, start, count, cursor, order)``: bucket counts, starts and sphere indices sorted by bucket."""
+    """``sort(n, key, start, count, cursor, order, tally)``: bucket counts, starts and sphere indices sorted by
+    bucket; on CUDA ``tally`` holds the spheres per bucket (counted by ``place``) and is left zero."""
     if not target.is_cuda:
         return cache.cpu_function(sort_cpu)
 
-    @target.kernel(threads=THREADS)
-    def zero(nb, a):
-        i = cuda.grid(1)
-        if i < nb:
-            a[i] = 0
-
-    @target.kernel(threads=THREADS)
-    def count_k(n, key, count):
-        i = cuda.grid(1)
-        if i < n:
-            cuda.atomic.add(count, key[i], 1)
-
     @target.kernel(threads=SCAN_THREADS)
-    def scan_buckets(nb, count, start, cursor):
-        """start = exclusive prefix sum of count, cursor = 0; one block of SCAN_THREADS threads (Hillis and Steele
-        1986 on the threads' run sums)."""
+    def scan_buckets(nb, tally, start, count, cursor):
+        """start = exclusive prefix sum of tally, count = tally, then tally = cursor = 0; one block of SCAN_THREADS
+        threads (Hillis and Steele 1986 on the threads' run sums)."""
         t = cuda.threadIdx.x
         per = (nb + SCAN_THREADS - 1) // SCAN_THREADS
         lo = min(t * per, nb)
         hi = min(lo + per, nb)
         own = 0
         for b in range(lo, hi):
-            own += count[b]
+            own += tally[b]
         part = cuda.shared.array(SCAN_THREADS, np.int32)
         part[t] = own
         cuda.syncthreads()
@@ -113,9 +119,12 @@ def build_grid_sort(target: Target):
             d *= 2
         run = part[t] - own
         for b in range(lo, hi):
+            m = tally[b]
             start[b] = run
+            count[b] = m
+            tally[b] = 0
             cursor[b] = 0
-            run += count[b]
+            run += m
 
     @target.kernel(threads=THREADS)
     def scatter(n, key, start, cursor, order):
@@ -128,11 +137,9 @@ def build_grid_sort(target: Target):
     def grid(n):
         return ((n + THREADS - 1) // THREADS, THREADS)
 
-    def sort_cuda(n, key, start, count, cursor, order):
+    def sort_cuda(n, key, start, count, cursor, order, tally):
         nb = count.shape[0]
-        cuda_launch(zero, *grid(nb), nb, count)
-        cuda_launch(count_k, *grid(n), n, key, count)
-        cuda_launch(scan_buckets, 1, SCAN_THREADS, nb, count, start, cursor)
+        cuda_launch(scan_buckets, 1, SCAN_THREADS, nb, tally, start, count, cursor)
         cuda_launch(scatter, *grid(n), n, key, start, cursor, order)
 
     return sort_cuda

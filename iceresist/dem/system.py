@@ -255,6 +255,7 @@ class DEMSystem:
         h["start"] = np.zeros(nbk, dtype=np.int32)
         h["count"] = np.zeros(nbk, dtype=np.int32)
         h["cursor"] = np.zeros(nbk, dtype=np.int32)
+        h["tally"] = np.zeros(nbk, dtype=np.int32)     # CUDA: spheres per bucket between place and sort, else 0
         h["order"] = np.zeros(ns, dtype=np.int32)
         K = self.history_slots
         for tag in ("a", "b"):
@@ -337,8 +338,8 @@ class DEMSystem:
         d, k, r = self._d, self._k, self.real
         ns = len(self._h["srad"])
         k["place"](ns, d["soff"], d["sbody"], d["pos"], d["quat"], d["xs"], d["key"], r(self._inv_cell),
-                   np.int64(self._mask))
-        k["sort"](ns, d["key"], d["start"], d["count"], d["cursor"], d["order"])
+                   np.int64(self._mask), d["tally"])
+        k["sort"](ns, d["key"], d["start"], d["count"], d["cursor"], d["order"], d["tally"])
         old = self._hist(self._cur)
         nxt = "b" if self._cur == "a" else "a"
         new = self._hist(nxt)

@@ -46,12 +46,11 @@ BOTH = HAS_GAS | HAS_LIQUID
 
 
 def build_bulk_blocks(target):
-    """Compile the per-block passes ``(active_block, roles_block, commit_block, near_roles_block)``:
+    """Compile the per-block passes ``(active_block, roles_block, near_roles_block)``:
 
     * ``active_block(b, near, act)``: ``act[b]`` = 1 where ``near[b]`` holds gas and liquid;
     * ``roles_block(b, act, nbr, valid, ghost, settle, refill)``: ghost = not active and next to an active
       block; settle = not active and valid (h -> phi); refill = ghost, or active and not valid (phi -> h);
-    * ``commit_block(b, act, valid)``: ``valid[b] = act[b]`` (after the step: h is the state where it ran);
     * ``near_roles_block(b, near, nbr, valid, act, ghost, settle, refill)``: the first two in one pass (one
       process, where the ``near`` of every neighbour is known: one launch fewer a step).
     """
@@ -77,10 +76,6 @@ def build_bulk_blocks(target):
         settle[b] = one if (v and not a) else zero
         refill[b] = one if (g or (a and not v)) else zero
 
-    def commit_block(b, act, valid):
-        b = int64(b)
-        valid[b] = act[b]
-
     def near_roles_block(b, near, nbr, valid, act, ghost, settle, refill):
         """``active_block`` and ``roles_block`` in one pass, a neighbour's activity read from its ``near`` (one
         process: every block's ``near`` is whole)."""
@@ -100,7 +95,7 @@ def build_bulk_blocks(target):
         refill[b] = one if (g or (a and not v)) else zero
 
     dev = target.device
-    return dev(active_block), dev(roles_block), dev(commit_block), dev(near_roles_block)
+    return dev(active_block), dev(roles_block), dev(near_roles_block)
 
 
 def build_bulk_cells(target, real, nq: int):
@@ -123,18 +118,17 @@ def build_bulk_cells(target, real, nq: int):
 
 @lru_cache(maxsize=None)
 def bulk_launchers(target, precision: str, lattice_name: str):
-    """``{"active", "roles", "commit", "near_roles", "settle"}``: the launchers of the frozen bulk (module docstring),
+    """``{"active", "roles", "near_roles", "settle"}``: the launchers of the frozen bulk (module docstring),
     compiled once per target, precision and h lattice."""
     lat = lookup_h_lattice(lattice_name)
     real = jit.real_type(precision)
     k = kernel_key(target, f"bulk|{precision}|{lattice_name}")
-    active_block, roles_block, commit_block, near_roles_block = build_bulk_blocks(target)
+    active_block, roles_block, near_roles_block = build_bulk_blocks(target)
     settle_cell = build_bulk_cells(target, real, lat.q)
     return {
         "active": BlockLauncher(target, active_block, ("near", "act"), label="bulk_roles", cache_key=k),
         "roles": BlockLauncher(target, roles_block, ("act", "nbr", "valid", "ghost", "settle", "refill"),
                                label="bulk_roles", cache_key=k),
-        "commit": BlockLauncher(target, commit_block, ("act", "valid"), label="bulk_roles", cache_key=k),
         "near_roles": BlockLauncher(target, near_roles_block,
                                     ("near", "nbr", "valid", "act", "ghost", "settle", "refill"),
                                     label="bulk_roles", cache_key=k),
@@ -174,4 +168,6 @@ class FrozenBulk:
         u = p._u(u)
         p._init_active(n, self.refill, p.h, p.phi, u, p.nbr, p.kappa)
         p.stream_collide(u, self.act)
-        k["commit"](n, self.act, p.valid)
+        # h is the state where the step ran: the active flags become ``valid`` (a swap, no launch; the old
+        # ``valid`` is the next step's scratch for the active flags, which it overwrites whole)
+        p.valid, self.act = self.act, p.valid

@@ -249,13 +249,16 @@ def extension_launcher(target, precision: str, vector: bool = True) -> CellLaunc
                         label="extension", cache_key=k)
 
 
-def extend_velocity(launch: CellLauncher, nblocks: int, phi, u, dist, nbr, layers: int = 3, near=None) -> None:
+def extend_velocity(launch: CellLauncher, nblocks: int, phi, u, dist, nbr, layers: int = 3, near=None,
+                    first: int = 0) -> None:
     """Overwrite ``u[block, 3, cell]`` in the gas (phi < 1/2) with the velocity extended from the liquid.
 
     ``dist[block, cell]`` (int8 work array) ends as the pass that filled each cell (0 liquid,
     127 beyond ``layers``). ``near`` (int8 per block, see :func:`build_extension_cell`): None visits every block.
+    ``first``: the first pass to run (1 where the velocity pass already ran layer 0,
+    :func:`iceresist.freesurface.fluid.velocity_layer0_launcher`).
     """
     if near is None:
         near = np.full(nblocks, 3, np.int8)
-    for layer in range(layers + 1):
+    for layer in range(int(first), layers + 1):
         launch(nblocks, phi, u, dist, nbr, np.int64(layer), near)

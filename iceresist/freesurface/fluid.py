@@ -38,7 +38,7 @@ from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
 from iceresist.freesurface.bulk import FrozenBulk
 from iceresist.freesurface.columns import SurfaceColumns
-from iceresist.freesurface.extension import extension_launcher, extend_velocity
+from iceresist.freesurface.extension import build_extension_cell, extension_launcher, extend_velocity
 from iceresist.freesurface.layout import HALO1_SIDE, HAS_GAS, HAS_LIQUID, build_halo_or, build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
@@ -47,6 +47,8 @@ from iceresist.grid.forest import BLOCK, CELLS
 from iceresist.lbm.stream import TANH_CLIP
 
 log = logging.getLogger(__name__)
+
+cuda = jit.cuda_api()   # cuda.syncthreads_or in the CUDA block phases (a module global, for the simulator)
 
 
 
@@ -185,11 +187,42 @@ def build_block_phases(target, real):
     return target.device(phases_block), target.device(near_block)
 
 
+def build_phases_cell(target, real):
+    """CUDA: ``phases_cell(b, c, phi, flags, phases)``, ``phases_block`` with a thread per cell: the block's 512
+    threads OR their cell's bits together (``cuda.syncthreads_or``) and thread 0 writes ``phases[b]``; every thread
+    of the block must call it (a cell launcher does)."""
+    half = real(0.5)
+    gas = np.uint8(FL.GAS)
+    has_gas, has_liquid, none = np.int8(HAS_GAS), np.int8(HAS_LIQUID), np.int8(0)
+    int64 = np.int64
+
+    def phases_cell(b, c, phi, flags, phases):
+        b = int64(b)
+        liquid = phi[b, c] >= half
+        any_liquid = cuda.syncthreads_or(1 if liquid else 0)
+        any_gas = cuda.syncthreads_or(1 if (not liquid or (flags[b, c] & gas) != 0) else 0)
+        if c == 0:
+            m = none
+            if any_liquid:
+                m |= has_liquid
+            if any_gas:
+                m |= has_gas
+            phases[b] = m
+
+    return target.device(phases_cell)
+
+
 @lru_cache(maxsize=None)
 def block_phase_launchers(target, precision: str):
-    phases, near = build_block_phases(target, jit.real_type(precision))
+    """``(phases, near)`` launchers of :func:`build_block_phases`; on CUDA the phases with a thread per cell
+    (:func:`build_phases_cell`), not a thread walking a block's 512 cells."""
+    real = jit.real_type(precision)
+    phases, near = build_block_phases(target, real)
     k = kernel_key(target, f"block_phases|{precision}")
-    return (BlockLauncher(target, phases, ("phi", "flags", "phases"), label="block_phases", cache_key=k),
+    phases_launch = (CellLauncher(target, build_phases_cell(target, real), ("phi", "flags", "phases"),
+                                  label="block_phases") if target.is_cuda else
+                     BlockLauncher(target, phases, ("phi", "flags", "phases"), label="block_phases", cache_key=k))
+    return (phases_launch,
             BlockLauncher(target, near, ("phases", "nbr", "near"), label="block_phases_near", cache_key=k))
 
 
@@ -326,6 +359,24 @@ def surface_launchers(target, precision: str, vector: bool = True):
             CellLauncher(target, reflag, reflag_args, label="reflag", cache_key=k))
 
 
+@lru_cache(maxsize=None)
+def velocity_layer0_launcher(target, precision: str) -> CellLauncher:
+    """CUDA: the velocity pass and the velocity extension's layer 0 in one launch, ``velocity_cell`` then
+    ``extend_cell(..., layer=0, ...)`` of :mod:`iceresist.freesurface.extension` on each cell (both read and write
+    the cell alone): args ``(f, fslot, flags, u, gx, gy, gz, phi, dist, nbr, near)``."""
+    real = jit.real_type(precision)
+    vel, _, _ = build_surface_cells(target, real)
+    extend_cell = build_extension_cell(target, real)
+    layer0 = np.int64(0)
+
+    def velocity_layer0(b, c, f, fslot, flags, u, gx, gy, gz, phi, dist, nbr, near):
+        vel(b, c, f, fslot, flags, u, gx, gy, gz)
+        extend_cell(b, c, phi, u, dist, nbr, layer0, near)
+
+    return CellLauncher(target, target.device(velocity_layer0),
+                        ("f", "fslot", "flags", "u", "gx", "gy", "gz", "phi", "dist", "nbr", "near"), label="velocity")
+
+
 class FreeSurfaceFluid:
     """Liquid with a free surface under gravity on a :class:`~iceresist.grid.BlockForest` (paper section 2.2).
 
@@ -360,6 +411,7 @@ class FreeSurfaceFluid:
                                 target=target)
         self._vel, self._reflag = surface_launchers(target, precision)
         self._ext = extension_launcher(target, precision)
+        self._vel0 = velocity_layer0_launcher(target, precision) if target.is_cuda else None
         self.nblocks = forest.nblocks
         self._base = self._to_target(np.ascontiguousarray(forest.flags.astype(np.uint8)))
         self._u = self._to_target(np.zeros((self.nblocks, 3, CELLS), self.real))
@@ -421,18 +473,26 @@ class FreeSurfaceFluid:
 
     def _velocity(self):
         """The liquid's velocity from the populations, then extended into the gas."""
-        self._velocity_pass()
-        self._extend()
+        self._extend(self._velocity_pass())
 
-    def _velocity_pass(self):
-        """The liquid's velocity ``_u`` from the populations by a pass of its own (0 outside the liquid)."""
+    def _velocity_pass(self) -> int:
+        """The liquid's velocity ``_u`` from the populations by a pass of its own (0 outside the liquid); on CUDA
+        with the extension's layer 0 in the same launch (where it covers every block). Returns the first layer of
+        the extension still to run."""
         g, zero = self.real(self.g), self.real(0.0)
-        self._vel(self.fluid.active_blocks, self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, zero, zero, -g)
+        f, fslot, flags = self.fluid.state, self.fluid.fslot, self.fluid.flags
+        if self._vel0 is not None and self.fluid.active_blocks == self.nblocks:
+            self._vel0(self.nblocks, f, fslot, flags, self._u, zero, zero, -g, self.phase.phi, self._dist,
+                       self.phase.nbr, self._near)
+            return 1
+        self._vel(self.fluid.active_blocks, f, fslot, flags, self._u, zero, zero, -g)
+        return 0
 
-    def _extend(self):
-        """The liquid's velocity ``_u`` extended into the gas near the surface (:mod:`~iceresist.freesurface.extension`)."""
+    def _extend(self, first_layer: int = 0):
+        """The liquid's velocity ``_u`` extended into the gas near the surface from layer ``first_layer`` on
+        (:mod:`~iceresist.freesurface.extension`)."""
         extend_velocity(self._ext, self.nblocks, self.phase.phi, self._u, self._dist, self.phase.nbr,
-                        near=self._block_phases(self.phase.phi))
+                        near=self._block_phases(self.phase.phi), first=first_layer)
 
     def _exchange_blocks(self, per_block):
         """On several ranks: the halo blocks of a per-block int8 array on the target take their owners' values."""
@@ -449,22 +509,21 @@ class FreeSurfaceFluid:
         """(g, W / 2) in the real type: the inputs of the sub-cell surface density."""
         return self.real(self.g), self.real(0.5 * self.phase.width)
 
-    def _stream_collide(self):
+    def _stream_collide(self) -> int:
         """Steps 1-2: the fused update of the liquid with the current phi, the buffers swapped, and the liquid's
         velocity ``_u`` from the new populations: on the CPU written by the update itself (``POOL_U_ARGS``), on
-        CUDA by a pass of its own."""
+        CUDA by a pass of its own (with the extension's layer 0). Returns the first extension layer to run."""
         half_width = self.real(0.5 * self.phase.width)
         if self.target.is_cuda:
             self.fluid.step(1, self.phase.phi, half_width)
-            self._velocity_pass()
-        else:
-            self.fluid.step(1, self.phase.phi, half_width, u=self._u)
+            return self._velocity_pass()
+        self.fluid.step(1, self.phase.phi, half_width, u=self._u)
+        return 0
 
     def step(self, n: int = 1):
         """Advance ``n`` time steps (module docstring, steps 1-5)."""
         for _ in range(int(n)):
-            self._stream_collide()
-            self._extend()
+            self._extend(self._stream_collide())
             if self._bulk is None:
                 self.phase.step(self._u)
             else:

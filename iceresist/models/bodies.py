@@ -470,6 +470,7 @@ class BodiesModel(Model):
     def diagnostics(self) -> dict[str, float]:
         """One row: the per-body columns (:meth:`body_columns`) and the fluid's (:meth:`_fluid_columns`); on several
         ranks the fluid's from the gathered blocks on rank 0, the same row on every rank."""
+        self.coupling.check_link_list()
         fluid = self._fluid_columns()
         if self.decomp is not None:
             fluid = self.decomp.bcast(fluid)

@@ -314,6 +314,7 @@ class Tier2Model(Tier2Ship):
         if full is None:
             full = self._probes % self.full_probe_every == 0
         self._probes += 1
+        self.fb.coupling.check_link_list()      # CUDA: the links passes since the last probe found no cell left out
         u_ship = self.speed_m_s * self.units.dt_s / self.units.dx_m
         probe = self.fb.fluid.probe(full, 0.5 * self.cells * u_ship ** 2)
         if not probe["finite"][0]:

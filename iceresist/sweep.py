@@ -43,7 +43,7 @@ from iceresist.models.fluid import resolve_target
 from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, sweep_table
 from iceresist.post.sweeptable import stored_meta as _stored_meta
 from iceresist.ship.matrix import MatrixCase
-from iceresist.ship.presets import CASES, FIDELITIES, case_scene, get_case
+from iceresist.scene.case_scenes import CASES, FIDELITIES, case_scene, get_case
 
 log = logging.getLogger(__name__)
 
@@ -170,7 +170,7 @@ def case_spec(case: str, plan: dict | None = None) -> MatrixCase:
 
 
 def sweep_scene(spec: MatrixCase, fidelity: str, tier: int, amr: bool = False, overrides: dict | None = None):
-    """The validated scene of one case of a sweep (:func:`~iceresist.ship.presets.case_scene`)."""
+    """The validated scene of one case of a sweep (:func:`~iceresist.scene.case_scenes.case_scene`)."""
     return case_scene(spec.case, fidelity, tier, amr=amr, hull=spec.hull, hull_keys=spec.hull_keys,
                       **(overrides or {}))
 

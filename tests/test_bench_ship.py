@@ -6,7 +6,7 @@ import math
 import pytest
 
 from iceresist.errors import InputError
-from iceresist.ship.presets import TIER2, case_scene
+from iceresist.scene.case_scenes import TIER2, case_scene
 from iceresist.sweep import TINY_TIER2_OVERRIDES
 from validation.bench_ship import bytes_per_cell, finest_fit, measure, scaled_scene
 

@@ -18,7 +18,7 @@ import numpy as np
 from iceresist.models.tier1 import Tier1Model
 from iceresist.scene.load import parse_scene
 from iceresist.scene.write import to_toml
-from iceresist.ship.presets import scene_data
+from iceresist.scene.case_scenes import scene_data
 d = scene_data("A-c68-v1.0", "quick", 1)
 d["numerics"]["backend"] = "cpu"
 m = Tier1Model(parse_scene(to_toml(d)), backend="cpu")

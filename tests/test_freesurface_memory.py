@@ -161,7 +161,7 @@ def test_block_form_of_the_pooled_update_equals_the_per_cell_form(operator):
     from iceresist.backends.launch import CellLauncher
     from iceresist.lbm.codegen import compile_source
     from iceresist.lbm.solver import collide_builder
-    from iceresist.lbm.stream import POOL_ARGS, _namespace, cell_device
+    from iceresist.lbm.stream import POOL_ARGS, cell_device, stream_namespace
 
     fo = BlockForest.uniform((48, 24, 48), WALLS)
     runs = []
@@ -171,7 +171,7 @@ def test_block_form_of_the_pooled_update_equals_the_per_cell_form(operator):
         if form == "cell":
             collide = collide_builder(operator)(jit.cpu, np.float64)
             fn = compile_source(pooled_source(stream_collide_source(loop_cells=True, free_surface=True)),
-                                "stream_collide_block", _namespace(jit.cpu, np.float64, collide),
+                                "stream_collide_block", stream_namespace(jit.cpu, np.float64, collide),
                                 cell_device(jit.cpu))
             fs.fluid._launch = CellLauncher(jit.cpu, fn, POOL_ARGS, per_block=True, label="f_update")
         zs = 36.4 + 3.0 * np.cos(np.pi * (np.arange(48) + 0.5) / 48)[:, None] * np.ones((1, 24))

@@ -12,7 +12,7 @@ from iceresist.errors import InputError
 from iceresist.models import build_model
 from iceresist.scene.load import load_scene
 from iceresist.ship.icefield import floe_corners, ice_field, overlapping_pairs
-from iceresist.ship.presets import case_scene
+from iceresist.scene.case_scenes import case_scene
 from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES
 
 CASE = "A-c68-v1.0"

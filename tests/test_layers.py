@@ -3,9 +3,12 @@
 Every ``import`` counts, also those inside functions (a cycle hidden in a function-level import is still a
 cycle). The rules:
 
-* layers (:data:`LAYER_PARTS`, from the bottom): backends and lattice < grid < kernels (lbm, freesurface, dem,
-  coupling, parallel) < models < driver (simulation, watchdog, driver, run, sweep, validate) < the command line
-  (iceresist.cli); nothing imports a layer above its own, and post imports neither the models nor the driver;
+* layers (:data:`LAYER_PARTS`, from the bottom): base (backends, lattice, errors, units, io, console) < grid <
+  kernels (lbm, freesurface, dem, coupling, parallel) < domain (ship, scene, limits) < post < models < driver
+  (simulation, watchdog, driver, run, sweep, validate) < the command line (iceresist.cli); every part of the
+  package is ranked and nothing imports a layer above its own (so post imports neither the models nor the driver,
+  and ship, below nothing of scene, cannot import it);
+* no module imports a private name (``_x``) of a module in another part of the package;
 * data flows one way: engine -> files -> ``iceresist.post`` -> ``reports``: nothing under iceresist/ imports
   ``reports`` except the composition root ``iceresist.cli``; ``reports`` imports from iceresist only
   ``post``, ``io`` and ``errors``; ``fsicr`` imports nothing from iceresist;
@@ -24,18 +27,20 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("iceresist", "fsicr", "reports")
 
 #: The layers from the bottom up, each with the top-level parts of iceresist it holds: a part may import its own
-#: layer and those below, never one above (docs/ARCHITECTURE.md: kernels < grid < models < driver < cli).
+#: layer and those below, never one above (docs/ARCHITECTURE.md, "The layers"). Every part is ranked
+#: (:func:`test_every_part_of_the_package_is_ranked`).
 LAYER_PARTS = (
-    ("backends", {"backends", "lattice"}),
+    ("base", {"backends", "lattice", "errors", "units", "io", "console"}),
     ("grid", {"grid"}),
     ("kernels", {"lbm", "freesurface", "dem", "coupling", "parallel"}),
+    ("domain", {"ship", "scene", "limits"}),
+    ("post", {"post"}),
     ("models", {"models"}),
     ("driver", {"simulation", "watchdog", "driver", "run", "sweep", "validate"}),
     ("cli", {"cli"}),
 )
 LAYERS = {part: level for level, (_, parts) in enumerate(LAYER_PARTS) for part in parts}
 LAYER_NAMES = tuple(name for name, _ in LAYER_PARTS)
-MODELS_LAYER = LAYER_NAMES.index("models")
 #: What reports may import from iceresist.
 REPORTS_MAY_IMPORT = ("iceresist.post", "iceresist.io", "iceresist.errors")
 
@@ -114,8 +119,6 @@ def layer_violations() -> list[str]:
         ls, ld = LAYERS.get(_part(src)), LAYERS.get(_part(dst))
         if ls is not None and ld is not None and ld > ls:
             bad.append(f"{src} ({LAYER_NAMES[ls]}) imports {dst} ({LAYER_NAMES[ld]})")
-        if _part(src) == "post" and ld is not None and ld >= MODELS_LAYER:
-            bad.append(f"{src} (post) imports {dst} ({LAYER_NAMES[ld]})")
     return bad
 
 
@@ -189,6 +192,35 @@ def test_the_import_graph_is_read():
     assert {"iceresist.cli", "iceresist.post.case", "reports.report", "fsicr"} <= set(g)
     assert "reports.report" in g["iceresist.cli"]  # a function-level import
     assert "iceresist.post.case" in g["reports.report"]
+
+
+def parts() -> set[str]:
+    """The top-level parts of iceresist (packages and modules, ``__main__`` left out)."""
+    return {_part(m) for m in modules() if _part(m) not in (None, "__main__")}
+
+
+def private_imports() -> list[str]:
+    """``from a.b import _name`` where a.b lies in another part of iceresist than the importing module."""
+    bad = []
+    for name, path in modules().items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if not isinstance(node, ast.ImportFrom) or node.level or not (node.module or "").startswith("iceresist."):
+                continue
+            if _part(node.module) == _part(name):
+                continue
+            for a in node.names:
+                if a.name.startswith("_"):
+                    bad.append(f"{name} imports {node.module}.{a.name}")
+    return bad
+
+
+def test_every_part_of_the_package_is_ranked():
+    assert parts() <= set(LAYERS), f"parts with no layer: {sorted(parts() - set(LAYERS))}"
+
+
+def test_no_private_name_crosses_a_part():
+    bad = private_imports()
+    assert not bad, "private names imported across parts:\n  " + "\n  ".join(bad)
 
 
 def test_layers_kernels_below_models_below_cli():

@@ -9,7 +9,7 @@ import pytest
 from iceresist import cli, limits
 from iceresist.errors import InputError, StabilityError
 from iceresist.scene import parse_scene, preset_text
-from iceresist.ship.presets import scene_data, to_toml
+from iceresist.scene.case_scenes import scene_data, to_toml
 
 
 def _cli_run(tmp_path, capsys, text, *extra):

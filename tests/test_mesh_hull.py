@@ -17,7 +17,7 @@ from iceresist.models import build_model
 from iceresist.ship.hull import HullGeometry, b063_hull
 from iceresist.ship.meshhull import MeshHull
 from iceresist.scene.load import load_scene
-from iceresist.ship.presets import case_scene
+from iceresist.scene.case_scenes import case_scene
 from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, run_case
 
 CASE = "A-c68-v1.0"
@@ -206,7 +206,7 @@ def test_sweep_mesh_refusals_are_one_line_and_write_nothing(tmp_path, capsys, mo
 def test_the_quick_tier1_sweep_on_the_b063_mesh_equals_the_parametric_hulls(tmp_path):
     """Every Bow A case of the quick tier-1 sweep, B-063 from its shipped mesh and from its parameters: the mean
     ice forces agree within their combined 95 % intervals (about 3 min on a 2-core x86 VM)."""
-    from iceresist.ship.presets import CASES
+    from iceresist.scene.case_scenes import CASES
     from iceresist.sweep import run_sweep
 
     names = ",".join(c for c in CASES if c.startswith("A-"))

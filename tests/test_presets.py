@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from iceresist.ship import cases
-from iceresist.ship.presets import CASES, FIDELITIES, FIDELITY_NOTES, TIER2, case_scene, get_case, to_toml
+from iceresist.scene.case_scenes import CASES, FIDELITIES, FIDELITY_NOTES, TIER2, case_scene, get_case, to_toml
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -162,10 +162,12 @@ def _imports(path: Path) -> set[str]:
     return out
 
 
-def test_the_scene_package_does_not_import_the_presets():
-    """The schema checks case names against the data loader (iceresist.ship.cases), which imports nothing from
-    the scene package; ship.presets builds scenes on top of the schema. No import of either kind hides in a
-    function (ast.walk sees every import, nested or not)."""
-    for f in sorted((ROOT / "iceresist" / "scene").glob("*.py")):
-        assert "iceresist.ship.presets" not in _imports(f), f.name
-    assert not {m for m in _imports(ROOT / "iceresist" / "ship" / "cases.py") if m.startswith("iceresist.scene")}
+def test_ship_imports_nothing_from_the_scene_package():
+    """The ship package (hull, ice, tank, the cases as data) sits below the scene package: the schema checks case
+    names against iceresist.ship.cases, and iceresist.scene.case_scenes builds scenes from the cases on top of the schema.
+    No import of the scene package hides in a function of ship (ast.walk sees every import, nested or not), and the
+    schema, loader and writer do not import the presets."""
+    for f in sorted((ROOT / "iceresist" / "ship").glob("*.py")):
+        assert not {m for m in _imports(f) if m.startswith("iceresist.scene")}, f.name
+    for name in ("schema.py", "load.py", "write.py", "__init__.py"):
+        assert "iceresist.scene.case_scenes" not in _imports(ROOT / "iceresist" / "scene" / name), name

@@ -10,7 +10,7 @@ import pytest
 
 from iceresist.models import RefinedTier2Model, Tier2Model, build_model
 from iceresist.post.case import analyse_case
-from iceresist.ship.presets import case_scene
+from iceresist.scene.case_scenes import case_scene
 from iceresist.sweep import TINY_TIER2_OVERRIDES, run_case
 from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
 
@@ -169,7 +169,7 @@ def test_the_refined_case_runs_through_the_sweep_to_the_file_the_report_reads(tm
 ])
 def test_bad_refined_ship_scenes_exit_2_with_one_line(tmp_path, main, edit, needle):  # noqa: F811
     from iceresist.scene.write import to_toml
-    from iceresist.ship.presets import scene_data
+    from iceresist.scene.case_scenes import scene_data
 
     data = scene_data(CASE, "quick", 2)
     for section, values in _deep(True).items():

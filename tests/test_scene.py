@@ -204,7 +204,7 @@ channel_length_m = 2.78
 def test_case_section_starts_from_a_ship_case_and_changes_only_the_keys_given():
     """A [case] scene is the preset's case with the keys the file names replaced, the others kept: the same
     Scene as case_scene with those overrides."""
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
 
     scene = parse_scene(CASE_SCENE)
     ref = case_scene("B-c68-v1.0", "quick", 2, scene={"name": "finer"},
@@ -261,7 +261,7 @@ def test_built_in_scenes_round_trip_through_the_writer(name):
 
 
 def test_case_scenes_round_trip_through_their_stored_text():
-    from iceresist.ship.presets import CASES, case_scene
+    from iceresist.scene.case_scenes import CASES, case_scene
 
     for case in CASES:
         for preset in ("paper", "quick"):

@@ -363,7 +363,7 @@ def test_preset_note_names_what_the_quick_tiers_trade_away():
     assert tier2.startswith(tier1) and "3 cells per 41 mm cube" in tier2 and "Not grid-converged" in tier2
     assert "``" not in tier2 and ":mod:" not in tier2 and "  " not in tier2
     assert preset_note("paper", 2) == ""
-    from iceresist.ship.presets import FIDELITIES, TIER2
+    from iceresist.scene.case_scenes import FIDELITIES, TIER2
 
     # the notes are data beside the presets: they name the presets' own grid and channel
     assert " x ".join(map(str, TIER2["quick"]["cells"])) + " = " in tier2

@@ -10,7 +10,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.ship.hull import b063_hull
-from iceresist.ship.presets import TIER2, case_names, case_scene
+from iceresist.scene.case_scenes import TIER2, case_names, case_scene
 from iceresist.ship.tank import blockage_ratio, depth_froude, schijf_limit_froude, start_wave, tank_flow
 from iceresist.models.ship import hull_geometry, ice_layout
 from iceresist.models.tier2 import start_wave_of_scene

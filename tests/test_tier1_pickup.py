@@ -5,7 +5,7 @@ import pytest
 
 from iceresist import cli
 from iceresist.io import RunFile
-from iceresist.ship.presets import case_scene
+from iceresist.scene.case_scenes import case_scene
 from iceresist.sweep import TINY_OVERRIDES
 from iceresist.models.tier1 import Tier1Model
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from iceresist.models import build_model
-from iceresist.ship.presets import TIER2, case_scene
+from iceresist.scene.case_scenes import TIER2, case_scene
 from iceresist.post.case import analyse_case
 from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, run_case
 
@@ -250,7 +250,7 @@ def test_tier2_scene_runs_through_iceresist_run_with_hydrostatic_fields(tmp_path
     """`iceresist run` of the CI-sized tier-2 scene: exit 0, finite fields; at t = 0 the pressure at the tank
     bottom is the hydrostatic rho g h in pascals (away from the hull and the cubes)."""
     from iceresist.cli import main
-    from iceresist.ship.presets import scene_data, to_toml
+    from iceresist.scene.case_scenes import scene_data, to_toml
 
     d = scene_data(CASE, "quick", 2)
     for k, v in TINY_TIER2_OVERRIDES.items():

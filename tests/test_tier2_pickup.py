@@ -6,7 +6,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.io import RunFile
-from iceresist.ship.presets import case_scene
+from iceresist.scene.case_scenes import case_scene
 from iceresist.sweep import TINY_TIER2_OVERRIDES
 from tests.test_tier1_pickup import run_cli, scene_file
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from iceresist.ship.presets import case_scene
+from iceresist.scene.case_scenes import case_scene
 from iceresist.validate.cases import ship_tier2
 from iceresist.validate.ladder import discover_cases
 from iceresist.validate.result import CaseResult

@@ -225,7 +225,7 @@ def test_real_fluid_beyond_the_limits_is_stopped_and_readable(tmp_path, capsys):
 
     from iceresist import cli
     from iceresist.scene import preset_text
-    from iceresist.ship.presets import to_toml
+    from iceresist.scene.case_scenes import to_toml
 
     d = tomllib.loads(preset_text("cavity"))
     d["fluid"].pop("nu_m2_s")

@@ -110,7 +110,7 @@ def ship_amr_worker(steps: int, precision: str) -> dict | None:
     from iceresist import parallel
     from iceresist.models import RefinedTier2Model
     from iceresist.ship.cases import amr_overrides
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
 
     comm = parallel.world()
     model = RefinedTier2Model(case_scene("A-c68-v1.0", "quick", 2, **amr_overrides("quick")), backend="cpu",
@@ -177,7 +177,7 @@ def ship_worker(steps: int, precision: str) -> dict | None:
     LBM step; rank 0's figures, None on the others."""
     from iceresist import parallel
     from iceresist.models import Tier2Model
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
 
     comm = parallel.world()
     model = Tier2Model(case_scene("A-c68-v1.0", "quick", 2), backend="cpu", precision=precision, comm=comm)

@@ -1,7 +1,7 @@
 """Cost of a tier-2 ship case (coupled LBM-DEM) at a chosen resolution, and the projected time to finish it:
 ``python -m validation.bench ship --preset paper --backend cuda --fit-gib 70 --records 3``.
 
-The case's tank (``iceresist.ship.presets.TIER2``) is kept in metres and cut into ``--across N`` cells over its
+The case's tank (``iceresist.scene.case_scenes.TIER2``) is kept in metres and cut into ``--across N`` cells over its
 width (dx = width / N; every cell count rounded up to a multiple of the 8-cell block). ``--fit-gib G`` first
 builds the case at ``--probe-across`` cells, reads what its arrays hold (the model's ``allocation``: LBM
 populations, phase field and coupling per cell, the DEM fixed) and picks the finest N, a multiple of 8, whose
@@ -63,7 +63,7 @@ def add_arguments(parser):
 def scaled_scene(case: str, preset: str, across: int, **overrides):
     """The tier-2 scene of ``case`` at ``preset`` with the tank cut into ``across`` cells over its width."""
     from iceresist.errors import InputError
-    from iceresist.ship.presets import TIER2, case_scene
+    from iceresist.scene.case_scenes import TIER2, case_scene
 
     if across < 8 or across % 8:
         raise InputError(f"--across: a positive multiple of 8 cells (got {across})")
@@ -304,7 +304,7 @@ def launch_rows(model, common: dict, coupled_s: float, steps: int = 5) -> list[d
 
 def run(args):
     from iceresist.errors import InputError
-    from iceresist.ship.presets import FIDELITIES, TIER2, case_scene
+    from iceresist.scene.case_scenes import FIDELITIES, TIER2, case_scene
     from iceresist.models.tier2 import Tier2Model
 
     if args.preset not in FIDELITIES:

@@ -32,8 +32,8 @@ from iceresist.errors import InputError
 from iceresist.grid.forest import CELLS
 from iceresist.freesurface import kernel_key
 from iceresist.lbm.solver import CUMULANT_MODULES, collide_builder
-from iceresist.lbm.stream import (POOL_ARGS, POOL_U_ARGS, _namespace, block_namespace, cell_device, pooled_source,
-                                  stream_collide_block_source, stream_collide_source)
+from iceresist.lbm.stream import (POOL_ARGS, POOL_U_ARGS, block_namespace, cell_device, pooled_source,
+                                  stream_collide_block_source, stream_collide_source, stream_namespace)
 from iceresist.lbm.codegen import compile_source
 
 log = logging.getLogger(__name__)
@@ -57,7 +57,7 @@ def pooled_fused_launcher(target, precision: str, operator: str, velocity: bool 
         if velocity:
             raise ValueError("the CUDA f update does not write the velocity (its own pass does)")
         fn = compile_source(pooled_source(stream_collide_source(free_surface=True)),
-                            "stream_collide_cell", _namespace(target, real, collide), cell_device(target))
+                            "stream_collide_cell", stream_namespace(target, real, collide), cell_device(target))
         return CellLauncher(target, fn, args, label="f_update")
     key = kernel_key(target, f"f_update|{precision}|{operator}|velocity={bool(velocity)}",
                      CUMULANT_MODULES if operator == "cumulant" else ())
@@ -313,14 +313,14 @@ class PooledLBM:
     def initialize(self, rho, u, wet: np.ndarray):
         """Size the pool from ``wet`` (bool per block) and set the equilibrium of the dense density ``rho``
         (nx, ny, nz) and uniform velocity ``u`` (3 numbers) in the blocks that hold a row."""
-        from iceresist.lbm.solver import _equilibrium_minus_w
+        from iceresist.lbm.solver import equilibrium_minus_w
 
         self.pool.start(wet)
         fo = self.forest
         blocks = np.flatnonzero(self.pool.fslot >= 0)
         rho_b = fo.from_dense(np.broadcast_to(np.asarray(rho, dtype=float), fo.shape_cells))[blocks]
         ux, uy, uz = (float(v) for v in u)
-        feq = _equilibrium_minus_w(rho_b, ux, uy, uz).transpose(1, 0, 2)   # (blocks, 27, 512)
+        feq = equilibrium_minus_w(rho_b, ux, uy, uz).transpose(1, 0, 2)   # (blocks, 27, 512)
         feq[np.broadcast_to(~fo.fluid[blocks][:, None, :], feq.shape)] = 0.0
         host = np.zeros((self.pool.capacity, L.Q, CELLS), self.real)
         host[self.pool.fslot[blocks]] = feq

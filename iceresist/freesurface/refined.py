@@ -38,7 +38,7 @@ from iceresist.freesurface.pool import PooledLBM
 from iceresist.grid.forest import CELLS
 from iceresist.grid.levels import FROM_COARSER
 from iceresist.grid.octree import BlockOctree
-from iceresist.lbm.refinement import RefinedLBM, _locate
+from iceresist.lbm.refinement import RefinedLBM, locate_cells
 
 #: A coarse level's cells must start at least this liquid (phi >= 1 - PHI_BULK_TOL).
 PHI_BULK_TOL = 1e-4
@@ -311,7 +311,7 @@ class RefinedFreeSurface:
         o = v.forest.origin[v.nleaves:] * 8
         from iceresist.grid.forest import LX, LY, LZ
         pts = np.stack([o[:, a:a + 1] + Lc for a, Lc in enumerate((LX, LY, LZ))], axis=-1) >> 1
-        pb, pc, _ = _locate(coarse, pts, self.lbm.periodic)
+        pb, pc, _ = locate_cells(coarse, pts, self.lbm.periodic)
         if (pb < 0).any():
             raise InputError("refinement: a ghost block of the finest level lies over no coarse block")
         dev = self.target.to_device

@@ -43,7 +43,7 @@ from iceresist.grid.forest import LX, LY, LZ
 from iceresist.grid.levels import FROM_COARSER, FROM_FINER, LevelView, level_views
 from iceresist.grid.octree import CHILDREN, BlockOctree
 from iceresist.lattice import C, OPP
-from iceresist.lbm.solver import _equilibrium_minus_w
+from iceresist.lbm.solver import equilibrium_minus_w
 
 
 def _lookup(view: LevelView, x, y, z, periodic):
@@ -111,7 +111,7 @@ def restriction_table(coarse: LevelView, fine: LevelView, periodic):
             np.stack(blocks, -1), np.stack(cells, -1), w)
 
 
-def _locate(view: LevelView, pts, periodic):
+def locate_cells(view: LevelView, pts, periodic):
     """(block, cell, inside) of global cells ``pts`` (..., 3) of ``view``'s level: wrapped on periodic axes;
     ``inside`` False beyond a closed face; block -1 where none is allocated."""
     n = np.array(view.forest.shape_cells)
@@ -173,13 +173,13 @@ def _coarse_stencil(coarse: LevelView, pos, periodic):
     pos = np.asarray(pos, dtype=np.int64)
     X = pos >> 1
     off = ((pos & 1) - 0.5) / 2.0
-    b0, c0, _ = _locate(coarse, X, periodic)
+    b0, c0, _ = locate_cells(coarse, X, periodic)
     nbrs = []
     for a in range(3):
         for d in (-1, 1):
             e = np.zeros(3, dtype=np.int64)
             e[a] = d
-            b, c, inside = _locate(coarse, X + e, periodic)
+            b, c, inside = locate_cells(coarse, X + e, periodic)
             ok = inside & (b >= 0)
             nbrs.append((np.where(ok, b, b0), np.where(ok, c, c0), ok))
     # one-sided where a neighbour is missing: the difference over the cells that exist
@@ -239,7 +239,7 @@ def _arrival(fine: LevelView, s, d, steps: int, periodic):
         back = moving & crossed
         p = np.where(back[:, None], s, p)
         d = np.where(back, OPP[d], d)
-        pb, pc, _ = _locate(fine, p, periodic)
+        pb, pc, _ = locate_cells(fine, p, periodic)
         leaf = moving & (pb >= 0) & (pb < fine.nleaves)
         tag = np.where(leaf, FINE_HALF if k == 2 else FINE_T, tag)
         blk, cel = np.where(leaf, pb, blk), np.where(leaf, pc, cel)
@@ -290,7 +290,7 @@ def _take_free_packets(fine: LevelView, coarse: LevelView, periodic, fed, slot, 
 
     def taken(sl, ps):
         cell, row_slot, to, ok = _coarse_row(coarse, ps, sl, periodic)
-        b, _, _ = _locate(coarse, cell, periodic)
+        b, _, _ = locate_cells(coarse, cell, periodic)
         by_row = ok & (b >= 0) & (b < coarse.nleaves) & ~np.isin(_sub_cell_keys(coarse, to, row_slot), fed)
         return by_row, row_slot, to
 
@@ -338,18 +338,18 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool
     tables = ([], [])
     for q in range(1, 27):
         cq = C[q].astype(np.int64)
-        tb, _, tin = _locate(fine, h + cq, periodic)
+        tb, _, tin = locate_cells(fine, h + cq, periodic)
         keep = tin & (tb >= 0) & (tb < fine.nleaves)
         if not keep.any():
             continue
         hk, hbk, hck = h[keep], hb[keep], hc[keep]
-        cb, cc, _ = _locate(coarse, hk >> 1, periodic)
+        cb, cc, _ = locate_cells(coarse, hk >> 1, periodic)
         qq = np.full(len(hk), q)
         tables[0].append((hbk, qq, hck, np.full(len(hk), COARSE_T), cb, cc, qq, hk))
         tag, pb, pc, slot, pos, ok = _arrival(fine, hk, qq, 1, periodic)
         # a path through a face that is not a resting wall: h's own coarse cell, slot q
         tag, slot, pos = np.where(ok, tag, COARSE_T), np.where(ok, slot, q), np.where(ok[:, None], pos, hk)
-        ob, oc, _ = _locate(coarse, pos >> 1, periodic)
+        ob, oc, _ = locate_cells(coarse, pos >> 1, periodic)
         coarse_src = tag == COARSE_T
         tables[1].append((hbk, qq, hck, tag, np.where(coarse_src, ob, pb), np.where(coarse_src, oc, pc), slot, pos))
     if not tables[0]:
@@ -361,7 +361,7 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool
             c = cols[3] == COARSE_T
             cols[6], cols[7] = cols[6].copy(), cols[7].copy()
             cols[6][c], cols[7][c] = _take_free_packets(fine, coarse, periodic, fed, cols[6][c], cols[7][c])
-            cols[4][c], cols[5][c], _ = _locate(coarse, cols[7][c] >> 1, periodic)
+            cols[4][c], cols[5][c], _ = locate_cells(coarse, cols[7][c] >> 1, periodic)
         if partial:
             cols = [c[cols[4] >= 0] for c in cols]
         if (cols[4] < 0).any():
@@ -402,7 +402,7 @@ def coalescence(coarse: LevelView, fine: LevelView, periodic, partial: bool = Fa
     from_finer[coarse.nleaves + np.flatnonzero(coarse.ghost_source == FROM_FINER)] = True
     next_to_finer = np.zeros(len(X), dtype=bool)
     for e in C[1:]:
-        b, _, inside = _locate(coarse, X + e.astype(np.int64), periodic)
+        b, _, inside = locate_cells(coarse, X + e.astype(np.int64), periodic)
         next_to_finer |= inside & (b >= 0) & from_finer[np.maximum(b, 0)]
     X = X[next_to_finer]
     walls = _wall_faces(coarse)
@@ -429,7 +429,7 @@ def coalescence(coarse: LevelView, fine: LevelView, periodic, partial: bool = Fa
         pos = np.where(back[..., None], s, pos)
         fed = tag != COARSE_T
         keys.append(_sub_cell_keys(coarse, s[fed], np.full(int(fed.sum()), q)))
-        yb, yc, _ = _locate(coarse, np.where(crossed[:, None], X[touch], Y[touch]), periodic)
+        yb, yc, _ = locate_cells(coarse, np.where(crossed[:, None], X[touch], Y[touch]), periodic)
         dq = np.where(crossed, OPP[q], q)
         rows.append((yb, dq, yc, tag, slot, pos))
     if not rows:
@@ -438,7 +438,7 @@ def coalescence(coarse: LevelView, fine: LevelView, periodic, partial: bool = Fa
     yb, dq, yc, tag, slot, pos = (np.concatenate([r[k] for r in rows]) for k in range(6))
     fb, fc = (np.concatenate([r[k] for r in fine_src]) for k in range(2))
     coarse_src = tag == COARSE_T
-    cb, cc, _ = _locate(coarse, pos >> 1, periodic)
+    cb, cc, _ = locate_cells(coarse, pos >> 1, periodic)
     sb, sc = np.where(coarse_src, cb, fb), np.where(coarse_src, cc, fc)
     if partial:
         held = (yb >= 0) & (sb >= 0).all(axis=1)
@@ -508,7 +508,7 @@ def _apply(table, dst, src, neq_scale: float = 1.0):
     if neq_scale != 1.0:
         rho = 1.0 + acc.sum(axis=-1)
         u = (acc @ C.astype(np.float64)) / rho[..., None]
-        feq = np.moveaxis(_equilibrium_minus_w(rho, u[..., 0], u[..., 1], u[..., 2]), 0, -1)
+        feq = np.moveaxis(equilibrium_minus_w(rho, u[..., 0], u[..., 1], u[..., 2]), 0, -1)
         acc = feq + neq_scale * (acc - feq)
     dst[gb[have], :, gc[have]] = acc[have].astype(dst.dtype)
 

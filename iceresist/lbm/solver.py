@@ -82,7 +82,7 @@ def fused_launcher(target, precision: str, operator: str, free_surface: bool = F
                 per_block=True, label="lbm_stream_collide", cache_key=key)
 
 
-def _equilibrium_minus_w(rho, ux, uy, uz):
+def equilibrium_minus_w(rho, ux, uy, uz):
     """f_eq - w (paper eq. 12) computed without forming f_eq: well-conditioned for rho ~ 1."""
     cu = [C[q, 0] * ux + C[q, 1] * uy + C[q, 2] * uz for q in range(Q)]
     uu = ux * ux + uy * uy + uz * uz
@@ -169,7 +169,7 @@ class LBMSolver:
         else:
             raise InputError(f"initialize: u must be 3 numbers or an array (3, {', '.join(map(str, fo.shape_cells))}), "
                              f"got shape {u.shape}")
-        feq = _equilibrium_minus_w(rho_b, *ub).transpose(1, 0, 2)      # (nblocks, 27, 512)
+        feq = equilibrium_minus_w(rho_b, *ub).transpose(1, 0, 2)      # (nblocks, 27, 512)
         feq[np.broadcast_to(~fo.fluid[:, None, :], feq.shape)] = 0.0
         host = np.ascontiguousarray(feq.astype(self.real))
         if self.target.is_cuda:

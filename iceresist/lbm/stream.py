@@ -239,8 +239,11 @@ def _gas_source_lines(q: int, indent: str) -> str:
     return "".join(indent + ln + "\n" for ln in lines)
 
 
-def _namespace(target, real, collide):
-    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "BC_SLIP": FL.BC_SLIP, "NEAR_OUTLET": FL.NEAR_OUTLET, "GAS": FL.GAS,
+def stream_namespace(target, real, collide):
+    """The names the generated stream-collide sources call: flags, constants, the collision ``collide``, the
+    lattice's tables in the real type ``real`` and the target's helpers."""
+    ns = {"FLUID": FL.FLUID, "PULLED": FL.FLUID | GHOST, "BC_SLIP": FL.BC_SLIP, "NEAR_OUTLET": FL.NEAR_OUTLET,
+          "GAS": FL.GAS,
           "NEED_U": FL.NEAR_OUTLET | FL.NEAR_SURFACE, "c45": real(4.5), "c15": real(1.5),
           "izero": np.int64(0), "zero": real(0.0),
           "one": real(1.0), "half": real(0.5), "two": real(2.0), "three": real(3.0), "tclip": real(TANH_CLIP),
@@ -270,8 +273,8 @@ def build_stream_collide(target, real, collide, free_surface: bool = False):
     """The fused pull stream-collide update of one cell, ``stream_collide_cell(b, c, *ARGS)``;
     ``free_surface``: eq. (11) at GAS sources with the sub-cell link density and the force rho g,
     arguments ``FS_ARGS`` (see :func:`stream_collide_source`)."""
-    return compile_source(stream_collide_source(free_surface=free_surface), "stream_collide_cell", _namespace(target, real, collide),
-                          cell_device(target))
+    return compile_source(stream_collide_source(free_surface=free_surface), "stream_collide_cell",
+                          stream_namespace(target, real, collide), cell_device(target))
 
 
 def build_stream_collide_block(target, real, collide, vector: bool = True, free_surface: bool = False):
@@ -283,14 +286,14 @@ def build_stream_collide_block(target, real, collide, vector: bool = True, free_
     ``free_surface`` (gravity times the cell's density, eq. 11 at gas sources)."""
     if not vector:
         return compile_source(stream_collide_source(loop_cells=True, free_surface=free_surface),
-                              "stream_collide_block", _namespace(target, real, collide), cell_device(target))
+                              "stream_collide_block", stream_namespace(target, real, collide), cell_device(target))
     return compile_source(stream_collide_block_source(free_surface), "stream_collide_block",
                           block_namespace(target, real, collide), cell_device(target))
 
 
 def block_namespace(target, real, collide) -> dict:
     """The names :func:`stream_collide_block_source` uses: those of the per-cell form and its scratch."""
-    ns = _namespace(target, real, collide)
+    ns = stream_namespace(target, real, collide)
     ns.update({"np": np, "rdtype": real, "PLANE": PLANE})
     return ns
 

@@ -16,7 +16,7 @@ Units (the rule of :meth:`iceresist.scene.schema.Scene.units`):
 * tau = 1/2 + 3 nu dt / dx^2 from ``fluid.nu_m2_s``. The paper runs the cumulant operator without a turbulence
   model at the water's viscosity (tau - 1/2 ~ 1e-5 here); we do the same when ``fluid.nu_m2_s`` is the water's.
   Coarse presets may raise ``fluid.nu_m2_s`` (an effective viscosity, a stability floor written in the scene,
-  see :mod:`iceresist.ship.presets`); ``tau_floor`` (constructor) is the other way to set a floor on tau.
+  see :mod:`iceresist.scene.case_scenes`); ``tau_floor`` (constructor) is the other way to set a floor on tau.
 
 One model step is one record interval: ``contact.sample_interval_s`` rounded to whole LBM steps. The recorded
 ice force is the mean over the LBM steps of the interval (each the mean over its DEM sub-steps) of the DEM contact

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import typing
+from importlib import resources
 
 from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
@@ -380,9 +381,8 @@ body_band_m = 0.01
 def _settling_levels_example() -> str:
     """The settling sphere's scene file (iceresist/validate/scenes/settling_sphere.toml: E1 at 6 cells per diameter,
     the box in whole blocks) on two levels that follow the sphere."""
-    from iceresist.validate.scenes import scene_path
-
-    text = scene_path("settling_sphere").read_text(encoding="utf-8")
+    # the file as package data (the validation cases run above the scene package: their code is not imported)
+    text = resources.files("iceresist").joinpath("validate/scenes/settling_sphere.toml").read_text(encoding="utf-8")
     text = text[text.index("[scene]"):]
     for old, new in (('name = "settling_sphere"', 'name = "settling_sphere_levels"'),
                      ("6 cells per diameter (quick ladder, middle rung)", "12 per diameter on levels that follow it"),

@@ -42,7 +42,7 @@ def _norm(v) -> float:
 
 # ---------------------------------------------------------------------------------------------------------
 class CaseBase(_Section):
-    """``[case]`` (optional): start from a ship case of the paper's sweep matrix (:mod:`iceresist.ship.presets`,
+    """``[case]`` (optional): start from a ship case of the paper's sweep matrix (:mod:`iceresist.scene.case_scenes`,
     docs/SHIP.md) at a fidelity and tier. The file's other sections then change only the keys they name and
     keep the case's others (e.g. ``[domain] cells``/``dx_m`` for a finer grid, ``[ice] channel_length_m`` for a
     longer channel); a section the case does not have is added whole."""

@@ -3,7 +3,7 @@
 Six cases (names ``<bow>-c<percent>-v<knots>``) at two fidelities, ``paper`` and ``quick`` (tier 1 = DEM with
 water models; tier 2 = the coupled LBM-DEM, which changes the tank where the flow field makes it expensive:
 ``TIER2``). :func:`scene_data` turns one (case, fidelity, tier) into the sections of a scene file;
-:func:`iceresist.ship.presets.case_scene` validates them. This module imports nothing from the scene package,
+:func:`iceresist.scene.case_scenes.case_scene` validates them. This module imports nothing from the scene package,
 so the scene schema may check case names against :data:`CASES`.
 """
 

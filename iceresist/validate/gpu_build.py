@@ -31,7 +31,7 @@ def check_scenes():
     break (a free surface whose population pool follows the water: its wet and fill kernels) and the built-in
     refined channel (two levels: the level transfer kernel)."""
     from iceresist.scene.load import load_scene
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
     from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES
 
     t2 = {k: dict(v) for k, v in TINY_TIER2_OVERRIDES.items()}

@@ -88,7 +88,7 @@ def _poiseuille(dt_s=None) -> dict:
 
 def _tier1(quick: bool, *, knots: float = 1.0, **overrides) -> dict:
     """A micro tier-1 scene: the quick B-063 case, a 0.1 m long channel (2 x 28 cubes), the stem 2 cm before it."""
-    from iceresist.ship.presets import KNOT_M_S, scene_data
+    from iceresist.scene.case_scenes import KNOT_M_S, scene_data
 
     d = scene_data("A-c68-v1.0", "quick", 1)
     d["ice"].update({"channel_length_m": 0.1 if quick else 0.3})
@@ -154,7 +154,7 @@ def run_setting(s: Setting, out_dir: Path, name: str, *, backend: str = "cpu") -
     from iceresist.driver import Outputs, Stop, run_model
     from iceresist.models import build_model
     from iceresist.scene.load import parse_scene
-    from iceresist.ship.presets import to_toml
+    from iceresist.scene.case_scenes import to_toml
     from iceresist.simulation import IterationInterval
 
     row = {"axis": s.axis, "setting": s.label, "value": s.value, "outcome": "", "message": "",

@@ -3,7 +3,7 @@
 Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot). The hull is a clump of spheres on its faces
 (:func:`iceresist.models.ship.hull_shape`); the rung refines their spacing, the resolution of the hull surface the ice
 touches. Quick ladder: the CI-sized channel of :data:`iceresist.sweep.TINY_OVERRIDES` (0.3 m of ice, 0.75 s);
-full ladder: the ``quick`` fidelity of :mod:`iceresist.ship.presets` (1.39 m of ice). The headline quantity is the
+full ladder: the ``quick`` fidelity of :mod:`iceresist.scene.case_scenes` (1.39 m of ice). The headline quantity is the
 mean ice force in the steady window (:func:`iceresist.post.ice_resistance_from_timeseries`, as in
 ``iceresist sweep``). There is no external reference: ``reference`` is NaN and :mod:`iceresist.validate.ladder`
 measures the error against the Richardson extrapolation of the three finest rungs (Roache 1998) where they
@@ -35,7 +35,7 @@ def ladder(quick: bool) -> list[dict]:
 
 
 def beam_m() -> float:
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
 
     return float(case_scene(CASE, "quick", 1).ship.beam_m)
 

@@ -9,7 +9,7 @@ contact force over the same time samples.
 
 * Quick ladder: the CI-sized tank of :data:`iceresist.sweep.TINY_TIER2_OVERRIDES` (0.875 x 0.219 x 0.219 m,
   0.48 m hull, 4 cubes, 0.06 s) at 64x16x16, 96x24x24 and 128x32x32 cells: 3, 4.5 and 6 cells per 41 mm cube.
-* Full ladder: the ``quick`` tier-2 preset of :mod:`iceresist.ship.presets` (68 % channel of 1.39 m, water
+* Full ladder: the ``quick`` tier-2 preset of :mod:`iceresist.scene.case_scenes` (68 % channel of 1.39 m, water
   0.9 m deep) in a tank of whole multiples of eight cubes (5.248 x 1.312 x 0.984 m, against the preset's
   5.13 x 1.39 x 1.07 m, so that every rung fills whole blocks) at 2, 3 and 4 cells per cube (256x64x48 to
   512x128x96 cells): a GPU ladder.
@@ -71,7 +71,7 @@ def ladder(quick: bool) -> list[dict]:
 
 def overrides(params: dict) -> dict:
     """Scene overrides of one rung: the tank and cell size, and the record interval fixed in seconds."""
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
     from iceresist.sweep import TINY_TIER2_OVERRIDES
 
     ov = copy.deepcopy(TINY_TIER2_OVERRIDES) if params.get("tiny", True) else {}

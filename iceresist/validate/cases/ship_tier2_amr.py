@@ -78,7 +78,7 @@ def overrides(params: dict) -> dict:
     """Scene overrides of one rung: the level-0 tank and cell size, the water depth, the refinement, and the record
     interval fixed in seconds (``steps_per_record`` level-0 steps of the rung, a hair under so that the ceiling in
     the model gives them exactly)."""
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
 
     ov = {"domain": {"cells": list(params["cells"]), "dx_m": float(params["dx_m"])},
           "free_surface": {"water_depth_m": float(params["water_depth_m"])},
@@ -90,7 +90,7 @@ def overrides(params: dict) -> dict:
 
 def scene(params: dict):
     """The validated scene of one rung."""
-    from iceresist.ship.presets import case_scene
+    from iceresist.scene.case_scenes import case_scene
 
     return case_scene(CASE, "quick", 2, **overrides(params))
 

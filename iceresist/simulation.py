@@ -64,7 +64,7 @@ class TimeInterval:
         self._next_k = 0
 
     def _eps(self, sim) -> float:
-        return 1e-9 * self.interval_s + 1e-6 * (getattr(sim.model, "dt_s", 0.0) or 0.0)
+        return 1e-9 * self.interval_s + 1e-6 * (sim.model.dt_s or 0.0)
 
     def initialize(self, sim):
         self._next_k = max(0, math.ceil((sim.model.time_s - self._eps(sim)) / self.interval_s))
@@ -77,7 +77,7 @@ class TimeInterval:
         return False
 
     def steps_to_next(self, sim) -> int | None:
-        dt = getattr(sim.model, "dt_s", None)
+        dt = sim.model.dt_s
         if not dt:
             return 1
         remaining = self._next_k * self.interval_s - sim.model.time_s
@@ -144,8 +144,7 @@ class FieldWriter:
     def write(self, sim):
         model = sim.model
         data = model.fields()
-        level_fields = getattr(model, "level_fields", None)     # a refined model: every level's leaf cells too
-        levels = None if level_fields is None else level_fields(self.fields)    # gathered on rank 0 with MPI
+        levels = model.level_fields(self.fields)    # a refined model: every level's leaf cells too (rank 0, MPI)
         if data is None:            # an MPI rank other than 0: the fields were gathered there
             self.last_iteration = model.iteration
             return
@@ -268,7 +267,7 @@ class Simulation:
         #: The MPI communicator of a model on several ranks (:attr:`Model.comm`): every decision that rests on a
         #: rank's own clock (chunk length, wall-time schedules and limit) or on what only rank 0 sees (a NaN in the
         #: gathered fields) is taken together, so all ranks step, write and stop in step.
-        self.comm = getattr(model, "comm", None)
+        self.comm = model.comm
 
     # -- control --------------------------------------------------------------------------------------
     def stop(self, reason: str):

@@ -78,6 +78,11 @@ class Model(abc.ABC):
         """Unit of each field of :meth:`fields` (``lattice``: the scene is written in lattice units)."""
         return {}
 
+    def level_fields(self, names=None) -> list[dict] | None:
+        """Each refinement level's leaf cells and their fields (``names``: those fields only), written beside the
+        dense fields; None for a model on one level (the default). With MPI gathered on rank 0."""
+        return None
+
     @abc.abstractmethod
     def diagnostics(self) -> dict[str, float]:
         """One time-series row: plain floats in physical units (mass, energy, forces, ...)."""

@@ -59,6 +59,10 @@ TILE_CELLS = 32768
 #: that the hull spreads over hundreds of blocks (with 32 768 the quick case's hull was 25 blocks sweeping 240-360
 #: cells per thread while the rest of the GPU idled: 75 % of the coupled step on an H200).
 TILE_CELLS_CUDA = 2048
+#: Threads of the CUDA links pass over its list of cells (each strides over the list): enough to fill a GPU, and few
+#: under the CUDA simulator, where every thread is a Python thread.
+LIST_THREADS = 1 << 18
+LIST_THREADS_SIMULATED = 256
 
 
 def slab_counts(bint, tile_cells: int = TILE_CELLS) -> np.ndarray:
@@ -338,7 +342,11 @@ class FluidStructureCoupling:
             k["poison"](nb, active, d["flags0"], d["owner"], d["owner_prev"], f)
         # with a free surface the same walk mirrors phi into the covered cells near the surface
         mirror = () if self.surface is None else (self.surface.phase.phi,)
-        walk = ((len(d["svals"]), d["ncells"], d["cells"], d["svals"]) if t.is_cuda else (rows,))  # the list: CUDA
+        if t.is_cuda:       # the list: a fixed number of threads striding over it
+            n = min(len(d["svals"]), LIST_THREADS_SIMULATED if t.simulator else LIST_THREADS)
+            walk = (n, np.int64(n), d["ncells"], d["cells"], d["svals"])
+        else:
+            walk = (rows,)
         k["links"](*walk, bint, body, d["planes"], d["grid"], d["block_map"], d["flags0"], d["owner"], f,
                    d["bforce"], d["btorque"], d["nlinks"], flags, d["film"], np.int64(self.nowned), *mirror)
         if not sums:

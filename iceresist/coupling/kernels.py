@@ -433,8 +433,9 @@ def build_link_list(target, real, links_at, free_surface: bool):
       links pass acts on (above -FILM_DEPTH, or with a free surface at least -MIRROR_DEPTH for the mirror) takes
       the next place of the list (an atomic count, so the order of the list is not fixed; a cell is listed once
       per row of its body that visits it, as the box walk visits it);
-    * ``links_listed(i, ncells, cells, svals, *LINK_ARGS[, phi])``: ``links_at`` of listed cell i with its stored
-      signed distance (the bodies have not moved since ``mark``).
+    * ``links_listed(i, stride, ncells, cells, svals, *LINK_ARGS[, phi])``: ``links_at`` of the listed cells i,
+      i + stride, ... (a thread of ``stride`` threads) with their stored signed distances (the bodies have not moved
+      since ``mark``); the launch's threads are fixed, not the list's length, which the host does not read.
 
     A cell beyond the list's length is counted in ``ncells[1]`` and not listed: the coupling sizes the list so
     that this cannot happen and reports it if it does (:meth:`FluidStructureCoupling.check_link_list`)."""
@@ -472,10 +473,8 @@ def build_link_list(target, real, links_at, free_surface: bool):
                 claim(ncells, 1)
 
     @dev
-    def listed(i, ncells, cells, bint):
-        """(row, gx, gy, gz) of listed cell i; row -1 past the end of this step's list."""
-        if i >= min(int64(ncells[0]), int64(cells.shape[0])):
-            return int64(-1), int64(0), int64(0), int64(0)
+    def listed(i, cells, bint):
+        """(row, gx, gy, gz) of listed cell i."""
         k = int64(cells[i, 0])
         j = int64(cells[i, 1])
         nx = int64(bint[k, 6]) - bint[k, 3] + 1
@@ -484,19 +483,19 @@ def build_link_list(target, real, links_at, free_surface: bool):
 
     if fs:
         @dev
-        def links_listed(i, ncells, cells, svals, bint, body, planes, grid, block_map, flags0, owner, f, bforce,
-                         btorque, nlinks, flags, film, nowned, phi):
-            k, gx, gy, gz = listed(i, ncells, cells, bint)
-            if k >= 0:
-                links_at(k, gx, gy, gz, svals[i], bint, body, planes, grid, block_map, flags0, owner, f, bforce,
+        def links_listed(i, stride, ncells, cells, svals, bint, body, planes, grid, block_map, flags0, owner, f,
+                         bforce, btorque, nlinks, flags, film, nowned, phi):
+            for e in range(i, min(int64(ncells[0]), int64(cells.shape[0])), stride):
+                k, gx, gy, gz = listed(e, cells, bint)
+                links_at(k, gx, gy, gz, svals[e], bint, body, planes, grid, block_map, flags0, owner, f, bforce,
                          btorque, nlinks, flags, film, nowned, phi)
     else:
         @dev
-        def links_listed(i, ncells, cells, svals, bint, body, planes, grid, block_map, flags0, owner, f, bforce,
-                         btorque, nlinks, flags, film, nowned):
-            k, gx, gy, gz = listed(i, ncells, cells, bint)
-            if k >= 0:
-                links_at(k, gx, gy, gz, svals[i], bint, body, planes, grid, block_map, flags0, owner, f, bforce,
+        def links_listed(i, stride, ncells, cells, svals, bint, body, planes, grid, block_map, flags0, owner, f,
+                         bforce, btorque, nlinks, flags, film, nowned):
+            for e in range(i, min(int64(ncells[0]), int64(cells.shape[0])), stride):
+                k, gx, gy, gz = listed(e, cells, bint)
+                links_at(k, gx, gy, gz, svals[e], bint, body, planes, grid, block_map, flags0, owner, f, bforce,
                          btorque, nlinks, flags, film, nowned)
 
     return mark_listed, links_listed
@@ -524,7 +523,7 @@ def coupling_launchers(target, real, h_lattice=None):
         if target.is_cuda:     # mark lists the cells the links pass visits (build_link_list)
             mark_listed, links_listed = build_link_list(target, real, links_at, fs)
             launchers = {"mark": BodyLauncher(target, mark_listed, MARK_ARGS + LIST_ARGS, label="mark"),
-                         "links": ItemLauncher(target, links_listed, ("ncells", "cells", "svals") + link_args,
+                         "links": ItemLauncher(target, links_listed, ("stride", "ncells", "cells", "svals") + link_args,
                                                label="links")}
         else:
             launchers = {"mark": BodyLauncher(target, build_mark_run(real, MARK_ARGS), MARK_ARGS, per_row=True,

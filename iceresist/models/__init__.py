@@ -16,7 +16,7 @@ model                       what it holds                                       
 ==========================  ======================================================  =============================
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
-asks for.
+asks for: :func:`physics_of` names the physics, :data:`MODELS` gives its model on one grid or on levels.
 """
 
 from __future__ import annotations
@@ -34,78 +34,67 @@ from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
 __all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "RefinedFreeSurfaceModel",
-           "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "RefinedTier2Model", "Tier1Model", "Tier2Model", "BodiesModel", "build_model"]
+           "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "RefinedTier2Model", "Tier1Model", "Tier2Model", "BodiesModel", "MODELS", "physics_of", "build_model"]
 
 
-def build_model(scene, *, backend: str | None = None, precision: str | None = None, comm=None) -> Model:
-    """The model of the components ``scene`` uses: fluid-only scenes, free-surface scenes ([free_surface]
-    alone), tier-1 and tier-2 ship scenes ([ship] + [ice]) and scenes of rigid bodies ([[bodies]], with or
-    without [free_surface] and [contact]). ``comm``: the MPI communicator of a run on several ranks
-    (:mod:`iceresist.parallel`: every scene but a tier-1 ship, on a uniform grid or on levels)."""
-    if comm is not None and comm.size > 1:
-        extra = scene.optional_sections()
-        if extra == ["refinement"]:
-            return RefinedFluidModel(scene, backend=backend, precision=precision, comm=comm)
-        if extra == ["free_surface", "refinement"]:
-            return RefinedFreeSurfaceModel(scene, backend=backend, precision=precision, comm=comm)
-        if "refinement" in extra and scene.bodies and set(extra) <= {"refinement", "bodies", "contact"}:
-            return RefinedBodiesModel(scene, backend=backend, precision=precision, comm=comm)
-        if "refinement" in extra and scene.bodies and set(extra) <= {"refinement", "bodies", "contact",
-                                                                        "free_surface"}:
-            return RefinedSurfaceBodiesModel(scene, backend=backend, precision=precision, comm=comm)
-        if "refinement" in extra and scene.ship is not None and scene.ice is not None and scene.ship.tier == 2 \
-                and not scene.bodies:
-            return RefinedTier2Model(scene, backend=backend, precision=precision, comm=comm)
-        if "refinement" in extra:
-            raise InputError(f"mpirun -n {comm.size}: refinement: this refined scene "
-                             f"({', '.join('[' + s + ']' for s in extra)}) has no model on levels; run it without "
-                             f"mpirun to see why")
-        if scene.ship is not None and scene.ice is not None and scene.ship.tier == 2 and not scene.bodies:
-            return Tier2Model(scene, backend=backend, precision=precision, comm=comm)
-        if extra == ["free_surface"]:
-            return FreeSurfaceModel(scene, backend=backend, precision=precision, comm=comm)
-        if scene.bodies and set(extra) <= {"contact", "bodies", "free_surface"}:
-            return BodiesModel(scene, backend=backend, precision=precision, comm=comm)
-        if extra:
-            raise InputError(f"mpirun -n {comm.size}: a scene with {', '.join('[' + s + ']' for s in extra)} runs on "
-                             f"one process so far (the fluid, the free surface, bodies and a tier-2 ship run on "
-                             f"several); run it without mpirun")
-        return FluidModel(scene, backend=backend, precision=precision, comm=comm)
+#: The model of each physics a scene asks for (:func:`physics_of`): on one uniform grid, and on the levels of a
+#: ``[refinement]`` (None: that physics has no lattice to refine).
+MODELS: dict[str, tuple[type, type | None]] = {
+    "fluid": (FluidModel, RefinedFluidModel),
+    "free_surface": (FreeSurfaceModel, RefinedFreeSurfaceModel),
+    "bodies": (BodiesModel, RefinedBodiesModel),
+    "floating_bodies": (BodiesModel, RefinedSurfaceBodiesModel),
+    "tier1": (Tier1Model, None),
+    "tier2": (Tier2Model, RefinedTier2Model),
+}
+
+
+def _sections(names) -> str:
+    return ", ".join("[" + s + "]" for s in names)
+
+
+def physics_of(scene) -> str:
+    """The physics a scene asks for, a key of :data:`MODELS`: ``tier1`` / ``tier2`` ([ship] + [ice]), ``bodies``
+    ([[bodies]], with [contact] or not), ``floating_bodies`` (the same in water with a [free_surface]),
+    ``free_surface`` ([free_surface] alone) or ``fluid`` (no optional section); ``[refinement]`` picks the grid, not
+    the physics. A scene that mixes what no model holds is an :class:`~iceresist.errors.InputError` naming the key."""
     if scene.ship is not None and scene.ice is not None:
         if scene.bodies:
             raise InputError(f"{scene.source_name}: bodies: a ship scene takes no extra [[bodies]] yet; remove "
                              f"the [[bodies]] tables (or the [ship] and [ice] sections)")
-        if scene.refinement is not None:
-            if scene.ship.tier != 2:
-                raise InputError(f"{scene.source_name}: refinement: tier 1 has no lattice to refine; remove "
-                                 f"[refinement] or set ship.tier = 2")
-            return RefinedTier2Model(scene, backend=backend, precision=precision)
-        model = Tier2Model if scene.ship.tier == 2 else Tier1Model
-        return model(scene, backend=backend, precision=precision)
-    extra = scene.optional_sections()
-    if "refinement" in extra:
-        if extra == ["free_surface", "refinement"]:
-            return RefinedFreeSurfaceModel(scene, backend=backend, precision=precision)
-        if scene.bodies and set(extra) <= {"refinement", "bodies", "contact"}:
-            return RefinedBodiesModel(scene, backend=backend, precision=precision)
-        if scene.bodies and set(extra) <= {"refinement", "bodies", "contact", "free_surface"}:
-            return RefinedSurfaceBodiesModel(scene, backend=backend, precision=precision)
-        if extra != ["refinement"]:
-            others = ", ".join("[" + s + "]" for s in extra if s not in ("refinement", "free_surface"))
-            raise InputError(f"{scene.source_name}: refinement: a refined scene is the fluid alone, with a "
-                             f"[free_surface], with [[bodies]] or with both so far; remove [refinement] to run "
-                             f"{others} on a uniform grid")
-        return RefinedFluidModel(scene, backend=backend, precision=precision)
+        if scene.refinement is not None and scene.ship.tier != 2:
+            raise InputError(f"{scene.source_name}: refinement: tier 1 has no lattice to refine; remove "
+                             f"[refinement] or set ship.tier = 2")
+        return f"tier{scene.ship.tier}"
+    extra = [s for s in scene.optional_sections() if s != "refinement"]
     wants = [f for f in scene.output.fields if f in ("phi", "surface")]
     if wants and scene.free_surface is None:
         raise InputError(f"output.fields: {', '.join(wants)} need a [free_surface] section; "
                          f"remove them from output.fields")
     if scene.bodies and set(extra) <= {"free_surface", "contact", "bodies"}:
-        return BodiesModel(scene, backend=backend, precision=precision)
+        return "floating_bodies" if scene.free_surface is not None else "bodies"
     if extra == ["free_surface"]:
-        return FreeSurfaceModel(scene, backend=backend, precision=precision)
+        return "free_surface"
+    if extra and scene.refinement is not None:
+        raise InputError(f"{scene.source_name}: refinement: a refined scene is the fluid alone, with a "
+                         f"[free_surface], with [[bodies]] or with both so far; remove [refinement] to run "
+                         f"{_sections(s for s in extra if s != 'free_surface')} on a uniform grid")
     if extra:
-        raise InputError(f"{scene.source_name}: sections {', '.join('[' + s + ']' for s in extra)} need the "
-                         f"free-surface, DEM and coupling engine, which `iceresist run` does not build yet; "
-                         f"remove them to run the fluid alone")
-    return FluidModel(scene, backend=backend, precision=precision)
+        raise InputError(f"{scene.source_name}: sections {_sections(extra)} need the free-surface, DEM and coupling "
+                         f"engine, which `iceresist run` does not build yet; remove them to run the fluid alone")
+    return "fluid"
+
+
+def build_model(scene, *, backend: str | None = None, precision: str | None = None, comm=None) -> Model:
+    """The model of the physics ``scene`` asks for (:func:`physics_of`, :data:`MODELS`) on its grid: one uniform
+    grid, or the levels of its ``[refinement]``. ``comm``: the MPI communicator of a run on several ranks
+    (:mod:`iceresist.parallel`: every physics but tier 1, on a uniform grid or on levels)."""
+    physics = physics_of(scene)
+    uniform, levels = MODELS[physics]
+    model = levels if scene.refinement is not None else uniform
+    if comm is None or comm.size == 1:
+        return model(scene, backend=backend, precision=precision)
+    if physics == "tier1":
+        raise InputError(f"mpirun -n {comm.size}: a tier-1 ship has no lattice to split over ranks and runs on one "
+                         f"process; run it without mpirun")
+    return model(scene, backend=backend, precision=precision, comm=comm)

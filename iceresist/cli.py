@@ -10,10 +10,20 @@ import argparse
 import logging
 import sys
 
+from fsicr.cli import main as fsicr_main
 from fsicr.cliparser import OneLineParser
+from fsicr.compare import compare_table2
 from fsicr.errors import too_long_path
-from iceresist import __version__
+from iceresist import __version__, parallel
+from iceresist.console import configure_logging
 from iceresist.errors import InputError
+from iceresist.run import add_run_arguments
+from iceresist.sweep import add_sweep_arguments, run_sweep
+from iceresist.validate.cli import add_validate_arguments, cmd_validate, output_dir
+from iceresist.validate.ladder import discover_cases
+from reports.report import add_report_arguments, write_report
+from reports.steadiness import add_steadiness_arguments
+from reports.validation import write_stability_map, write_validation_report
 
 log = logging.getLogger("iceresist")
 
@@ -29,11 +39,6 @@ def demo(out_dir="runs/demo", *, json_output: bool = False, backend: str = "auto
     With ``json_output`` one JSON object is printed: ``{"fsicr": ..., "sweep": [...], "report": {...}}``.
     """
     import json
-
-    from fsicr.cli import main as fsicr_main
-    from fsicr.compare import compare_table2
-    from iceresist.sweep import run_sweep
-    from reports.report import write_report
 
     rc = 0 if json_output else fsicr_main(["compare"])
     table = run_sweep("quick", 1, out_dir, cases, backend=backend, progress=progress and not json_output,
@@ -70,10 +75,6 @@ def _cmd_demo(args) -> int:
 def _cmd_validate(args) -> int:
     """``iceresist validate``: the ladders (or the stability matrix) into their files, then the report drawn
     from those files (:mod:`reports.validation`)."""
-    from iceresist.validate.cli import cmd_validate, output_dir
-    from iceresist.validate.ladder import discover_cases
-    from reports.validation import write_stability_map, write_validation_report
-
     rc = cmd_validate(args)
     out = output_dir(args)
     if args.stability:
@@ -99,8 +100,6 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--output", default="runs/demo", help="sweep folder for the demo (default: runs/demo)")
     d.set_defaults(func=_cmd_demo)
 
-    from iceresist.run import add_run_arguments
-
     r = sub.add_parser("run", help="run one scene file (SCENE.toml or a built-in scene name)",
                        description="Run one scene into <output.directory>/<scene.name>.h5. A first run compiles the "
                                    "kernels its scene needs, a line per kernel: about 2 min on a 2-core CPU for a "
@@ -109,21 +108,14 @@ def build_parser() -> argparse.ArgumentParser:
                                    "seconds.")
     add_run_arguments(r)
 
-    from iceresist.sweep import add_sweep_arguments
-    from reports.report import add_report_arguments
-
     s = sub.add_parser("sweep", help="run the paper's ship cases (quick|paper, tier 1|2) into a sweep folder")
     add_sweep_arguments(s)
     rp = sub.add_parser("report", help="write report.html and report.pdf of a sweep folder")
     add_report_arguments(rp)
 
-    from reports.steadiness import add_steadiness_arguments
-
     st = sub.add_parser("steadiness", help="mean ice force over steps of stem travel through the channel: does it "
                                          "settle? (finished or running case files)")
     add_steadiness_arguments(st)
-
-    from iceresist.validate.cli import add_validate_arguments
 
     v = sub.add_parser("validate", help="error against run time of the reference cases, or (--stability) the "
                                         "stability matrix; report.html and report.pdf")
@@ -137,9 +129,6 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     root = True
     try:
-        from iceresist import parallel
-        from iceresist.console import configure_logging
-
         rank = parallel.rank() if parallel.launched_by_mpi() else 0
         root = rank == 0       # one rank speaks: the others log their own warnings only and print no errors
         configure_logging(verbose=args.verbose, numba_debug=args.debug_numba, rank=rank)
@@ -158,8 +147,6 @@ def main(argv=None) -> int:
             print(f"iceresist: error: {too_long_path(exc)}", file=sys.stderr)
         return 2
     except Exception:
-        from iceresist import parallel
-
         if parallel.launched_by_mpi() and parallel.world() is not None:
             parallel.abort(parallel.world())       # the other ranks would wait in their next collective call forever
         raise

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import logging
 
+from iceresist.backends import compilelog
+
 #: The packages ``-v`` raises to DEBUG.
 OWN_LOGGERS = ("iceresist", "reports", "fsicr", "validation")
 #: Loggers whose lines are about the scene, the same on every rank: only rank 0 says them.
@@ -37,8 +39,6 @@ class OtherRank(logging.Filter):
 
 def configure_logging(verbose: bool = False, numba_debug: bool = False, rank: int = 0) -> None:
     """Log lines on stderr for a command: see the module's docstring. ``rank``: this process's MPI rank."""
-    from iceresist.backends import compilelog
-
     logging.basicConfig(level=logging.INFO, format=FORMAT)
     for name in OWN_LOGGERS:
         logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.NOTSET)

@@ -26,11 +26,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from iceresist import watchdog
+from iceresist.backends import compilelog
 from iceresist.io.hdf5 import NullRunFile, RunFile
 from iceresist.io.meta import leg_meta, run_meta
 from iceresist.models.base import Model
-from iceresist.simulation import (Callback, Checkpointer, FieldWriter, IterationInterval, Simulation,
-                                  TimeSeriesWriter, WallTimeInterval)
+from iceresist.simulation import (Callback, Checkpointer, FieldWriter, IterationInterval, Simulation, TimeSeriesWriter,
+                                  WallTimeInterval)
 
 log = logging.getLogger(__name__)
 
@@ -102,8 +104,6 @@ def run_model(model: Model, scene, path, checkpoint_path=None, *, stop: Stop, ou
     ``leave_progress``). Everything that can fail on bad input must be checked by the caller before this opens a
     file.
     """
-    from iceresist import watchdog
-
     outputs = outputs or Outputs()
     path = Path(path)
     checkpoint_path = None if checkpoint_path is None else Path(checkpoint_path)
@@ -186,8 +186,6 @@ def closing_line(sim: Simulation, model: Model, build_s: float = 0.0, since: flo
     set-up within it, the stepping, the first step's share of the stepping (compiling or loading the kernels) and
     the kernels compiled since ``since`` (``time.perf_counter()`` at the leg's start, its set-up included); the rate
     over the steps after the first where there were any."""
-    from iceresist.backends import compilelog
-
     kernels, seconds = compilelog.compiled_since(since)
     compiled = f", {kernels} kernels compiled in {seconds:.1f} s" if kernels else ", kernels loaded from the cache"
     text = (f"{sim.stop_reason}: {sim.steps_done} steps; wall time {sim.wall_time_s + build_s:.1f} s: "

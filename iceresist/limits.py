@@ -33,6 +33,8 @@ import logging
 import math
 
 from iceresist.errors import InputError, StabilityError
+from iceresist.scene.schema import Contact
+from iceresist.ship.channel import grid_for_concentration, grid_for_count
 from iceresist.units import MACH_LATTICE_CEILING
 
 log = logging.getLogger(__name__)
@@ -223,8 +225,6 @@ def check_ice_floats(ice_density_kg_m3: float, water_density_kg_m3: float) -> No
 
 def touching_concentration(width_m: float, length_m: float, cube_m: float) -> float:
     """The largest ``ice.concentration`` (to 0.001) whose regular pattern keeps every pitch >= the cube edge."""
-    from iceresist.ship.channel import grid_for_concentration
-
     for milli in range(1000, 0, -1):
         ny, nx = grid_for_concentration(milli / 1000.0, width_m, length_m, cube_m)
         if width_m / ny >= cube_m and length_m / nx >= cube_m:
@@ -234,8 +234,6 @@ def touching_concentration(width_m: float, length_m: float, cube_m: float) -> fl
 
 def touching_count(width_m: float, length_m: float, cube_m: float) -> int:
     """The most cubes a count-filled channel takes before neighbours overlap."""
-    from iceresist.ship.channel import grid_for_count
-
     n = max(1, int((width_m // cube_m) * (length_m // cube_m)))
     while n > 1:
         ny, nx = grid_for_count(n, width_m, length_m)
@@ -247,8 +245,6 @@ def touching_count(width_m: float, length_m: float, cube_m: float) -> int:
 
 def check_ice_amount(ice, width_m: float) -> None:
     """Refuse a concentration or count above the touching limit of the channel (cubes would overlap)."""
-    from iceresist.ship.channel import grid_for_concentration, grid_for_count
-
     L, a = ice.channel_length_m, ice.size_m
     if ice.concentration is not None:
         ny, nx = grid_for_concentration(ice.concentration, width_m, L, a)
@@ -288,8 +284,6 @@ def check_tier1(model) -> None:
             f"(2 sqrt(m/k) x contact.dem_safety), {total:.3g} sub-steps in all, above the maximum "
             f"{MAX_DEM_SUBSTEPS:.0e}: use contact.stiffness_N_m <= {_g(k_ok)} or a shorter run.end_time_s")
     radius = model.cube.sphere_radius_m
-    from iceresist.scene.schema import Contact
-
     # name first the key far from its usual value: a spring ten times softer than the default, else the speed
     soft = k < 0.1 * Contact.model_fields["stiffness_N_m"].default
     overlap = model.speed_m_s * math.sqrt(model.cube.mass_kg / k)

@@ -21,6 +21,9 @@ from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
 from iceresist.io.paths import check_output_dir
 from iceresist.limits import check_memory
+from iceresist.models import build_model
+from iceresist.models.fluid import resolve_target
+from iceresist.post.case import window_summary
 from iceresist.scene.load import load_scene, preset_names
 from iceresist.scene.schema import Scene
 from iceresist.simulation import IterationInterval, TimeInterval, WallTimeInterval
@@ -79,8 +82,6 @@ def scene_outputs(scene: Scene) -> tuple[Stop, Outputs]:
 
 def cmd_run(args) -> int:
     """Run one scene. Exit status 0 when it reached its stop criterion, 1 when it diverged."""
-    from iceresist.models import build_model
-
     t_start = time.perf_counter()
     scene = load_scene(args.scene)
     if args.steps is not None:
@@ -106,8 +107,6 @@ def cmd_run(args) -> int:
 
     comm = parallel.world()
     if args.backend is not None:           # the flag the user typed is the key a refusal names
-        from iceresist.models.fluid import resolve_target
-
         resolve_target(args.backend, "--backend")
     parallel.on_rank0(check_files, comm)   # the files as rank 0 sees them, before it writes any
     if scene.has_lattice:
@@ -123,8 +122,6 @@ def cmd_run(args) -> int:
                        lattice_units=scene.is_lattice, progress=not args.no_progress and parallel.rank() == 0,
                        build_s=time.perf_counter() - t_start)
     if scene.ship is not None and getattr(result.sim, "completed", False) and parallel.rank() == 0:
-        from iceresist.post.case import window_summary
-
         summary = window_summary(h5_path)
         if summary:
             log.info("%s: %s", scene.scene.name, summary)

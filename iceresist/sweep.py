@@ -35,15 +35,21 @@ from pathlib import Path
 import pandas as pd
 from pydantic import ValidationError
 
+from fsicr.hullmesh import MeshKeys
 from iceresist import parallel
-from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S
+from iceresist.backends.jit import set_threads as set_backend_threads
+from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
+from iceresist.io.checkpoint import read_checkpoint
 from iceresist.io.paths import check_output_dir
+from iceresist.models import RefinedTier2Model, Tier1Model, Tier2Model
 from iceresist.models.fluid import resolve_target
-from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, sweep_table
-from iceresist.post.sweeptable import stored_meta as _stored_meta
-from iceresist.ship.matrix import MatrixCase
+from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, stored_meta as _stored_meta, sweep_table
 from iceresist.scene.case_scenes import CASES, FIDELITIES, case_scene, get_case
+from iceresist.ship.cases import amr_overrides
+from iceresist.ship.matrix import HullSpec, MatrixCase, hull_at, matrix_from_flags, read_matrix
+from iceresist.ship.meshhull import resolve_mesh_path
+from iceresist.simulation import IterationInterval, WallTimeInterval
 
 log = logging.getLogger(__name__)
 
@@ -85,8 +91,6 @@ def _resumable(partial: Path, checkpoint: Path, scene_text: str) -> dict | None:
     meta = _stored_meta(partial) if checkpoint.is_file() else None
     if meta is None or meta.get("scene_toml") != scene_text:
         return None
-    from iceresist.io.checkpoint import read_checkpoint
-
     try:
         read_checkpoint(checkpoint)
     except InputError as exc:
@@ -182,10 +186,6 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     partial file renamed at the end, continuing a killed run of it from its checkpoint. ``checkpoint_schedule``:
     when to checkpoint (default every ``CHECKPOINT_WALL_S`` of wall time); ``plan``: the sweep's cases by name
     (default the paper's on B-063); ``meta``: more for the case file's meta (the hull's power inputs)."""
-    from iceresist.driver import Outputs, Stop, run_model
-    from iceresist.models import RefinedTier2Model, Tier1Model, Tier2Model
-    from iceresist.simulation import IterationInterval, WallTimeInterval
-
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     t_build = time.perf_counter()
@@ -471,8 +471,6 @@ def add_sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 
 def set_threads(n: int | None):
-    from iceresist.backends.jit import set_threads as set_backend_threads
-
     set_backend_threads(n, "--threads")
 
 
@@ -491,8 +489,6 @@ def _list(flag: str, text: str | None, kind=float):
 
 def hull_spec(args):
     """The ``[hull]`` of the mesh flags (checked: one line naming the flag)."""
-    from iceresist.ship.matrix import HullSpec
-
     values = {"mesh": args.mesh or "b063", "mesh_unit": args.mesh_unit, "mesh_bow": args.mesh_bow,
               "mesh_up": args.mesh_up, "mesh_scale": args.mesh_scale, "draught_m": args.draught,
               "propeller_diameter_m": args.propeller_diameter, "ice_class": args.ice_class}
@@ -512,8 +508,6 @@ def sweep_plan(args):
     """(preset, tier, plan, about) of the command line: a matrix (``--matrix`` or the matrix flags), the paper's Bow A
     cases on ``--mesh``, or (plan None) the paper's cases on B-063. Every mesh is read and checked here, before
     anything is written."""
-    from iceresist.ship.matrix import matrix_from_flags, read_matrix
-
     flags = {axis: _list(flag, getattr(args, flag), str if flag == "ahead" else float)
              for flag, axis in MATRIX_FLAGS.items()}
     given = [f"--{f.replace('_', '-')}" for f, a in MATRIX_FLAGS.items() if flags[a] is not None]
@@ -560,9 +554,6 @@ def _mesh_plan(args):
     tier = 1 if args.tier is None else args.tier
     if not args.mesh:
         return preset, tier, args.amr, None, {}, f"runs/sweep-{preset}-t{tier}"
-    from fsicr.hullmesh import MeshKeys
-    from iceresist.ship.matrix import MatrixCase, hull_at
-
     spec = hull_spec(args)
     cases = args.cases
     if str(cases).strip() == "all":
@@ -581,8 +572,6 @@ def _mesh_plan(args):
 
 
 def _absolute(path: str) -> str:
-    from iceresist.ship.meshhull import resolve_mesh_path
-
     p = resolve_mesh_path(path)
     return str(Path(p).resolve()) if Path(p).is_file() else p
 
@@ -592,8 +581,6 @@ def cmd_sweep(args) -> int:
     if amr and tier != 2:
         raise InputError("--amr: refined levels are a tier-2 tank; add --tier 2")
     if amr:
-        from iceresist.ship.cases import amr_overrides
-
         amr_overrides(preset)  # refuses a preset without refined levels, naming those with them
     out = args.output or default_out + ("-amr" if amr else "")
     set_threads(args.threads)

@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from iceresist.simulation import Callback, IterationInterval
+
 log = logging.getLogger(__name__)
 
 #: Largest lattice speed u dt/dx tolerated while running.
@@ -190,8 +192,6 @@ def default_interval(model) -> int:
 
 def install(sim, *, interval: int | None = None, runfile=None, json_path=None, **limits) -> Watchdog:
     """Add a :class:`Watchdog` as ``sim.callbacks["watchdog"]`` every ``interval`` steps; returns it."""
-    from iceresist.simulation import Callback, IterationInterval
-
     dog = Watchdog(runfile=runfile, json_path=json_path, **limits)
     sim.callbacks["watchdog"] = Callback(dog, IterationInterval(interval or default_interval(sim.model)))
     return dog

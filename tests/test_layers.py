@@ -190,7 +190,8 @@ def test_the_import_graph_is_read():
     """The graph sees imports inside functions and relative imports (else the contract proves nothing)."""
     g = imports()
     assert {"iceresist.cli", "iceresist.post.case", "reports.report", "fsicr"} <= set(g)
-    assert "reports.report" in g["iceresist.cli"]  # a function-level import
+    assert "reports.report" in g["iceresist.cli"]
+    assert "iceresist.lbm.operators" in g["iceresist.lbm.solver"]  # a function-level import
     assert "iceresist.post.case" in g["reports.report"]
 
 
@@ -212,6 +213,40 @@ def private_imports() -> list[str]:
                 if a.name.startswith("_"):
                     bad.append(f"{name} imports {node.module}.{a.name}")
     return bad
+
+
+def function_imports() -> list[str]:
+    """Imports of the project's modules (iceresist, fsicr, reports) inside a function of iceresist without a
+    ``# deferred:`` comment on the line or the line above saying what the deferral spares (an optional or costly
+    dependency): module-level imports show what a module needs, and a cycle cannot hide in a function."""
+    bad = []
+    for name, path in modules().items():
+        if not name.startswith("iceresist.") or name.endswith("__main__"):
+            continue
+        lines = path.read_text(encoding="utf-8").splitlines()
+        tree = ast.parse("\n".join(lines), str(path))
+        for fn in ast.walk(tree):
+            if not isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for node in ast.walk(fn):
+                if isinstance(node, ast.Import):
+                    mods = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom):
+                    mods = ["." if node.level else (node.module or "")]
+                else:
+                    continue
+                if not any(m == "." or m.split(".")[0] in PACKAGES for m in mods):
+                    continue
+                said = lines[node.lineno - 1] + (lines[node.lineno - 2] if node.lineno > 1 else "")
+                if "# deferred:" not in said:
+                    bad.append(f"{path.relative_to(ROOT)}:{node.lineno} ({fn.name})")
+    return sorted(set(bad))
+
+
+def test_the_project_is_imported_at_module_level():
+    bad = function_imports()
+    assert not bad, "imports of the project inside functions (move them up, or say why with # deferred:):\n  " + \
+        "\n  ".join(bad)
 
 
 def test_every_part_of_the_package_is_ranked():

@@ -168,9 +168,9 @@ class FakeFluid(Model):
 
 @pytest.fixture
 def fake_model(monkeypatch):
-    import iceresist.models
+    import iceresist.run
 
-    monkeypatch.setattr(iceresist.models, "build_model", lambda scene, **kw: FakeFluid(scene, **kw))
+    monkeypatch.setattr(iceresist.run, "build_model", lambda scene, **kw: FakeFluid(scene, **kw))
 
 
 def test_run_writes_result_meta_fields_and_xdmf(tmp_path, main, fake_model):
@@ -204,9 +204,9 @@ def test_existing_result_is_kept_unless_force(tmp_path, main, fake_model):
     # --force with a start that fails (cells not a multiple of 8 is caught before any file is opened)
     bad = tmp_path / "bad.toml"
     bad.write_text(POISEUILLE.replace("[0.008, 0.008, 0.016]", "[0.008, 0.008, 0.015]"))
-    import iceresist.models
+    import iceresist.run
 
-    iceresist.models.build_model = _real_build_model  # restored by monkeypatch at teardown
+    iceresist.run.build_model = _real_build_model  # restored by monkeypatch at teardown
     _one_line_error(*main(bad, "--output", tmp_path, "--force"), "multiple of 8")
     assert h5.read_bytes() == before
     _one_line_error(*main("poiseuille", "--output", tmp_path, "--force", "--pickup"), "exclude each other")
@@ -268,7 +268,7 @@ def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_p
     steps (not 650 + 700), two legs, and the wall time up to the checkpoint plus the second leg's. It is
     finished only after a leg that reached its stop criterion: not after the interrupt, and not again once a
     third leg towards 1500 is interrupted."""
-    import iceresist.models
+    import iceresist.run
 
     class Interrupted(FakeFluid):
         at = 650
@@ -279,7 +279,7 @@ def test_pickup_after_an_interrupt_reports_the_steps_and_wall_time_it_kept(tmp_p
                 raise KeyboardInterrupt
             super().step(n)
 
-    monkeypatch.setattr(iceresist.models, "build_model", lambda scene, **kw: Interrupted(scene, **kw))
+    monkeypatch.setattr(iceresist.run, "build_model", lambda scene, **kw: Interrupted(scene, **kw))
     scene = tmp_path / "poiseuille.toml"
     scene.write_text(POISEUILLE + "checkpoint_every_steps = 500\n")
     rc, err = main(scene, "--output", tmp_path, "--steps", "1200")

@@ -17,6 +17,7 @@ import threading
 import time
 from pathlib import Path
 
+from iceresist.backends.cache import cache_dir
 from iceresist.backends.conf import KERNELS
 
 log = logging.getLogger(__name__)
@@ -44,8 +45,6 @@ def kernel_label(dispatcher) -> str:
 
 def cache_folder_text() -> str:
     """Where compiled kernels are kept, for messages (~ for the home folder)."""
-    from iceresist.backends.cache import cache_dir
-
     folder = cache_dir()
     if folder is None:
         return "nowhere (ICERESIST_CACHE=off: every run compiles)"

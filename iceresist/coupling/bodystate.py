@@ -31,6 +31,11 @@ import math
 
 import numpy as np
 
+from iceresist.backends import cache
+from iceresist.backends.jit import cuda_api
+from iceresist.backends.launch import BlockLauncher, build_block_sum6, cuda_launch, profiled
+from iceresist.freesurface.layout import DIR_OF_OFFSET
+
 BODY_ROW_ARGS = ("rows", "pos", "quat", "vel", "omega", "shape_int", "par_lat", "half_lat", "conv", "grid", "body",
                  "bint", "box")
 #: ``body_row`` then ``active_row`` of the same row: one launch of a step.
@@ -211,8 +216,6 @@ def build_event_mask(target):
     of b, o = (bx + 1) + 3 (by + 1) + 9 (bz + 1) (bit 13: b itself), had a covered or uncovered cell this step
     (``evt`` of the refill pass). A cell of b whose 26 neighbours lie in blocks without the bit has nothing to
     redistribute (:func:`reach_mask`)."""
-    from iceresist.freesurface.layout import DIR_OF_OFFSET
-
     dir_of = DIR_OF_OFFSET
     int64, int32 = np.int64, np.int32
 
@@ -282,9 +285,6 @@ def build_row_loads_cuda(target, fluid_loads):
     body: the threads sum (and zero) strided runs of the body's rows, a shared-memory tree adds their sums in a fixed
     order, and thread 0 writes ``now``, ``links`` and the fluid loads (``fluid_loads``). The hull's hundreds of rows
     are then summed by 64 threads, not one."""
-    from iceresist.backends.jit import cuda_api
-    from iceresist.backends.launch import build_block_sum6, cuda_launch, profiled
-
     f64 = np.float64
     block_sum6 = build_block_sum6(f64, ROW_THREADS)
     nt, zero = ROW_THREADS, f64(0.0)
@@ -348,9 +348,6 @@ def body_state_launchers(target, real) -> dict:
     where a cell changed cover (:func:`build_changed_blocks`)."""
     key = (target.name, target.simulator, np.dtype(real).name)
     if key not in _LAUNCHERS:
-        from iceresist.backends import cache
-        from iceresist.backends.launch import BlockLauncher
-
         _, body_row_active, row_sums, fluid_loads, row_loads = build_body_state(target, real)
         near = build_event_mask(target)
         changed = build_changed_blocks(target)

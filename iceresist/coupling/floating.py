@@ -41,6 +41,7 @@ from iceresist.dem import DEMSystem
 from iceresist.errors import InputError
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.grid.forest import BlockForest, Face
+from iceresist.parallel.decomposition import Decomposition
 from iceresist.units import GRAVITY_M_S2, Units
 
 log = logging.getLogger(__name__)
@@ -81,8 +82,6 @@ class FloatingBodies:
             shape, {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-", "z+")})
         self.decomp = None
         if comm is not None and comm.size > 1:
-            from iceresist.parallel.decomposition import Decomposition
-
             self.decomp = Decomposition(self.global_forest, comm)
             self.forest = self.decomp.local
         self.fluid = FreeSurfaceFluid(self.forest, tau=tau, gravity_lattice=g_lattice, depth_cells=self.depth_cells,

@@ -38,10 +38,11 @@ from iceresist.errors import InputError
 from iceresist.freesurface import kernel_key
 from iceresist.freesurface.bulk import FrozenBulk
 from iceresist.freesurface.columns import SurfaceColumns
-from iceresist.freesurface.extension import build_extension_cell, extension_launcher, extend_velocity
+from iceresist.freesurface.extension import build_extension_cell, extend_velocity, extension_launcher
 from iceresist.freesurface.layout import HALO1_SIDE, HAS_GAS, HAS_LIQUID, build_halo_or, build_neighbour
 from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
+from iceresist.freesurface.probe import FluidProbe
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import BLOCK, CELLS
 from iceresist.lbm.stream import TANH_CLIP
@@ -638,8 +639,6 @@ class FreeSurfaceFluid:
         :func:`iceresist.models.probe.fluid_probe` on :meth:`macroscopic` (``full``) or
         :func:`iceresist.models.probe.fluid_speed_probe` on :meth:`velocity`."""
         if self._probe is None:
-            from iceresist.freesurface.probe import FluidProbe
-
             self._probe = FluidProbe(self.forest, self.target, self.decomp)
         return self._probe.probe(self.fluid.state, self.fluid.fslot, self.fluid.flags, self._u, self.phase.phi,
                                  full, 0.5 * self.g, kinetic_energy_ref)

@@ -28,13 +28,13 @@ import numpy as np
 from iceresist import lattice as L
 from iceresist.backends import jit
 from iceresist.backends.launch import CellLauncher
-from iceresist.errors import InputError
-from iceresist.grid.forest import CELLS
+from iceresist.errors import InputError, StabilityError
 from iceresist.freesurface import kernel_key
-from iceresist.lbm.solver import CUMULANT_MODULES, collide_builder
+from iceresist.grid.forest import CELLS
+from iceresist.lbm.codegen import compile_source
+from iceresist.lbm.solver import CUMULANT_MODULES, collide_builder, equilibrium_minus_w
 from iceresist.lbm.stream import (POOL_ARGS, POOL_U_ARGS, block_namespace, cell_device, pooled_source,
                                   stream_collide_block_source, stream_collide_source, stream_namespace)
-from iceresist.lbm.codegen import compile_source
 
 log = logging.getLogger(__name__)
 
@@ -219,8 +219,6 @@ class PooledLBM:
     def __init__(self, forest, *, tau: float, force, operator: str = "cumulant", precision: str = "float32",
                  target=jit.cpu, margin: float | None = DEFAULT_MARGIN):
         if not tau > 0.5:
-            from iceresist.errors import StabilityError
-
             raise StabilityError(f"tau = {tau} must exceed 1/2 (lattice viscosity (tau - 1/2)/3 > 0); "
                                  "raise the viscosity or coarsen the time step")
         self.forest = forest
@@ -313,8 +311,6 @@ class PooledLBM:
     def initialize(self, rho, u, wet: np.ndarray):
         """Size the pool from ``wet`` (bool per block) and set the equilibrium of the dense density ``rho``
         (nx, ny, nz) and uniform velocity ``u`` (3 numbers) in the blocks that hold a row."""
-        from iceresist.lbm.solver import equilibrium_minus_w
-
         self.pool.start(wet)
         fo = self.forest
         blocks = np.flatnonzero(self.pool.fslot >= 0)

@@ -35,10 +35,12 @@ from iceresist.freesurface import kernel_key
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
 from iceresist.freesurface.pool import PooledLBM
-from iceresist.grid.forest import CELLS
+from iceresist.grid.forest import CELLS, LX, LY, LZ
 from iceresist.grid.levels import FROM_COARSER
 from iceresist.grid.octree import BlockOctree
+from iceresist.grid.regrid import same_blocks
 from iceresist.lbm.refinement import RefinedLBM, locate_cells
+from iceresist.parallel.levels import LevelShare
 
 #: A coarse level's cells must start at least this liquid (phi >= 1 - PHI_BULK_TOL).
 PHI_BULK_TOL = 1e-4
@@ -122,8 +124,6 @@ def carried_surface(fs: "RefinedFreeSurface", f_finest, surface_state: dict, old
     finest level), so takes phi = 1, h of that water at its carried velocity (:func:`liquid_h`, as
     :meth:`RefinedFreeSurface.refill_ghosts` gives a ghost block) and the static flags. Raises RuntimeError where a
     block the level drops holds a cell less liquid than 1 - 1e-4."""
-    from iceresist.grid.regrid import same_blocks
-
     L_ = fs.finest
     src, dst = same_blocks(old_view, view)
     kept = np.zeros(old_view.forest.nblocks, dtype=bool)
@@ -275,8 +275,6 @@ class RefinedFreeSurface:
 
     def _split_steps(self, decomp):
         """On several ranks: each level's step followed by the swap of its halo leaves (class docstring)."""
-        from iceresist.parallel.levels import LevelShare
-
         fs, t = self.surface, self.target
         fs.decomp = LevelShare(decomp, self.finest)
         for lv, level in self.lbm.solvers.items():
@@ -309,7 +307,6 @@ class RefinedFreeSurface:
             raise InputError("refinement: the finest level has ghosts over a finer level")
         coarse = self.views[self.finest - 1]
         o = v.forest.origin[v.nleaves:] * 8
-        from iceresist.grid.forest import LX, LY, LZ
         pts = np.stack([o[:, a:a + 1] + Lc for a, Lc in enumerate((LX, LY, LZ))], axis=-1) >> 1
         pb, pc, _ = locate_cells(coarse, pts, self.lbm.periodic)
         if (pb < 0).any():

@@ -32,7 +32,7 @@ from functools import lru_cache
 import sympy as sp
 from sympy.printing.str import StrPrinter
 
-from iceresist.lattice import index_of
+from iceresist.lattice import C, index_of
 
 #: Velocity component -1, 0, 1 -> a letter used in generated names.
 _V = {-1: "m", 0: "0", 1: "p"}
@@ -246,8 +246,6 @@ def cumulant_source(higher_at_equilibrium: bool = False):
     lines.append("    drho = " + " + ".join(f"f{q}" for q in range(27)))
     lines.append("    rho = one + drho")
     lines.append("    ir = one / rho")
-    from iceresist.lattice import C
-
     for a, comp in enumerate(_AXES):
         pos = [f"f{q}" for q in range(27) if C[q, a] == 1]
         neg = [f"f{q}" for q in range(27) if C[q, a] == -1]

@@ -6,6 +6,9 @@ device function ``collide(f, omega, Fx, Fy, Fz) -> 27-tuple`` (see :mod:`iceresi
 
 from __future__ import annotations
 
+from iceresist.backends import jit
+from iceresist.lattice import Q, W
+from iceresist.lbm.codegen import compile_source
 from iceresist.lbm.collide import build_collide_bgk
 from iceresist.lbm.cumulant import build_collide_cumulant
 
@@ -33,10 +36,6 @@ def cpu_cell_rate(name: str, precision: str = "float32", cells: int = 1_000_000,
     import time
 
     import numpy as np
-
-    from iceresist.backends import jit
-    from iceresist.lattice import Q, W
-    from iceresist.lbm.codegen import compile_source
 
     real = jit.real_type(precision)
     src = "def sweep(f, fo, omega, Fx, Fy, Fz):\n    for i in range(f.shape[0]):\n"

@@ -38,12 +38,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from iceresist.backends import jit
 from iceresist.errors import InputError
 from iceresist.grid.forest import LX, LY, LZ
 from iceresist.grid.levels import FROM_COARSER, FROM_FINER, LevelView, level_views
-from iceresist.grid.octree import CHILDREN, BlockOctree
+from iceresist.grid.octree import BlockOctree, CHILDREN
 from iceresist.lattice import C, OPP
-from iceresist.lbm.solver import equilibrium_minus_w
+from iceresist.lbm.exchange import copy_blocks, pack_table, transfer_launcher
+from iceresist.lbm.solver import LBMSolver, equilibrium_minus_w
 
 
 def _lookup(view: LevelView, x, y, z, periodic):
@@ -550,9 +552,6 @@ class RefinedLBM:
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
                  scheme: str = "conservative", reconstruction: str = "linear", target=None, solver_factory=None,
                  views: list | None = None):
-        from iceresist.backends import jit
-        from iceresist.lbm.solver import LBMSolver
-
         self.target = target or jit.cpu
         if self.target.is_cuda and scheme != "conservative":
             raise InputError("scheme: the interpolating level interface runs on the CPU only; use the conservative "
@@ -645,8 +644,6 @@ class RefinedLBM:
         """The conservative transfer tables packed for the transfer kernel (:mod:`iceresist.lbm.exchange`) on the
         target, and a scratch copy of every level's populations (the coarse level at t, the fine one at t and
         t + 1/2)."""
-        from iceresist.lbm.exchange import pack_table, transfer_launcher
-
         real = np.dtype(precision).type
         dev = self.target.to_device
 
@@ -690,8 +687,6 @@ class RefinedLBM:
     def _snapshot(self, scratch, state, key):
         """Copy into ``scratch`` the blocks of ``state`` that the transfer tables read from it (the rest of the
         scratch copy is never read)."""
-        from iceresist.lbm.exchange import copy_blocks
-
         blocks, n = self._scratch_blocks[key]
         copy_blocks(self.target, scratch, state, blocks, n)
 

@@ -19,6 +19,7 @@ from iceresist.backends import cache, jit
 from iceresist.backends.launch import ActiveLauncher, CellLauncher
 from iceresist.errors import InputError, StabilityError
 from iceresist.lattice import C, Q, W
+from iceresist.lbm.collide import build_collide_bgk
 from iceresist.lbm.stream import ARGS, build_stream_collide, build_stream_collide_block
 
 log = logging.getLogger(__name__)
@@ -36,19 +37,11 @@ CUMULANT_MODULES = ("iceresist.lbm.cumulant", "iceresist.lbm.cumulant_gen", "ice
 def collide_builder(operator: str):
     """The collision builder ``build_collide_*(target, real)`` of an operator name."""
     if operator == "bgk":
-        from iceresist.lbm.collide import build_collide_bgk
-
         return build_collide_bgk
     if operator == "cumulant":
-        try:
-            from iceresist.lbm.operators import get_collide_builder
-        except ImportError:
-            try:
-                from iceresist.lbm.cumulant import build_collide_cumulant
-            except ImportError:
-                raise InputError("operator 'cumulant' is not available in this installation; "
-                                 "use operator='bgk'") from None
-            return build_collide_cumulant
+        # deferred: the cumulant operator's generator imports sympy (half a second), which a BGK run never needs
+        from iceresist.lbm.operators import get_collide_builder
+
         return get_collide_builder("cumulant")
     raise InputError(f"operator must be one of {', '.join(OPERATORS)}, not {operator!r}")
 

@@ -31,12 +31,24 @@ import math
 
 import numpy as np
 
+from fsicr.errors import FsicrInputError
+from fsicr.hullmesh import MeshKeys, read_mesh
 from iceresist.backends.launch import copy_into
+from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, Sphere
+from iceresist.coupling.floating import FloatingBodies
+from iceresist.dem import ContactParameters, DEMSystem, box, convex_polyhedron, sphere
 from iceresist.errors import InputError
+from iceresist.grid import flags as FL
+from iceresist.grid.forest import BlockForest
+from iceresist.lbm.solver import LBMSolver
+from iceresist.limits import check_fluid
 from iceresist.models.base import Model, array_bytes
-from iceresist.models.fluid import (BLOCK, FluidModel, check_block_shape, check_free_surface_forces, forest_faces,
-                                    padding_solid, resolve_target)
+from iceresist.models.fluid import (BLOCK, FluidModel, FreeSurfaceModel, check_block_shape, check_free_surface_forces,
+                                    forest_faces, padding_solid, resolve_target)
+from iceresist.models.probe import fluid_probe
+from iceresist.parallel.decomposition import Decomposition
 from iceresist.scene.schema import Scene
+from iceresist.ship.meshhull import resolve_mesh_path
 
 log = logging.getLogger(__name__)
 
@@ -55,10 +67,6 @@ def body_mesh(body, index: int, scene_source: str | None = None):
     """A mesh body's checked surface: vertices (n, 3) m about the centre of its bounding box, faces, and the
     fraction of its convex hull it fills; one line naming ``bodies[i].mesh_file`` (or ``mesh_unit``) on a bad
     file."""
-    from fsicr.errors import FsicrInputError
-    from fsicr.hullmesh import MeshKeys, read_mesh
-    from iceresist.ship.meshhull import resolve_mesh_path
-
     keys = MeshKeys(file=f"bodies[{index}].mesh_file", unit=f"bodies[{index}].mesh_unit")
     try:
         mesh = read_mesh(resolve_mesh_path(body.mesh_file, scene_source), unit=body.mesh_unit, keys=keys, what="body")
@@ -186,8 +194,6 @@ class BodiesModel(Model):
 
     # -- set-up -----------------------------------------------------------------------------------------
     def _make_dem(self, gravity_m_s2):
-        from iceresist.dem import ContactParameters, DEMSystem
-
         con = self.scene.contact
         if con is None:
             return DEMSystem(backend=self.dem_backend, gravity_m_s2=tuple(gravity_m_s2))
@@ -213,9 +219,6 @@ class BodiesModel(Model):
 
     def _shapes(self):
         """(coupling geometry, DEM shape, kinematic, velocity, material) of each body."""
-        from iceresist.coupling import Box, ConvexPolyhedron, Sphere
-        from iceresist.dem import box, convex_polyhedron, sphere
-
         out = []
         for i, b in enumerate(self.scene.bodies):
             rho = b.density_kg_m3 if b.density_kg_m3 is not None else self.scene.rho_kg_m3
@@ -238,11 +241,6 @@ class BodiesModel(Model):
         return out
 
     def _build_fluid(self, u):
-        from iceresist.coupling import FluidStructureCoupling
-        from iceresist.grid.forest import BlockForest
-        from iceresist.lbm.solver import LBMSolver
-        from iceresist.limits import check_fluid
-
         scene = self.scene
         self.units = u
         self.shape_cells = scene.domain.padded_cells()
@@ -252,8 +250,6 @@ class BodiesModel(Model):
         self.global_forest = self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u),
                                                                solid=padding_solid(scene))
         if self.comm is not None:
-            from iceresist.parallel.decomposition import Decomposition
-
             self.decomp = Decomposition(self.global_forest, self.comm)
             self.forest = self.decomp.local
         # gravity acts on the bodies (DEM) with the buoyancy -rho_f V g; the LBM carries the driving force alone
@@ -282,8 +278,6 @@ class BodiesModel(Model):
         self.fb = None
 
     def _build_free_surface(self, u0):
-        from iceresist.coupling.floating import FloatingBodies
-
         scene = self.scene
         _check_free_surface(scene)
         fs = scene.free_surface
@@ -383,8 +377,6 @@ class BodiesModel(Model):
         covers is GHOST); rho0, u = 0 and pressure 0 in solids and bodies (the field writer takes a NaN for a
         blow-up). Free surface: as :class:`FreeSurfaceModel` (rho0, u = 0 and pressure 0 in the gas and the
         bodies), with phi and surface (0 in a column without a crossing of phi = 1/2)."""
-        from iceresist.grid import flags as FL
-
         u = self.units
         if not self.free_surface:
             rho_b, u_b = self.solver.macroscopic_blocks()
@@ -418,8 +410,6 @@ class BodiesModel(Model):
                 "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
 
     def field_units(self, lattice: bool) -> dict[str, str]:
-        from iceresist.models.fluid import FreeSurfaceModel
-
         return FreeSurfaceModel.field_units(lattice) if self.free_surface else FluidModel.field_units(lattice)
 
     def _fluid_columns(self) -> dict[str, float]:
@@ -499,8 +489,6 @@ class BodiesModel(Model):
             full = self._probes % self.full_probe_every == 0
             self._probes += 1
             return self.fb.fluid.probe(full, ke_ref)
-        from iceresist.models.probe import fluid_probe
-
         if self.decomp is None:
             rho_lat, u_lat = self.solver.macroscopic()
             return fluid_probe(rho_lat, u_lat, self._dense_mask(self._fluid_now()), ke_ref)

@@ -12,10 +12,18 @@ import math
 
 import numpy as np
 
+from iceresist.backends import jit
 from iceresist.errors import InputError
+from iceresist.freesurface.fluid import FreeSurfaceFluid
+from iceresist.grid import flags as FL
 from iceresist.grid.flags import FLUID as FL_FLUID
+from iceresist.grid.forest import BlockForest, Face
 from iceresist.lattice import C as _C
+from iceresist.lbm.solver import LBMSolver
+from iceresist.limits import check_fluid
 from iceresist.models.base import Model
+from iceresist.models.probe import fluid_probe
+from iceresist.parallel.decomposition import Decomposition
 from iceresist.scene.schema import Scene
 from iceresist.units import Units
 
@@ -31,8 +39,6 @@ BLOCK = 8
 
 def resolve_target(backend: str, key: str = "numerics.backend"):
     """The compile target of a backend name; a CUDA request without a GPU is an input error naming ``key``."""
-    from iceresist.backends import jit
-
     try:
         return jit.resolve_backend(backend)
     except (RuntimeError, ValueError) as exc:
@@ -41,8 +47,6 @@ def resolve_target(backend: str, key: str = "numerics.backend"):
 
 def forest_faces(scene: Scene, units: Units) -> dict:
     """The scene's faces as block-forest :class:`Face` values in lattice units."""
-    from iceresist.grid.forest import Face
-
     faces = {}
     for name, face in scene.domain.faces.items():
         rho = face.density_kg_m3 if face.density_kg_m3 is not None else scene.rho_kg_m3
@@ -104,12 +108,7 @@ class FluidModel(Model):
         u = self.units
         self.shape_cells = scene.domain.padded_cells()
         check_block_shape(self.shape_cells)
-        from iceresist.limits import check_fluid
-
         check_fluid(scene, u)
-        from iceresist.grid.forest import BlockForest
-        from iceresist.lbm.solver import LBMSolver
-
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
@@ -117,8 +116,6 @@ class FluidModel(Model):
                                                  solid=padding_solid(scene))
         self.forest = self.global_forest
         if comm is not None and comm.size > 1:
-            from iceresist.parallel.decomposition import Decomposition
-
             self.comm = comm
             self.decomp = Decomposition(self.global_forest, comm)
             self.forest = self.decomp.local
@@ -146,8 +143,6 @@ class FluidModel(Model):
         """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)), flags (uint8); in solid
         cells (``domain.pad_to_blocks``) rho0, u = 0 and pressure 0, so that the field writer's NaN check sees only
         a blow-up."""
-        from iceresist.grid import flags as FL
-
         dense = self._dense_macroscopic()
         if dense is None:
             return None
@@ -207,8 +202,6 @@ class FluidModel(Model):
     def watchdog_probe(self) -> dict:
         """Lattice quantities the run watchdog checks (:mod:`iceresist.watchdog`); the reference kinetic energy
         is that of the whole fluid moving at the scene's largest speed (at least a tenth of numerics.mach)."""
-        from iceresist.models.probe import fluid_probe
-
         dense = self._dense_macroscopic()
         probe = None
         if dense is not None:
@@ -286,9 +279,6 @@ class FreeSurfaceModel(Model):
     components = ("fluid", "free_surface")
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
-        from iceresist.freesurface.fluid import FreeSurfaceFluid
-        from iceresist.grid.forest import BlockForest
-
         fs = scene.free_surface
         self.scene = scene
         self.units = u = scene.units()
@@ -309,8 +299,6 @@ class FreeSurfaceModel(Model):
         self.gravity_lattice = float(u.acceleration_to_lattice(-gz))
         margin = None if fs.f_pool_margin == "full" else float(fs.f_pool_margin)
         if comm is not None and comm.size > 1:
-            from iceresist.parallel.decomposition import Decomposition
-
             self.comm = comm
             self.decomp = Decomposition(self.global_forest, comm)
             self.forest = self.decomp.local

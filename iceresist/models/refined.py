@@ -16,12 +16,19 @@ import math
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
+from iceresist.grid.levels import level_views
+from iceresist.grid.octree import BlockOctree
+from iceresist.grid.regrid import any_in_boxes, carry_over, vorticity_magnitude
 from iceresist.lattice import Q
-from iceresist.limits import available_memory_bytes as mem_available
-from iceresist.limits import release_freed_memory
+from iceresist.lbm.refinement import RefinedLBM
+from iceresist.limits import available_memory_bytes as mem_available, check_fluid, release_freed_memory
 from iceresist.models.base import Model
-from iceresist.models.fluid import FluidModel, check_block_shape, forest_faces, resolve_target
+from iceresist.models.bodies import body_mesh, half_extent
+from iceresist.models.fluid import FluidModel, _set_populations, check_block_shape, forest_faces, resolve_target
+from iceresist.models.probe import fluid_probe
+from iceresist.parallel.levels import LevelDecomposition
 from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)
@@ -45,8 +52,6 @@ def body_half_extents_m(scene: Scene) -> np.ndarray:
     """Half the extent (m) along x, y, z of each of the scene's bodies that the finest level must hold: the
     axis-aligned half size at the start (:func:`iceresist.models.bodies.half_extent`) or, in a regridding scene,
     where bodies turn, the radius of the bounding sphere about the centre of mass along every axis."""
-    from iceresist.models.bodies import body_mesh, half_extent
-
     out = []
     for i, body in enumerate(scene.bodies):
         mesh = body_mesh(body, i, scene.source_name) if body.shape == "mesh" else None
@@ -101,9 +106,6 @@ def build_octree(scene: Scene, hot: np.ndarray | None = None, body_boxes_m: np.n
     of the regions its box overlaps (:func:`static_regions`, the bodies in ``body_boxes_m``) and, where ``hot``
     (a bool array on the level-0 cells: the cells a moving criterion marks, e.g. vorticity) holds a True cell in its
     box, the finest level; then 2:1 balance."""
-    from iceresist.grid.octree import BlockOctree
-    from iceresist.grid.regrid import any_in_boxes
-
     ref = scene.refinement
     shape = scene.domain.shape_cells()
     periodic = tuple(getattr(scene.domain.faces, f"{a}_min").kind == "periodic" for a in "xyz")
@@ -172,20 +174,14 @@ class RefinedFluidModel(Model):
 
     def _check_limits(self, scene: Scene, u):
         """The fluid's stability limits (:func:`iceresist.limits.check_fluid`)."""
-        from iceresist.limits import check_fluid
-
         check_fluid(scene, u)
 
     def _split(self, octree):
         """The levels of ``octree`` this process holds and their :class:`~iceresist.parallel.levels.LevelDecomposition`
         over the ranks (None on one process, where it holds them all)."""
-        from iceresist.grid.levels import level_views
-
         views = level_views(octree, forest_faces(self.scene, self.units))
         if self.comm is None:
             return views, None
-        from iceresist.parallel.levels import LevelDecomposition
-
         decomp = LevelDecomposition(octree, views, self.comm)
         return decomp.views, decomp
 
@@ -210,8 +206,6 @@ class RefinedFluidModel(Model):
     def _build(self, initialize: bool = True):
         """The levels' solver (``self.lbm``) on ``self.octree``, initialised from the scene (or left for the caller
         to fill: a regrid, a pickup)."""
-        from iceresist.lbm.refinement import RefinedLBM
-
         scene, u, fl = self.scene, self.units, self.scene.fluid
         d = self.decomp
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
@@ -230,8 +224,6 @@ class RefinedFluidModel(Model):
         """The level-0 cells a moving criterion marks for the finest level: vorticity |curl u| above
         ``refinement.vorticity_1_s``, from the velocity on the level-0 grid (central differences over level-0
         cells); None without that criterion."""
-        from iceresist.grid.regrid import vorticity_magnitude
-
         if self.scene.refinement.vorticity_1_s is None:
             return None
         _, u_lat, _ = self._level0()
@@ -279,8 +271,6 @@ class RefinedFluidModel(Model):
         (:func:`iceresist.grid.regrid.carry_over`; onto the same octree, a rebuild changes nothing:
         tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``decomp``: the new split) the old
         levels are gathered on rank 0, carried over there and the new ones dealt out to the ranks."""
-        from iceresist.grid.regrid import carry_over
-
         old_views = self.lbm.views
         old = {lv: self._populations(lv) for lv in self.lbm.levels}
         finest = self._finest_extra()
@@ -329,8 +319,6 @@ class RefinedFluidModel(Model):
         """The new levels' populations (leaves and ghosts) set from ``new`` (per level, carried over from the levels
         of ``old_views``; ``finest``: :meth:`_finest_extra`, unused here; on MPI ranks ``new`` is this rank's share,
         ``old_views`` the whole levels before and ``whole`` the whole carried levels on rank 0)."""
-        from iceresist.models.fluid import _set_populations
-
         for lv, s in self.lbm.solvers.items():
             _set_populations(s, new[lv].astype(s.real))
             s.iteration = self.level0_steps * 2 ** lv
@@ -402,8 +390,6 @@ class RefinedFluidModel(Model):
 
     def fields(self) -> dict[str, np.ndarray]:
         """rho (kg/m^3), u (m/s), pressure (Pa, gauge) and flags on the level-0 grid."""
-        from iceresist.grid import flags as FL
-
         rho_lat, u_lat, _ = self._level0()
         if self.comm is not None and self.comm.rank != 0:
             return None
@@ -461,8 +447,6 @@ class RefinedFluidModel(Model):
         return out
 
     def watchdog_probe(self) -> dict:
-        from iceresist.models.probe import fluid_probe
-
         rho_lat, u_lat, _ = self._level0()
         u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
                     0.1 * self.scene.numerics.mach)
@@ -500,8 +484,6 @@ class RefinedFluidModel(Model):
 
     def _octree_of(self, state: dict):
         """The checkpoint's octree on this scene's root blocks, None if its leaves do not tile this domain."""
-        from iceresist.grid.octree import BlockOctree
-
         lev = np.asarray(state["octree_level"], dtype=np.int64)
         coord = np.asarray(state["octree_coord"], dtype=np.int64)
         t = self.octree
@@ -521,8 +503,6 @@ class RefinedFluidModel(Model):
         self.regrid_count = int(state.get("regrid_count", self.regrid_count))
 
     def load_state(self, state: dict):
-        from iceresist.models.fluid import _set_populations
-
         self.check_checkpoint(state)
         self._adopt_checkpoint_octree(state)
         f = state.get("f", {})

@@ -20,9 +20,15 @@ import math
 
 import numpy as np
 
-from iceresist.errors import InputError
+from iceresist.backends.launch import copy_into
+from iceresist.coupling import FluidStructureCoupling
+from iceresist.errors import InputError, StabilityError
+from iceresist.grid.regrid import same_blocks
+from iceresist.lbm.refinement import RefinedLBM
 from iceresist.models.bodies import BodiesModel, body_mesh, check_bodies
+from iceresist.models.fluid import forest_faces
 from iceresist.models.refined import RefinedFluidModel, body_half_extents_m
+from iceresist.parallel.levels import LevelShare
 
 
 class FinestLevelBodies:
@@ -112,8 +118,6 @@ class FinestLevelBodies:
         where they are. A body that left the finest level since the last regrid (it moved further than the band)
         stops the run with a StabilityError naming the two keys; after the regrid every body lies on the finest
         level with two cells to spare (asserted)."""
-        from iceresist.errors import StabilityError
-
         pos = self.body_positions_m()
         gone = self.bodies_outside_finest(pos, margin_cells=1.0)
         if gone:
@@ -139,8 +143,6 @@ class FinestLevelBodies:
         the level has no body in it (the band keeps every body on blocks that stay), so no owner. The rest of the
         coupling's state (boxes, forces, the record's load sum, step count) carries as it is. The cell flags are
         not carried: the new coupling's first refill sets them from the owners on every block a body touches."""
-        from iceresist.grid.regrid import same_blocks
-
         d = self.decomp
         view = self.lbm.views[self.finest] if d is None else d.global_views[self.finest]
         st, error = None, None
@@ -188,10 +190,6 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         """The levels' solver, and the coupling on its finest level. The first call also builds the DEM and its
         bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
         cell flags and the coupling's state (:meth:`_carry_finest`)."""
-        from iceresist.coupling import FluidStructureCoupling
-        from iceresist.lbm.refinement import RefinedLBM
-        from iceresist.models.fluid import forest_faces
-
         scene, u, fl = self.scene, self.units, self.scene.fluid
         first = getattr(self, "coupling", None) is None
         if first:
@@ -227,8 +225,6 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         on a uniform grid: :class:`~iceresist.models.bodies.BodiesModel`), counts the links of its own leaves into
         the forces (summed over the ranks) and swaps its halo leaves' populations after each step. The cell flags
         need no swap: the replicated bodies mark their cells on the halo leaves alike on every rank."""
-        from iceresist.parallel.levels import LevelShare
-
         finest, t = self.lbm.solvers[self.finest], self.target
         self.coupling.distribute(LevelShare(d, self.finest))
         for lv, level in self.lbm.solvers.items():
@@ -283,8 +279,6 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         return {**levels, "flags_finest": flags, "coupling": coupling, "dem": self.dem.state()}
 
     def load_state(self, state: dict):
-        from iceresist.backends.launch import copy_into
-
         if "coupling" not in state or "dem" not in state or "flags_finest" not in state:
             raise InputError("the checkpoint holds no bodies on refined levels: it belongs to another scene; run "
                              "again without --pickup")

@@ -16,6 +16,8 @@ import math
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.freesurface.hlattice import h_lattice
+from iceresist.freesurface.refined import PHI_BULK_TOL, RefinedFreeSurface
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import Q
@@ -33,8 +35,6 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
     def _level_bytes(self, views) -> dict[int, int]:
         """Bytes each level's blocks take: both population buffers, and on the finest level the phase field (h in
         two buffers, phi) and the velocity, flags and work arrays of the free surface."""
-        from iceresist.freesurface.hlattice import h_lattice
-
         item = np.dtype(self.precision).itemsize
         finest = max(v.level for v in views if v is not None)
         qh = h_lattice(self.scene.free_surface.h_lattice).q
@@ -52,8 +52,6 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """The levels with the surface on the finest (:class:`RefinedFreeSurface`), the water still and
         hydrostatic at ``free_surface.water_depth_m`` (or, ``initialize`` False, left for a regrid or a pickup to
         fill)."""
-        from iceresist.freesurface.refined import RefinedFreeSurface
-
         scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
         if not initialize:
             finest = self.finest
@@ -110,8 +108,6 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         them. This keeps those blocks and their neighbours on the finest level when the body moves on, so the
         surface stays a block clear of the level's edge as at the start (:meth:`RefinedFreeSurface.initialize`);
         without it the regrid stops in :func:`carried_surface`."""
-        from iceresist.freesurface.refined import PHI_BULK_TOL
-
         hot = super().hot_cells()
         shape = tuple(int(n) for n in self.shape_cells)
         mark = np.zeros(shape, dtype=np.uint8)

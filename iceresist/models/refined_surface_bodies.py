@@ -23,6 +23,7 @@ import math
 
 import numpy as np
 
+from iceresist.coupling import FluidStructureCoupling
 from iceresist.errors import InputError
 from iceresist.models.refined_bodies import FinestLevelBodies
 from iceresist.models.refined_surface import RefinedFreeSurfaceModel
@@ -38,8 +39,6 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         level's free-surface fluid. The first call also builds the DEM and places the bodies in the still water; a
         later one (a regrid, a pickup onto another octree) keeps the DEM and carries the coupling's state
         (:meth:`FinestLevelBodies._carry_finest`)."""
-        from iceresist.coupling import FluidStructureCoupling
-
         first = getattr(self, "coupling", None) is None
         old = None if first else self._finest_state()
         super()._build(initialize)

@@ -25,7 +25,12 @@ import math
 
 import numpy as np
 
+from iceresist.dem.bodies import matrix_from_quaternion
+from iceresist.errors import InputError
+from iceresist.grid.levels import level_views
 from iceresist.models.base import array_bytes
+from iceresist.models.fluid import forest_faces
+from iceresist.models.refined import build_octree
 from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
 from iceresist.models.ship import ShipModel
 from iceresist.models.tier2 import Tier2Ship
@@ -94,10 +99,6 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         ``updates_per_step`` (cell updates per level-0 step), ``dt_s`` (level 0's step), ``level0_steps`` (the
         case's) and ``level_bytes`` (what :meth:`__init__` checks against the memory: every level's populations, the
         finest level's free surface; the coupling, the DEM and the level-transfer tables come on top)."""
-        from iceresist.grid.levels import level_views
-        from iceresist.models.fluid import forest_faces
-        from iceresist.models.refined import build_octree
-
         self = cls.__new__(cls)
         self.backend, self.precision = "cpu", None
         self._set_up_tier2(scene)
@@ -120,8 +121,6 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
     def _centres_of_mass(bodies) -> np.ndarray:
         """Where each body's centre of mass starts (n, 3), m: the model frame's origin at ``position_m`` turned by
         ``orientation``, as :meth:`DEMSystem.add_body` places it."""
-        from iceresist.dem.bodies import matrix_from_quaternion
-
         out = []
         for _, shape, kw in bodies:
             q = kw.get("orientation")
@@ -267,8 +266,6 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
                 "fluid_force_mean_N": self._fluid_mean.copy(), **self.ice_state()}
 
     def load_state(self, state: dict):
-        from iceresist.errors import InputError
-
         if "records" not in state:
             raise InputError("the checkpoint holds no tier-2 ship on refined levels: it belongs to another scene; "
                              "run again without --pickup")

@@ -16,8 +16,11 @@ import math
 
 import numpy as np
 
+from iceresist.dem import ContactParameters, DEMSystem, box, convex_polyhedron, mesh_solid
 from iceresist.errors import InputError
+from iceresist.limits import check_ice_floats, check_scene_ice
 from iceresist.models.base import Model
+from iceresist.scene.schema import Contact
 from iceresist.ship.cases import MIN_WINDOW_HULL_LENGTHS
 from iceresist.ship.channel import ChannelLayout, channel_layout
 from iceresist.ship.hull import HullGeometry
@@ -46,8 +49,6 @@ def hull_shape(geometry: HullGeometry | MeshHull, spacing_m: float, band_m: floa
     :func:`~iceresist.dem.mesh_solid`.
 
     Mass properties are those of the whole solid (they do not matter for a kinematic body)."""
-    from iceresist.dem import convex_polyhedron, mesh_solid
-
     if isinstance(geometry, MeshHull) and not geometry.is_convex:
         shape = mesh_solid(geometry.vertices(), geometry.faces, density_kg_m3, spacing_m, name="hull",
                            z_max_m=geometry.draught_m + band_m)
@@ -63,8 +64,6 @@ def ice_layout(scene, width_m: float, centre_y_m: float, level_m: float,
     """The scene's ice channel (``[ice]``) across ``width_m``, centred on ``centre_y_m``, floating at ``level_m``:
     the cube pattern after the pre-run ice limits (:func:`iceresist.limits.check_scene_ice`), or with
     ``ice.size_distribution`` an :class:`~iceresist.ship.icefield.IceField`."""
-    from iceresist.limits import check_ice_floats, check_scene_ice
-
     ice = scene.ice
     if ice.size_distribution != "none":
         check_ice_floats(ice.density_kg_m3, rho_w_kg_m3)
@@ -146,9 +145,6 @@ class ShipModel(Model):
 
     def _set_up_ship(self, scene, domain_m) -> None:
         """Hull geometry, ice layout, speed, start and steady window of ``scene`` in a tank of ``domain_m``."""
-        from iceresist.dem import box
-        from iceresist.scene.schema import Contact
-
         self._check_sections(scene)
         self.scene = scene
         sh, ice = scene.ship, scene.ice
@@ -184,8 +180,6 @@ class ShipModel(Model):
 
     def _make_dem(self, *, backend: str, precision: str, gravity_m_s2):
         """The DEM system with the scene's contact law (ice-ice and ice-ship) and no bodies yet."""
-        from iceresist.dem import ContactParameters, DEMSystem
-
         con = self.contact
         kt = con.tangential_stiffness_ratio * con.stiffness_N_m
         return DEMSystem(backend=backend, precision=precision, gravity_m_s2=tuple(gravity_m_s2),

@@ -15,7 +15,9 @@ import math
 
 import numpy as np
 
+from iceresist.dem import Water
 from iceresist.errors import InputError
+from iceresist.limits import check_tier1
 from iceresist.models.base import array_bytes
 from iceresist.models.ship import ShipModel
 
@@ -30,9 +32,6 @@ class Tier1Model(ShipModel):
     units = None  # no lattice
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None):
-        from iceresist.dem import Water
-        from iceresist.limits import check_tier1
-
         size = scene.domain.size_m or tuple(n * scene.domain.dx_m for n in scene.domain.cells)
         self._set_up_ship(scene, size)
         g, ice, con = self.geometry, scene.ice, self.contact

@@ -35,6 +35,8 @@ from abc import abstractmethod
 import numpy as np
 
 from iceresist.backends.graphs import StepReplay
+from iceresist.coupling.floating import FloatingBodies
+from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
 from iceresist.errors import InputError
 from iceresist.models.base import array_bytes
 from iceresist.models.fluid import check_block_shape, resolve_target
@@ -101,8 +103,6 @@ class Tier2Ship(ShipModel):
         """The bodies the coupling moves, the hull first: (geometry for the fluid, DEM shape, keywords of
         ``add_body``) each. The hull is kinematic at the ship's speed; its geometry is the convex hull of its
         vertices or, for a mesh hull that is not convex, a union of convex slabs. Every ice piece is a box."""
-        from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
-
         g = self.geometry
         pieces = g.fluid_pieces() if isinstance(g, MeshHull) else None
         if pieces is not None and len(pieces[0]) > 1:
@@ -181,8 +181,6 @@ class Tier2Model(Tier2Ship):
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
                  tau_floor: float | None = None, comm=None):
-        from iceresist.coupling.floating import FloatingBodies
-
         self.backend, self.precision = backend, precision
         gvec = self._set_up_tier2(scene)
         lu = scene.units()

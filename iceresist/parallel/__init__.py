@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 
+from iceresist.backends import jit
+from iceresist.backends.conf import get_threads, max_threads, set_threads
 from iceresist.errors import InputError
 
 #: Environment variables an MPI launcher sets for its ranks (MPICH's Hydra, Open MPI, Slurm's PMI).
@@ -42,8 +44,6 @@ def share_cores(comm) -> int:
     """Give this rank its share of the machine's cores for numba's parallel loops: the cores over the ranks on this
     node (at least one), unless ``NUMBA_NUM_THREADS`` says otherwise; returns the thread count. Ranks that each run
     every core's worth of threads wait on each other (measured 100 x slower on a 2-core machine)."""
-    from iceresist.backends.conf import get_threads, max_threads, set_threads
-
     if "NUMBA_NUM_THREADS" in os.environ:
         return get_threads()
     from mpi4py import MPI
@@ -99,8 +99,6 @@ def use_local_gpu(comm) -> int | None:
     """On a node with several GPUs, give each of its ranks its own: local rank modulo the GPUs numba-cuda sees
     (where a launcher already gave each rank one GPU, e.g. ``CUDA_VISIBLE_DEVICES`` per task, there is one to
     see and nothing changes). Returns the device index taken, or None. Call it before any array is on a GPU."""
-    from iceresist.backends import jit
-
     n = jit.device_count()
     if n <= 1:
         return None

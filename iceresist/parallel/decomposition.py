@@ -25,7 +25,10 @@ import time
 import numpy as np
 
 from iceresist.errors import InputError
+from iceresist.grid.forest import BlockForest, LX, LY, LZ
+from iceresist.lattice import C
 from iceresist.parallel.messages import Exchanges, Pending, swap_start
+from iceresist.parallel.staging import DevicePlan
 
 
 def morton_partition(weights: np.ndarray, nranks: int) -> np.ndarray:
@@ -98,8 +101,6 @@ class Decomposition(Collectives, Exchanges):
     """
 
     def __init__(self, forest, comm):
-        from iceresist.grid.forest import BlockForest
-
         self.comm = comm
         self.rank, self.size = int(comm.rank), int(comm.size)
         self.forest = forest
@@ -150,9 +151,6 @@ class Decomposition(Collectives, Exchanges):
         next to a receiving block o, the cells of h on its side facing o (one layer; an edge or a corner for
         diagonal neighbours) and of them the populations that stream from h into o (9 across a face, 3 across an
         edge, 1 across a corner), sorted by block, population, cell."""
-        from iceresist.grid.forest import LX, LY, LZ
-        from iceresist.lattice import C
-
         nbr, owner = self.forest.nbr, self.owner
         local = (LX, LY, LZ)
         mine = np.flatnonzero(owner == receiver)
@@ -204,8 +202,6 @@ class Decomposition(Collectives, Exchanges):
         if target is not None and target.is_cuda:
             key = (bool(full), tuple(arr.shape), str(arr.dtype))
             if key not in self._plans:
-                from iceresist.parallel.staging import DevicePlan
-
                 self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends)
             pending = self._plans[key].start(self.comm, arr, tag=7)
         else:

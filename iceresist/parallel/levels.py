@@ -35,6 +35,7 @@ from iceresist.grid.forest import BlockForest, morton_key
 from iceresist.grid.levels import LevelView
 from iceresist.parallel.decomposition import Collectives, SolverHalo, morton_partition
 from iceresist.parallel.messages import Exchanges, Pending, swap_start
+from iceresist.parallel.staging import DevicePlan
 
 
 def tree_of(view: LevelView) -> np.ndarray:
@@ -164,8 +165,6 @@ class LevelDecomposition(Collectives, Exchanges):
         if target is not None and target.is_cuda:
             key = (lv, tuple(arr.shape), str(arr.dtype))
             if key not in self._plans:
-                from iceresist.parallel.staging import DevicePlan
-
                 self._plans[key] = DevicePlan(target, arr.shape, arr.dtype,
                                               [(r, rows, None, None) for r, rows in self._recvs[lv]],
                                               [(r, rows, None, None) for r, rows in self._sends[lv]])

@@ -11,9 +11,19 @@ from pathlib import Path
 
 import numpy as np
 
+import fsicr
+from fsicr import formulas
+from fsicr.hullmesh import HOW
+from fsicr.ship import DESCRIPTIONS
 from iceresist.errors import InputError
-from iceresist.post.scaling import PAPER_SCALE
+from iceresist.io.hdf5 import RunFile
+from iceresist.post.resistance import ice_resistance_from_timeseries, window_halves
+from iceresist.post.scaling import PAPER_SCALE, force_to_full_scale
 from iceresist.post.statistics import MIN_BATCH_LENGTH_TAU
+from iceresist.ship.hull import HullGeometry
+from iceresist.ship.icefield import floe_corners
+from iceresist.ship.meshhull import HullRecord
+from iceresist.ship.tank import start_wave
 
 #: Scale ratio of the paper (lambda).
 SCALE = PAPER_SCALE
@@ -25,8 +35,6 @@ FALLBACK_BATCHES = 5
 def load_case(path) -> dict:
     """``{"meta", "ts", "bodies", "model"}`` of one case file: meta attributes, time series, ice start and end
     positions, and the model description."""
-    from iceresist.io.hdf5 import RunFile
-
     with RunFile(path, "r") as rf:
         meta = rf.meta
         model = rf.meta_object("model")
@@ -37,8 +45,6 @@ def load_case(path) -> dict:
 
 def mesh_r_ch_kN(hull, scale: float = SCALE, ice_class: str = "IA") -> float:
     """FSICR R_CH (kN) of a mesh hull at full scale (1:``scale``), from the inputs measured on it."""
-    import fsicr
-
     return fsicr.r_ch(fsicr.Ship(name="mesh hull", **hull.fsicr_inputs(scale)), ice_class).r_ch_N / 1e3
 
 
@@ -46,8 +52,6 @@ def engine_power_kW(resistance_kN: float, meta: dict) -> float:
     """FSICR required engine output (kW) for a full-scale ice resistance, P = Ke (R/1000)^1.5 / Dp (FSICR 3.2.2;
     R in N), with the propeller of the case's meta; NaN without one (no class minimum: this is the output that
     resistance needs)."""
-    from fsicr import formulas
-
     if "Dp_m" not in meta:
         return float("nan")
     ke = formulas.ke(int(meta["n_propellers"]), str(meta["propulsion"]))
@@ -57,8 +61,6 @@ def engine_power_kW(resistance_kN: float, meta: dict) -> float:
 def fsicr_r_ch_kN() -> dict:
     """FSICR R_CH (kN) of the paper's table-1 ships (fsicr/ships), class IA."""
     from importlib import resources
-
-    import fsicr
 
     out = {}
     for bow in "AB":
@@ -110,9 +112,6 @@ def analyse_case(path) -> dict:
     """One table row from a finished case file (see :func:`iceresist.post.sweeptable.sweep_table` for the
     columns). What limits the row's interval or its steadiness check is said in its ``note`` column (empty when
     nothing does), not logged."""
-    from iceresist.post.resistance import window_halves
-    from iceresist.post.scaling import force_to_full_scale
-
     case = load_case(path)
     meta, model, ts, bodies = case["meta"], case["model"], case["ts"], case["bodies"]
     t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]  # row 0 is the state before the first step
@@ -182,8 +181,6 @@ def window_mean(t_s, Fx_N, x_bow_m, window_m) -> tuple:
     """The steady-window mean of a ship's record (:func:`~iceresist.post.resistance.ice_resistance_from_timeseries`)
     and None, or, where the window is shorter than the automatic batches need, the mean over
     :data:`FALLBACK_BATCHES` batches and why. A window the record cannot average raises InputError."""
-    from iceresist.post.resistance import ice_resistance_from_timeseries
-
     try:
         return ice_resistance_from_timeseries(t_s, Fx_N, x_bow_m, window_m=window_m, motion_direction=+1), None
     except InputError as exc:
@@ -194,8 +191,6 @@ def window_mean(t_s, Fx_N, x_bow_m, window_m) -> tuple:
 def window_summary(path) -> str | None:
     """One sentence on a ship run's result file: its mean ice resistance over the steady window with the 95 %
     interval (model scale, and full scale at the run's scale), or why there is none; None for a scene without a ship."""
-    from iceresist.io.hdf5 import RunFile
-
     with RunFile(path, "r") as rf:
         model, meta, ts = rf.meta_object("model"), rf.meta, rf.timeseries()
     if not isinstance(model, dict) or "steady_window_m" not in model or "Fx_N" not in ts:
@@ -222,9 +217,6 @@ def window_summary(path) -> str | None:
 def hull_of_model(model: dict):
     """The :class:`~iceresist.ship.hull.HullGeometry` of a case file's model description, or for a mesh hull its
     :class:`~iceresist.ship.meshhull.HullRecord`."""
-    from iceresist.ship.hull import HullGeometry
-    from iceresist.ship.meshhull import HullRecord
-
     h = model["hull"]
     if h.get("kind") == "mesh":
         return HullRecord(h)
@@ -237,8 +229,6 @@ def case_start_wave(model: dict, geom) -> tuple | None:
     """Tier 2: (:class:`~iceresist.ship.tank.StartWave`, steady window in s after the start) from a case file's
     model description, the tank's width from its blockage, so files written before the start wave was
     described read the same; None for tier 1 (no tank flow) or a ship at rest."""
-    from iceresist.ship.tank import start_wave
-
     tank = model.get("tank")
     speed = float(model["speed_m_s"])
     if not tank or speed <= 0:
@@ -260,8 +250,6 @@ def start_wave_fraction(model: dict, geom) -> float:
 def floe_outlines(model: dict, bodies: dict, positions: np.ndarray, quaternions=None):
     """Plan outlines (n, 4, 2) of the floes at ``positions``, turned by the quaternions' yaw (or the recorded start
     yaw), and their thicknesses (n,): each floe's own size where the file records it, else the cube edge."""
-    from iceresist.ship.icefield import floe_corners
-
     n = len(positions)
     size = np.asarray(bodies.get("floe_sizes_m", np.full(n, model["cube_m"])), dtype=float)
     thick = np.asarray(bodies.get("floe_thickness_m", np.full(n, model["cube_m"])), dtype=float)
@@ -276,10 +264,6 @@ def floe_outlines(model: dict, bodies: dict, positions: np.ndarray, quaternions=
 def mesh_hull_inputs(hull: dict, scale: float) -> list[dict] | None:
     """Rows (input, full scale, how it is measured) of the FSICR inputs measured on a mesh hull, from a case
     file's hull description; None for the parametric hull."""
-    from fsicr.hullmesh import HOW
-    from fsicr.ship import DESCRIPTIONS
-    from iceresist.ship.meshhull import HullRecord
-
     if hull.get("kind") != "mesh":
         return None
     return [{"input": DESCRIPTIONS[k], "full scale": f"{v:.4g}", "measured as": HOW.get(k, "the draught x scale")}

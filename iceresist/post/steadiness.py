@@ -21,6 +21,8 @@ import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
+from iceresist.io.hdf5 import RunFile
+from iceresist.post.resistance import window_parts
 
 log = logging.getLogger(__name__)
 
@@ -57,8 +59,6 @@ class CaseRecord:
 def read_case_record(path) -> CaseRecord:
     """Read a ship case file written by ``iceresist run`` or ``iceresist sweep``. A file still being written
     is read as far as it goes (no file lock is taken, so a running case can be looked at)."""
-    from iceresist.io.hdf5 import RunFile
-
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such case file; give the .h5 file of a ship case (iceresist run/sweep)")
@@ -103,8 +103,6 @@ def steadiness_table(cases, step_m: float = DEFAULT_STEP_M) -> pd.DataFrame:
     ``mean_N``, ``ci95_N``, ``samples``, ``batch_tau_int`` (batch length over the integrated autocorrelation
     time), ``interval_too_narrow`` (:attr:`~iceresist.post.SteadyMean.interval_too_narrow`), ``in_window`` (the
     step lies inside the case's steady window). ``cases``: paths or :class:`CaseRecord`."""
-    from iceresist.post.resistance import window_parts
-
     records = [c if isinstance(c, CaseRecord) else read_case_record(c) for c in cases]
     rows = []
     for rec, label in zip(records, case_labels(records)):

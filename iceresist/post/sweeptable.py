@@ -16,7 +16,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from iceresist.errors import InputError
+from iceresist.io.hdf5 import RunFile
 from iceresist.post.case import analyse_case
+from iceresist.ship.cases import CASES, FIDELITY_NOTES
 
 #: The table's file in a sweep folder.
 TABLE_NAME = "sweep.csv"
@@ -30,8 +33,6 @@ def stored_meta(path: Path) -> dict | None:
     """The meta attributes of a case file, or None when there is no readable one."""
     if not path.is_file():
         return None
-    from iceresist.io.hdf5 import RunFile
-
     try:
         with RunFile(path, "r") as rf:
             return rf.meta
@@ -57,8 +58,6 @@ def case_order(out: Path) -> list[str]:
     """The cases of a sweep folder in its matrix's order: its ``sweep.json`` list, else the paper's matrix."""
     import json
 
-    from iceresist.ship.cases import CASES
-
     try:
         cases = json.loads((out / "sweep.json").read_text()).get("cases")
     except (OSError, ValueError, AttributeError):
@@ -70,8 +69,6 @@ def case_order(out: Path) -> list[str]:
 
 def _analyse(path: Path) -> dict:
     """:func:`analyse_case`, a file that is not a whole case result named in one line."""
-    from iceresist.errors import InputError
-
     try:
         return analyse_case(path)
     except (KeyError, OSError, ValueError, IndexError) as exc:
@@ -82,8 +79,6 @@ def _analyse(path: Path) -> dict:
 def preset_note(preset: str | None, tier: int) -> str:
     """What the quick preset trades away (:data:`iceresist.ship.cases.FIDELITY_NOTES`; its tier-2 note too for
     a tier-2 sweep, with the grid caveat); empty for the paper preset."""
-    from iceresist.ship.cases import FIDELITY_NOTES
-
     if preset != "quick":
         return ""
     note = "Quick preset: " + FIDELITY_NOTES[("quick", 1)]

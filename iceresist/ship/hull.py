@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+import fsicr
 from iceresist.errors import InputError
 
 #: Paper's scale ratio (model : full = 1 : 25).
@@ -167,8 +168,6 @@ class HullGeometry:
 
     def fsicr_ship(self, scale: float = B063_SCALE, name: str = "B-063 (geometry)"):
         """An :class:`fsicr.Ship` from :meth:`fsicr_inputs`."""
-        import fsicr
-
         return fsicr.Ship(name=name, **self.fsicr_inputs(scale))
 
 

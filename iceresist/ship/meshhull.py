@@ -20,8 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+import fsicr
 from fsicr import hullmesh
 from fsicr.errors import FsicrInputError
+from iceresist.dem.bodies import inside_mesh
 from iceresist.errors import InputError
 
 #: The scene keys of the mesh options, for messages.
@@ -195,8 +197,6 @@ class MeshHull:
         volume (points of a lattice of ``samples`` along the longest side)."""
         from scipy.spatial import ConvexHull
 
-        from iceresist.dem.bodies import inside_mesh
-
         cached = self._lattice
         if cached is None or cached[0] != samples:  # the lattice and what of it the mesh holds, once per hull
             v = self.mesh.vertices
@@ -296,8 +296,6 @@ class MeshHull:
         return scaled_inputs(self.inputs, scale)
 
     def fsicr_ship(self, scale: float = 25.0, name: str | None = None):
-        import fsicr
-
         return fsicr.Ship(name=name or self.name, **self.fsicr_inputs(scale))
 
     def sha256(self) -> str:

@@ -14,7 +14,14 @@ import logging
 import sys
 
 from fsicr.cliparser import OneLineParser
+from iceresist.console import configure_logging
 from iceresist.errors import InputError
+from iceresist.io.paths import check_output_dir
+from iceresist.models.fluid import resolve_target
+from iceresist.post.convergence import markdown_table
+from iceresist.sweep import set_threads
+from iceresist.validate.ladder import run_ladders
+from iceresist.validate.stability import main as stability_main
 
 log = logging.getLogger(__name__)
 
@@ -43,24 +50,13 @@ def output_dir(args) -> str:
 
 def cmd_validate(args) -> int:
     """Run the ladders (or ``--stability`` the matrix) into the files of :func:`output_dir`."""
-    from iceresist.io.paths import check_output_dir
-    from iceresist.models.fluid import resolve_target
-    from iceresist.sweep import set_threads
-
     out = output_dir(args)
     set_threads(args.threads)
     resolve_target(args.backend, "--backend")       # a backend this machine lacks is refused before a file is made
     check_output_dir(out, "--out")
     if args.stability:
-        try:
-            from iceresist.validate.stability import main as stability_main
-        except ImportError as exc:
-            raise InputError(f"--stability: the stability matrix is not available in this version ({exc})")
         argv = ["--quick" if args.quick else "--full", "--out", out, "--backend", args.backend]
         return int(stability_main(argv) or 0)
-    from iceresist.post.convergence import markdown_table
-    from iceresist.validate.ladder import run_ladders
-
     table = run_ladders(out, quick=args.quick, cases=args.cases, backend=args.backend, precision=args.precision,
                         progress=not args.no_progress)
     if table.empty:
@@ -81,8 +77,6 @@ def main(argv=None) -> int:
         args = build_parser().parse_args(argv)
     except SystemExit as exc:           # --help (0) or a usage error (2, one line already on stderr)
         return int(exc.code or 0)
-    from iceresist.console import configure_logging
-
     configure_logging(verbose=args.verbose)
     try:
         return int(args.func(args) or 0)

@@ -25,15 +25,23 @@ import numpy as np
 
 from iceresist.backends import jit
 from iceresist.backends.buildcheck import KernelBuild, compile_kernel, toolkit, tracing
+from iceresist.freesurface.pool import PooledLBM
+from iceresist.freesurface.refined import RefinedFreeSurface
+from iceresist.grid import BlockForest
+from iceresist.grid.forest import Face
+from iceresist.grid.octree import BlockOctree
+from iceresist.lbm.solver import LBMSolver
+from iceresist.models import build_model
+from iceresist.parallel.decomposition import SolverHalo
+from iceresist.parallel.staging import DevicePlan
+from iceresist.scene.case_scenes import case_scene
+from iceresist.scene.load import load_scene
+from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES
 
 def check_scenes():
     """``{label: scene}``: the CI-sized tier-1 and tier-2 cases, tier 2 in both precisions, the built-in dam
     break (a free surface whose population pool follows the water: its wet and fill kernels) and the built-in
     refined channel (two levels: the level transfer kernel)."""
-    from iceresist.scene.load import load_scene
-    from iceresist.scene.case_scenes import case_scene
-    from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES
-
     t2 = {k: dict(v) for k, v in TINY_TIER2_OVERRIDES.items()}
     t2_64 = {**t2, "numerics": {**t2["numerics"], "precision": "float64"}}
     return {"tier1": case_scene("A-c68-v1.0", "quick", 1, **TINY_OVERRIDES),
@@ -46,10 +54,6 @@ def fluid_launches(precision: str):
     """Launches of the plain fused LBM step (the lbm benchmark's kernel) on a 16^3 periodic box, then of the step
     of an MPI rank (the blocks it sends updated before its messages go, the others while they travel; here with
     no messages)."""
-    from iceresist.grid import BlockForest
-    from iceresist.lbm.solver import LBMSolver
-    from iceresist.parallel.decomposition import SolverHalo
-
     solver = LBMSolver(BlockForest.uniform((16, 16, 16)), tau=0.6, precision=precision, target=jit.cuda())
     solver.initialize()
     solver.step(1)
@@ -63,8 +67,6 @@ def halo_packing(*arrays):
     """Launches of an MPI rank's halo packing on the device (:mod:`iceresist.parallel.staging`) for each of
     ``arrays`` (``[block, ..., 512]``): nine populations of one layer of block 1 sent and of block 0 received, then
     whole blocks."""
-    from iceresist.parallel.staging import DevicePlan
-
     for arr in arrays:
         k = min(9, arr.shape[1]) if arr.ndim == 3 else 1
         comps, cells = np.repeat(np.arange(k), 64), np.tile(np.arange(64), k)
@@ -79,10 +81,6 @@ def refined_surface_launches(precision: str):
     """Launches of one level-0 step of the free surface on two levels (:mod:`iceresist.freesurface.refined`: the
     ghost refill of the finest level, the liquid level's fused update, the level transfers) on a 16 x 16 x 32
     level-1 column."""
-    from iceresist.freesurface.refined import RefinedFreeSurface
-    from iceresist.grid.forest import Face
-    from iceresist.grid.octree import BlockOctree
-
     faces = {k: Face("periodic") for k in ("x-", "x+", "y-", "y+")} | {"z-": Face("wall"), "z+": Face("wall")}
     tree = BlockOctree((1, 1, 2), 1, periodic=(True, True, False)).refine(
         lambda lo, hi: np.where(lo[:, 2] >= 8, 1, 0))
@@ -96,8 +94,6 @@ def refined_surface_launches(precision: str):
 def _all_blocks_wet():
     """Traced kernels do not run, so no block ever turns wet and a population pool never fills a new row: within,
     the pool's wet-block scan (still traced) reports every block wet, so its fill kernel is traced too."""
-    from iceresist.freesurface.pool import PooledLBM
-
     scan = PooledLBM.wet_blocks
 
     def wet_blocks(self, phi):
@@ -112,8 +108,6 @@ def _all_blocks_wet():
 
 def trace(steps: int = 2) -> dict:
     """``{(kernel, threads, argtypes): [scene labels]}`` over :func:`check_scenes` and the plain LBM step."""
-    from iceresist.models import build_model
-
     seen: dict = {}
     def run(scene, read: bool):
         model = build_model(scene, backend="cuda")

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import pandas as pd
 
+import iceresist.validate.cases as pkg
 from iceresist.errors import InputError
 from iceresist.post.convergence import TABLE_NAME, load_table
 
@@ -34,8 +35,6 @@ KEY = ("case", "label", "ladder", "backend", "precision")
 def discover_cases() -> tuple[dict, dict]:
     """``(available, missing)``: case modules by NAME that import and follow the protocol, and
     ``{name: reason}`` for the known cases that do not (absent module, import error, missing attribute)."""
-    import iceresist.validate.cases as pkg
-
     names = list(KNOWN_CASES) + sorted(m.name for m in pkgutil.iter_modules(pkg.__path__)
                                        if m.name not in KNOWN_CASES and not m.name.startswith("_"))
     present = {m.name for m in pkgutil.iter_modules(pkg.__path__)}

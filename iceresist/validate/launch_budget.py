@@ -19,6 +19,12 @@ from __future__ import annotations
 
 import json
 
+from iceresist.backends import transfers
+from iceresist.backends.buildcheck import tracing
+from iceresist.backends.launch import tallying
+from iceresist.models import build_model
+from iceresist.validate.gpu_build import check_scenes
+
 #: Launches of one coupled step of the tier-2 case: ``fixed`` (grid passes, surface, coupling), ``regather`` (the
 #: body forces summed again with the step's fluid loads) and ``per_substep`` (one DEM sub-step: drift, place, two
 #: for the sort, contact, gather). The target of docs/PERFORMANCE.md is 20 for one sub-step.
@@ -34,9 +40,6 @@ def count(model) -> dict:
     """``{"step": ..., "record": ...}`` for a built tier-2 ``model`` that has made one record (see the module
     docstring); each part holds ``launches`` (total), ``by_kernel``, ``syncs``, ``downloads``,
     ``download_bytes``, ``largest_download_bytes``, ``uploads``, ``implicit`` (host arrays handed to a launch)."""
-    from iceresist.backends import transfers
-    from iceresist.backends.launch import tallying
-
     def part(tally, copies) -> dict:
         return {"launches": tally.total, "by_kernel": dict(tally.launches.most_common()), "syncs": tally.syncs,
                 "downloads": copies.counts["download"], "download_bytes": copies.nbytes["download"],
@@ -58,10 +61,6 @@ def count(model) -> dict:
 def traced(label: str = "tier2-float32") -> dict:
     """:func:`count` of the CI-sized tier-2 case ``label`` of :func:`~iceresist.validate.gpu_build.check_scenes`
     on the ``cuda`` target, traced (no GPU: launches recorded, not run)."""
-    from iceresist.backends.buildcheck import tracing
-    from iceresist.models import build_model
-    from iceresist.validate.gpu_build import check_scenes
-
     with tracing():
         model = build_model(check_scenes()[label], backend="cuda")
         model.step(1)            # a first record as a run makes it: what is made once is made here

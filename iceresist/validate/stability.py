@@ -30,7 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
+from iceresist.backends import jit
+from iceresist.driver import Outputs, Stop, run_model
 from iceresist.errors import InputError
+from iceresist.grid.forest import BlockForest, Face
+from iceresist.lbm.solver import LBMSolver
+from iceresist.limits import touching_concentration
+from iceresist.models import build_model
+from iceresist.scene.case_scenes import KNOT_M_S, scene_data, to_toml
+from iceresist.scene.load import parse_scene, preset_text
+from iceresist.simulation import IterationInterval
+from iceresist.watchdog import DENSITY_BAND, LATTICE_SPEED_LIMIT
 
 log = logging.getLogger(__name__)
 
@@ -61,8 +71,6 @@ class Setting:
 # -- scenes ---------------------------------------------------------------------------------------------
 def _cavity(quick: bool, *, lid: float = 0.05, tau: float = 0.6, operator: str = "cumulant", mach=None,
             check: bool = True) -> dict:
-    from iceresist.scene.load import preset_text
-
     d = tomllib.loads(preset_text("cavity"))
     d["domain"]["faces"]["z_max"] = {"kind": "moving_wall", "velocity_m_s": [lid, 0.0, 0.0]}
     d["fluid"].pop("nu_m2_s", None)
@@ -76,8 +84,6 @@ def _cavity(quick: bool, *, lid: float = 0.05, tau: float = 0.6, operator: str =
 
 
 def _poiseuille(dt_s=None) -> dict:
-    from iceresist.scene.load import preset_text
-
     d = tomllib.loads(preset_text("poiseuille"))
     d["numerics"]["backend"] = "cpu"
     if dt_s is not None:
@@ -88,8 +94,6 @@ def _poiseuille(dt_s=None) -> dict:
 
 def _tier1(quick: bool, *, knots: float = 1.0, **overrides) -> dict:
     """A micro tier-1 scene: the quick B-063 case, a 0.1 m long channel (2 x 28 cubes), the stem 2 cm before it."""
-    from iceresist.scene.case_scenes import KNOT_M_S, scene_data
-
     d = scene_data("A-c68-v1.0", "quick", 1)
     d["ice"].update({"channel_length_m": 0.1 if quick else 0.3})
     d["ship"].update({"start_x_m": 3.98, "sphere_band_m": 0.03, "sphere_spacing_m": 0.05,
@@ -104,8 +108,6 @@ def _tier1(quick: bool, *, knots: float = 1.0, **overrides) -> dict:
 
 def settings(quick: bool = True) -> list[Setting]:
     """The rows of the matrix, axis by axis."""
-    from iceresist.limits import touching_concentration
-
     rows: list[Setting] = []
     k0 = _tier1(quick)["contact"]["stiffness_N_m"]
     for f in (1, 10, 100, 1000):
@@ -151,12 +153,6 @@ def _slug(s: Setting, i: int) -> str:
 
 def run_setting(s: Setting, out_dir: Path, name: str, *, backend: str = "cpu") -> dict:
     """Build, run and classify one setting; returns its row."""
-    from iceresist.driver import Outputs, Stop, run_model
-    from iceresist.models import build_model
-    from iceresist.scene.load import parse_scene
-    from iceresist.scene.case_scenes import to_toml
-    from iceresist.simulation import IterationInterval
-
     row = {"axis": s.axis, "setting": s.label, "value": s.value, "outcome": "", "message": "",
            "dem_substeps": np.nan, "dem_substep_s": np.nan, "steps": 0, "wall_s": 0.0,
            "kinetic_energy_final": np.nan, "mass_drift": np.nan}
@@ -251,11 +247,6 @@ def measure_operator_limits(operators=("cumulant", "bgk"), speeds=(0.02, 0.05, 0
     for every (u, tau - 1/2) with the limits off; a run is unstable when the watchdog quantities leave their
     bands within ``steps``. Returns a DataFrame (operator, case, u, tau_excess, cell_reynolds, stable, step)."""
     import pandas as pd
-
-    from iceresist.backends import jit
-    from iceresist.grid.forest import BlockForest, Face
-    from iceresist.lbm.solver import LBMSolver
-    from iceresist.watchdog import DENSITY_BAND, LATTICE_SPEED_LIMIT
 
     rows = []
     x = (np.arange(n) + 0.5) * 2 * np.pi / n

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from iceresist.models import FreeSurfaceModel
 from iceresist.validate.result import CaseResult
 from iceresist.validate.rung import run_rung, scene_of
 
@@ -122,8 +123,6 @@ def front_position(phi: np.ndarray, rows: int = 1) -> float:
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """Run one rung through the driver, Z(T) sampled every 0.05 T; the error of Z at the measured T <= t_compare
     in ``extra``."""
-    from iceresist.models import FreeSurfaceModel
-
     p = {**DEFAULTS, **params}
     a = float(p["cells_per_column"])
     sc = scene(p, backend=backend, precision=precision)

@@ -26,7 +26,10 @@ import time
 
 import numpy as np
 
+from iceresist.models import build_model
 from iceresist.validate.result import CaseResult, relative_error
+from iceresist.validate.rung import run_rung, scene_of
+from iceresist.validate.scenes import scene_data
 
 NAME = "floating_cube"
 REFERENCE = "Archimedes: submerged fraction rho_ice / rho_water = 950 / 1000 = 0.95 of the 41 mm cube's height"
@@ -60,9 +63,6 @@ def scene(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: f
     widths square, four high, in whole blocks), the time step sqrt(g_lattice dx / g), the viscosity of ``tau``,
     the still-water level and the cube's release point (its bottom ``release_draft`` of its height under the
     still level) set over it, run for ``steps`` steps."""
-    from iceresist.validate.rung import scene_of
-    from iceresist.validate.scenes import scene_data
-
     dx = EDGE_M / n
     nxy = int(math.ceil(3 * n / 8) * 8)
     nz = int(math.ceil(4 * n / 8) * 8)
@@ -96,8 +96,6 @@ def build(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: f
     """The tank with one cube of ``n`` cells per edge, released at ``release_draft`` of its height under the
     still-water level; returns the :class:`~iceresist.coupling.floating.FloatingBodies` (started) of the model
     that :func:`scene` builds."""
-    from iceresist.models import build_model
-
     return build_model(scene(n, release_draft=release_draft, tau=tau, g_lattice=g_lattice, precision=precision,
                              backend=backend)).fb
 
@@ -164,9 +162,6 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float64", out_d
     """One rung through the driver (:func:`iceresist.validate.rung.run_rung`, a row every 5 steps): the submerged
     fraction, (water_level_m - cube bottom) / edge, over the last estimated period against 0.95 (the row of the
     release, t = 0, left out)."""
-    from iceresist.models import build_model
-    from iceresist.validate.rung import run_rung
-
     n = int(params["resolution"])
     sc = scene(n, release_draft=params["release_draft"], backend=backend, precision=precision)
     model = build_model(sc)

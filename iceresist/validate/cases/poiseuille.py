@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from iceresist.models import FluidModel
 from iceresist.validate.result import CaseResult
 from iceresist.validate.rung import run_rung, scene_of
 
@@ -55,8 +56,6 @@ def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung from rest through the driver; the profile of the final u against the parabola."""
-    from iceresist.models import FluidModel
-
     n = int(params["n"])
     sc = scene(params, backend=backend, precision=precision)
     steps = steps_for(n)

@@ -21,7 +21,10 @@ import time
 
 import numpy as np
 
+from iceresist.models import build_model
 from iceresist.validate.result import CaseResult, relative_error
+from iceresist.validate.rung import run_rung, scene_of
+from iceresist.validate.scenes import scene_data
 
 NAME = "settling_sphere"
 REFERENCE = "ten Cate et al. (2002), Phys. Fluids 14, 4012: terminal velocity of a 15 mm sphere in silicone oil"
@@ -59,9 +62,6 @@ def scene(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float 
     (block AMR: ``refinement.body_band_m`` of ``band_cells`` level-0 cells, a regrid every 10 level-0 steps);
     level 0 has d_cells / 2^levels cells per diameter and must tile the box with whole blocks (6 cells per diameter
     does: 40 x 40 x 64), the time step is level 0's."""
-    from iceresist.validate.rung import scene_of
-    from iceresist.validate.scenes import scene_data
-
     rho_f, mu, u_ref = CASES[case]
     d = DIAMETER_M
     dx = d / d_cells * 2 ** levels
@@ -90,8 +90,6 @@ def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float
     step, with the cell count, the number of steps and the wall time of the stepping (first step, which compiles,
     excluded) and the cell updates (every level's cells times its sub-steps, summed over the steps): the model of
     :func:`scene` (``levels``: on levels that follow the sphere) stepped here, outside the driver."""
-    from iceresist.models import build_model
-
     sc = scene(case, d_cells, u_lattice=u_lattice, t_end_s=t_end_s, operator=operator, backend=backend,
                precision=precision, levels=levels)
     model = build_model(sc)
@@ -118,9 +116,6 @@ SAMPLE_EVERY = 5
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung through the driver (:func:`iceresist.validate.rung.run_rung`): the largest settling velocity of
     the time series (``-sphere_vz_m_s``, a row every step) against the measured terminal velocity."""
-    from iceresist.models import build_model
-    from iceresist.validate.rung import run_rung
-
     case = params["case"]
     sc = scene(case, params["resolution"], u_lattice=params["u_lattice"], t_end_s=params["t_end_s"],
                operator=params["operator"], backend=backend, precision=precision)

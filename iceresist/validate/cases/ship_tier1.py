@@ -16,6 +16,9 @@ from __future__ import annotations
 import copy
 import time
 
+from iceresist.post.case import analyse_case
+from iceresist.scene.case_scenes import case_scene
+from iceresist.sweep import TINY_OVERRIDES, run_case
 from iceresist.validate.result import CaseResult
 from iceresist.validate.rung import rung_folder
 
@@ -35,14 +38,10 @@ def ladder(quick: bool) -> list[dict]:
 
 
 def beam_m() -> float:
-    from iceresist.scene.case_scenes import case_scene
-
     return float(case_scene(CASE, "quick", 1).ship.beam_m)
 
 
 def overrides(params: dict) -> dict:
-    from iceresist.sweep import TINY_OVERRIDES
-
     ov = copy.deepcopy(TINY_OVERRIDES) if params.get("tiny", True) else {}
     ov.setdefault("ship", {})["sphere_spacing_m"] = float(params["spacing_m"])
     return ov
@@ -51,9 +50,6 @@ def overrides(params: dict) -> dict:
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One tier-1 run through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder
     without ``out_dir``); the DEM runs in float64, as every tier-1 run: ``precision`` is recorded, not used."""
-    from iceresist.post.case import analyse_case
-    from iceresist.sweep import run_case
-
     with rung_folder(out_dir, NAME, params["label"]) as tmp:
         t0 = time.perf_counter()
         path = run_case(CASE, "quick", 1, tmp, backend=backend, overrides=overrides(params))

@@ -32,6 +32,10 @@ import time
 
 import numpy as np
 
+from iceresist.io.hdf5 import RunFile
+from iceresist.post.case import analyse_case
+from iceresist.scene.case_scenes import case_scene
+from iceresist.sweep import TINY_TIER2_OVERRIDES, run_case
 from iceresist.validate.result import CaseResult
 from iceresist.validate.rung import rung_folder
 
@@ -71,9 +75,6 @@ def ladder(quick: bool) -> list[dict]:
 
 def overrides(params: dict) -> dict:
     """Scene overrides of one rung: the tank and cell size, and the record interval fixed in seconds."""
-    from iceresist.scene.case_scenes import case_scene
-    from iceresist.sweep import TINY_TIER2_OVERRIDES
-
     ov = copy.deepcopy(TINY_TIER2_OVERRIDES) if params.get("tiny", True) else {}
     ov["domain"] = {"cells": [int(c) for c in params["cells"]], "dx_m": float(params["dx_m"])}
     # the LBM step is proportional to dx (the Mach rule of iceresist.models.tier2): take the coarsest rung's step
@@ -94,8 +95,6 @@ def warm_up(backend: str, precision: str) -> float:
     """Compile the tier-2 kernels once per process with one record of the coarsest quick rung, so that the
     ``wall_s`` of a rung is its stepping alone (the kernels are specialised on types, not on the grid size).
     Returns the seconds spent (0 when already warm)."""
-    from iceresist.sweep import run_case
-
     if (backend, precision) in _WARM:
         return 0.0
     ov = overrides(ladder(True)[0])
@@ -121,8 +120,6 @@ def run_rung(name: str, params: dict, ov: dict, *, backend: str, precision: str,
     """Case A-c68-v1.0 at the quick fidelity, tier 2, with the scene overrides ``ov`` (the LBM in ``precision``),
     through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder without ``out_dir``),
     as a :class:`CaseResult` (:func:`case_result`, ``extra`` added)."""
-    from iceresist.sweep import run_case
-
     ov.setdefault("numerics", {})["precision"] = precision
     with rung_folder(out_dir, name, params["label"]) as tmp:
         t0 = time.perf_counter()
@@ -136,9 +133,6 @@ def case_result(name: str, params: dict, path, *, backend: str, precision: str, 
     """The :class:`CaseResult` of one finished tier-2 run file ``path`` (:func:`iceresist.post.case.analyse_case`):
     the mean ice force in the steady window, its interval, the records and steps (LBM steps: level-0 steps on
     levels), the mean fluid force on the hull; ``extra`` added."""
-    from iceresist.io.hdf5 import RunFile
-    from iceresist.post.case import analyse_case
-
     row = analyse_case(path)
     with RunFile(path, "r") as rf:
         fluid_x = rf.h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step

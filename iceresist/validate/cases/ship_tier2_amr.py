@@ -25,6 +25,9 @@ from __future__ import annotations
 
 import math
 
+from iceresist.scene.case_scenes import case_scene
+from iceresist.ship.cases import amr_overrides
+from iceresist.validate.cases.ship_tier2 import run_rung
 from iceresist.validate.result import CaseResult
 
 NAME = "ship_tier2_amr"
@@ -51,8 +54,6 @@ SURFACE_BAND_CELLS = 8.0
 def rung(n: float) -> dict:
     """The parameters of the rung with ``n`` cells per cube on the finest level: level-0 cells and dx, the water depth,
     the bands, the record interval's steps."""
-    from iceresist.ship.cases import amr_overrides
-
     ref = amr_overrides("quick")["refinement"]
     dx0 = 2.0 * CUBE_M / n
     block_m = 8.0 * dx0
@@ -78,8 +79,6 @@ def overrides(params: dict) -> dict:
     """Scene overrides of one rung: the level-0 tank and cell size, the water depth, the refinement, and the record
     interval fixed in seconds (``steps_per_record`` level-0 steps of the rung, a hair under so that the ceiling in
     the model gives them exactly)."""
-    from iceresist.scene.case_scenes import case_scene
-
     ov = {"domain": {"cells": list(params["cells"]), "dx_m": float(params["dx_m"])},
           "free_surface": {"water_depth_m": float(params["water_depth_m"])},
           "refinement": {k: params[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}}
@@ -90,15 +89,11 @@ def overrides(params: dict) -> dict:
 
 def scene(params: dict):
     """The validated scene of one rung."""
-    from iceresist.scene.case_scenes import case_scene
-
     return case_scene(CASE, "quick", 2, **overrides(params))
 
 
 def run(params: dict, *, backend: str = "cuda", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung (:func:`iceresist.validate.cases.ship_tier2.run_rung`; a killed rung continues from its
     checkpoint); its steps are level-0 steps."""
-    from iceresist.validate.cases.ship_tier2 import run_rung
-
     return run_rung(NAME, params, overrides(params), backend=backend, precision=precision, out_dir=out_dir,
                     dx_finest_m=CUBE_M / float(params["resolution"]))

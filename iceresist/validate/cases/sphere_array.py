@@ -29,6 +29,7 @@ import math
 
 import numpy as np
 
+from iceresist.models import build_model
 from iceresist.validate.result import CaseResult, relative_error
 from iceresist.validate.rung import run_rung, scene_of
 
@@ -110,8 +111,6 @@ def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung: K from the momentum exchange on the sphere and the superficial velocity, against Zick-Homsy."""
-    from iceresist.models import build_model
-
     n, phi, nu = int(params["cells"]), float(params["phi"]), viscosity(params)
     sc = scene(params, backend=backend, precision=precision)
     model = build_model(sc)

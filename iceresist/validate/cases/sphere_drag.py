@@ -16,7 +16,10 @@ import math
 
 import numpy as np
 
+from iceresist.models import build_model
 from iceresist.validate.result import CaseResult, relative_error
+from iceresist.validate.rung import run_rung, scene_of
+from iceresist.validate.scenes import scene_data
 
 NAME = "sphere_drag"
 REFERENCE = ("Schiller-Naumann C_d = 24/Re (1 + 0.15 Re^0.687) at Re = 10 (Clift, Grace and Weber 1978). "
@@ -49,9 +52,6 @@ def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
     """The scene of a rung: the scene file (iceresist/validate/scenes/sphere_drag.toml, the middle quick rung)
     with the rung's diameter ``d`` (cells), box (``box_diameters``, rounded up to whole blocks), tau (Re = 10),
     sphere radius and position (3 d behind the inlet, centred sideways) and run length set over it."""
-    from iceresist.validate.rung import scene_of
-    from iceresist.validate.scenes import scene_data
-
     d = float(params["d"])
     shape = [int(math.ceil(n * d / 8) * 8) for n in params["box_diameters"]]
     nu = U_LATTICE * d / REYNOLDS
@@ -68,9 +68,6 @@ def scene(params: dict, *, backend: str = "cpu", precision: str = "float32"):
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung through the driver (:func:`iceresist.validate.rung.run_rung`): C_d from the mean of the fluid
     force (``sphere_Fx_N``, eq. 20, lattice units) over the rows of the last ``MEAN_FRACTION`` of the run."""
-    from iceresist.models import build_model
-    from iceresist.validate.rung import run_rung
-
     d = float(params["d"])
     sc = scene(params, backend=backend, precision=precision)
     steps = steps_for(d)

@@ -25,6 +25,11 @@ import math
 
 import numpy as np
 
+from iceresist.errors import InputError
+from iceresist.freesurface.refined import RefinedFreeSurface
+from iceresist.grid.forest import Face
+from iceresist.grid.octree import BlockOctree
+from iceresist.models import FreeSurfaceModel
 from iceresist.validate.result import CaseResult, relative_error
 from iceresist.validate.rung import run_rung, scene_of
 
@@ -120,8 +125,6 @@ def steps_for(params: dict) -> int:
 def build(params: dict, *, backend: str = "cpu", precision: str = "float32"):
     """The scene of a rung, its model with the surface z_s = h + a cos(k x) at rest over hydrostatic water, and
     its :func:`theory`."""
-    from iceresist.models import FreeSurfaceModel
-
     p = {**DEFAULTS, **params}
     th = theory(p)
     sc = scene(p, backend=backend, precision=precision)
@@ -170,11 +173,6 @@ def run_on_levels(params: dict, *, precision: str = "float32") -> CaseResult:
     of 16 level-1 cells along y, level 0 below the deepest multiple of 16 level-1 cells that leaves 8 of them of
     liquid under the trough, level 1 above it to the lid. The period against linear theory, as :func:`run`."""
     import time
-
-    from iceresist.errors import InputError
-    from iceresist.freesurface.refined import RefinedFreeSurface
-    from iceresist.grid.forest import Face
-    from iceresist.grid.octree import BlockOctree
 
     p = {**DEFAULTS, **params}
     th = theory(p)

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 
+from iceresist.models import FluidModel
 from iceresist.validate.result import CaseResult, relative_error
 from iceresist.validate.rung import run_rung, scene_of
 
@@ -74,8 +75,6 @@ def steps_for(n: int) -> int:
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:
     """One rung through the driver: the vortex set on the model, its kinetic energy sampled ``SAMPLES`` times,
     nu fitted to the log of the energy after the first sample (the initial layer of the stress)."""
-    from iceresist.models import FluidModel
-
     n = int(params["n"])
     k = 2.0 * math.pi / n
     amplitude = amplitude_of(n)

@@ -1,5 +1,7 @@
 """Block forest: neighbour table against a dense-index reference, Morton order, memory following fluid."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -7,6 +9,8 @@ from iceresist.errors import InputError
 from iceresist.grid import BlockForest, Face
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import morton_key
+from iceresist.grid.grid import Grid
+from iceresist.grid.octree import BlockOctree
 from iceresist.lattice import C, Q
 
 
@@ -124,3 +128,22 @@ def test_input_errors_name_the_field(kwargs, words):
 def test_face_kind_is_checked():
     with pytest.raises(InputError, match="face kind 'free_slip' is not one of .*slip"):
         Face("free_slip")
+
+
+def test_a_grid_on_one_process_gives_each_value_itself():
+    """:class:`iceresist.grid.grid.Grid` without ranks: sums, gathers and exchanges are the values themselves, so a
+    model asks the grid and never branches on the rank count (the two-rank side: tests/test_mpi.py)."""
+    g = Grid.uniform((16, 8, 8), None, comm=SimpleNamespace(size=1))
+    assert g.comm is None and g.decomp is None and g.root and g.describe() == {}
+    assert g.forest is g.global_forest and g.forest.nblocks == 2
+    rows = np.arange(6.0).reshape(2, 3)
+    assert g.gather_rows(rows, axis=0) is rows and g.local_rows(rows) is rows
+    assert g.sum(2.5) == 2.5 and g.max(3) == 3.0 and g.all(np.True_) is True and g.bcast("x") == "x"
+    assert g.first_given(None) is None
+    g.exchange(rows)
+    g.sum_arrays(rows)
+    assert rows.sum() == 15.0
+    levels = Grid.levels(BlockOctree((2, 1, 1), 1).refine(lambda lo, hi: (lo[:, 0] < 8).astype(int)), None)
+    assert [v is not None for v in levels.views] == [True, True]
+    assert levels.own_leaves(1) == 8 and levels.own_leaves(0) == 1
+    assert levels.gather(1, rows) is rows and levels.level_rows(0, rows) is rows

@@ -46,13 +46,12 @@ class Model(abc.ABC):
     #: ``fields()`` and ``state()`` then return the whole domain on rank 0 and None on the others, and its
     #: ``diagnostics()``, ``is_finite()`` and ``watchdog_probe()`` the same values on every rank.
     comm = None
-    #: The :class:`~iceresist.parallel.decomposition.Decomposition` of a model split over several ranks, or None.
+    #: The split of the model's blocks over several ranks (:class:`~iceresist.parallel.decomposition.Decomposition`
+    #: or :class:`~iceresist.parallel.levels.LevelDecomposition`), or None.
     decomp = None
-
-    def gathered(self, values, axis: int = 0):
-        """Per-block values of this rank's forest as the whole domain's in global block order: as they are on one
-        process; on several ranks gathered on rank 0 (None on the others)."""
-        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
+    #: The cells the model steps and their split over the ranks (:class:`~iceresist.grid.grid.Grid`: sums, gathers
+    #: and exchanges over the ranks, the value itself on one process), or None for a model without a lattice.
+    grid = None
 
     # -- clock ------------------------------------------------------------------------------------------
     @property

@@ -39,14 +39,13 @@ from iceresist.coupling.floating import FloatingBodies
 from iceresist.dem import ContactParameters, DEMSystem, box, convex_polyhedron, sphere
 from iceresist.errors import InputError
 from iceresist.grid import flags as FL
-from iceresist.grid.forest import BlockForest
+from iceresist.grid.grid import Grid, several
 from iceresist.lbm.solver import LBMSolver
 from iceresist.limits import check_fluid
 from iceresist.models.base import Model, array_bytes
 from iceresist.models.fluid import (BLOCK, FluidModel, FreeSurfaceModel, check_block_shape, check_free_surface_forces,
                                     forest_faces, padding_solid, resolve_target)
 from iceresist.models.probe import fluid_probe
-from iceresist.parallel.decomposition import Decomposition
 from iceresist.scene.schema import Scene
 from iceresist.ship.meshhull import resolve_mesh_path
 
@@ -165,8 +164,7 @@ class BodiesModel(Model):
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
-        if comm is not None and comm.size > 1:
-            self.comm = comm
+        self.comm = several(comm)
         if not scene.bodies:
             raise InputError(f"{scene.source_name}: BodiesModel needs a [[bodies]] section")
         self.free_surface = scene.free_surface is not None
@@ -247,11 +245,8 @@ class BodiesModel(Model):
         check_block_shape(self.shape_cells)
         check_fluid(scene, u)
         fl = scene.fluid
-        self.global_forest = self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u),
-                                                               solid=padding_solid(scene))
-        if self.comm is not None:
-            self.decomp = Decomposition(self.global_forest, self.comm)
-            self.forest = self.decomp.local
+        self.grid = Grid.uniform(self.shape_cells, forest_faces(scene, u), solid=padding_solid(scene), comm=self.comm)
+        self.global_forest, self.forest, self.decomp = self.grid.global_forest, self.grid.forest, self.grid.decomp
         # gravity acts on the bodies (DEM) with the buoyancy -rho_f V g; the LBM carries the driving force alone
         self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
         self.solver = LBMSolver(self.forest, tau=u.tau, force=self.force_lattice, operator=fl.operator,
@@ -308,6 +303,7 @@ class BodiesModel(Model):
                              velocity_m_s=velocity, kinematic=kinematic, material=material)
         self.fb.start()
         self.units = self.fb.units
+        self.grid = Grid.of_forest(self.fb.global_forest, self.comm, self.fb.decomp)
         self.global_forest, self.forest, self.decomp = self.fb.global_forest, self.fb.forest, self.fb.decomp
         self.coupling = self.fb.coupling
         self.solver = None
@@ -340,7 +336,7 @@ class BodiesModel(Model):
         8-cell halo block from its outer side, so the cells next to this rank's blocks stay exact through a step;
         the DEM runs on every rank alike, on the forces summed over the ranks."""
         for arr in (self.solver.state, self.solver.flags):
-            self.decomp.exchange(arr, self.target, full=True)
+            self.grid.exchange(arr, self.target, full=True)
 
     # -- bodies -----------------------------------------------------------------------------------------
     @property
@@ -380,8 +376,9 @@ class BodiesModel(Model):
         u = self.units
         if not self.free_surface:
             rho_b, u_b = self.solver.macroscopic_blocks()
-            parts = (self.gathered(rho_b), self.gathered(u_b, axis=1), self.gathered(self._fluid_now()),
-                     self.gathered(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64)))
+            g = self.grid
+            parts = (g.gather_rows(rho_b), g.gather_rows(u_b, axis=1), g.gather_rows(self._fluid_now()),
+                     g.gather_rows(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64)))
             if parts[0] is None:
                 return None
             fo = self.global_forest
@@ -432,7 +429,8 @@ class BodiesModel(Model):
         else:
             rho_b, u_b = self.solver.macroscopic_blocks()
             now = self._fluid_now()
-            rho_b, u_b, now = self.gathered(rho_b), self.gathered(u_b, axis=1), self.gathered(now)
+            g = self.grid
+            rho_b, u_b, now = g.gather_rows(rho_b), g.gather_rows(u_b, axis=1), g.gather_rows(now)
             if rho_b is None:       # an MPI rank other than 0: rank 0's columns follow
                 return None
             rho_lat, u_lat = rho_b[now], u_b[:, now]
@@ -461,17 +459,13 @@ class BodiesModel(Model):
         """One row: the per-body columns (:meth:`body_columns`) and the fluid's (:meth:`_fluid_columns`); on several
         ranks the fluid's from the gathered blocks on rank 0, the same row on every rank."""
         self.coupling.check_link_list()
-        fluid = self._fluid_columns()
-        if self.decomp is not None:
-            fluid = self.decomp.bcast(fluid)
-        return {**self.body_columns(), **fluid}
+        return {**self.body_columns(), **self.grid.bcast(self._fluid_columns())}
 
     def is_finite(self) -> bool:
         bodies = bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
         if self.free_surface:
             return bodies and math.isfinite(self.coupling.water_volume())
-        finite = bodies and math.isfinite(self.solver.mass())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(bodies and math.isfinite(self.solver.mass()))
 
     #: Every this many probes (the first included) a free-surface probe reads the populations (as tier 2).
     full_probe_every = 10
@@ -493,13 +487,14 @@ class BodiesModel(Model):
             rho_lat, u_lat = self.solver.macroscopic()
             return fluid_probe(rho_lat, u_lat, self._dense_mask(self._fluid_now()), ke_ref)
         rho_b, u_b = self.solver.macroscopic_blocks()
-        parts = (self.gathered(rho_b), self.gathered(u_b, axis=1), self.gathered(self._fluid_now()))
+        g = self.grid
+        parts = (g.gather_rows(rho_b), g.gather_rows(u_b, axis=1), g.gather_rows(self._fluid_now()))
         probe = None
         if parts[0] is not None:
             fo = self.global_forest
             now = np.nan_to_num(fo.to_dense(parts[2].astype(np.float64)), nan=0.0) > 0.5
             probe = fluid_probe(fo.to_dense(parts[0]), fo.to_dense(parts[1]), now, ke_ref)
-        return self.decomp.bcast(probe)
+        return self.grid.bcast(probe)
 
     # -- checkpoints ------------------------------------------------------------------------------------
     def state(self) -> dict:
@@ -516,9 +511,8 @@ class BodiesModel(Model):
                "coupling": self.coupling.state(), "dem": self.dem.state(),
                "f": np.array(host(self.solver._f[0]), copy=True), "f_back": np.array(host(self.solver._f[1]), copy=True),
                "flags": np.array(host(self.solver.flags), copy=True), "lbm_iteration": np.int64(self.solver.iteration)}
-        if self.decomp is not None:      # the whole domain in global block order, on rank 0
-            for key in ("f", "f_back", "flags"):
-                out[key] = self.decomp.gather_rows(out[key])
+        for key in ("f", "f_back", "flags"):      # the whole domain in global block order, on rank 0
+            out[key] = self.grid.gather_rows(out[key])
         return None if out["coupling"] is None else out
 
     def load_state(self, state: dict):
@@ -541,9 +535,7 @@ class BodiesModel(Model):
             if tuple(np.shape(state["f"])) != expected:
                 raise InputError(f"checkpoint populations have shape {tuple(np.shape(state['f']))}, this scene "
                                  f"needs {expected}: it belongs to another scene")
-            if self.decomp is not None:
-                d = self.decomp
-                state = {**state, **{k: d.local_rows(np.asarray(state[k])) for k in ("f", "f_back", "flags")}}
+            state = {**state, **{k: self.grid.local_rows(np.asarray(state[k])) for k in ("f", "f_back", "flags")}}
             copy_into(self.solver._f[0], np.asarray(state["f"]).astype(self.solver.real))
             copy_into(self.solver._f[1], np.asarray(state["f_back"]).astype(self.solver.real))
             copy_into(self.solver.flags, np.asarray(state["flags"]).astype(np.uint8))
@@ -571,9 +563,7 @@ class BodiesModel(Model):
         else:
             out.update(force_lattice=list(self.force_lattice), bytes_per_cell=int(self.solver.bytes_per_cell),
                        pad_to_blocks=bool(self.scene.domain.pad_to_blocks))
-        if self.decomp is not None:
-            out["mpi"] = self.decomp.describe()
-        return out
+        return {**out, **self.grid.describe()}
 
     def allocation(self) -> dict[str, int]:
         """Bytes of state per component: the LBM (populations, both buffers), the phase field (free surface),

@@ -17,13 +17,13 @@ from iceresist.errors import InputError
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.grid import flags as FL
 from iceresist.grid.flags import FLUID as FL_FLUID
-from iceresist.grid.forest import BlockForest, Face
+from iceresist.grid.forest import Face
+from iceresist.grid.grid import Grid
 from iceresist.lattice import C as _C
 from iceresist.lbm.solver import LBMSolver
 from iceresist.limits import check_fluid
 from iceresist.models.base import Model
 from iceresist.models.probe import fluid_probe
-from iceresist.parallel.decomposition import Decomposition
 from iceresist.scene.schema import Scene
 from iceresist.units import Units
 
@@ -112,13 +112,9 @@ class FluidModel(Model):
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
-        self.global_forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u),
-                                                 solid=padding_solid(scene))
-        self.forest = self.global_forest
-        if comm is not None and comm.size > 1:
-            self.comm = comm
-            self.decomp = Decomposition(self.global_forest, comm)
-            self.forest = self.decomp.local
+        self.grid = Grid.uniform(self.shape_cells, forest_faces(scene, u), solid=padding_solid(scene), comm=comm)
+        self.global_forest, self.forest = self.grid.global_forest, self.grid.forest
+        self.comm, self.decomp = self.grid.comm, self.grid.decomp
         fl = scene.fluid
         self.force_lattice = tuple(float(u.acceleration_to_lattice(g) + u.force_density_to_lattice(f))
                                    for g, f in zip(fl.gravity_m_s2, fl.body_force_N_m3))
@@ -171,14 +167,13 @@ class FluidModel(Model):
         if self.decomp is None:
             return self.solver.macroscopic()
         rho_b, u_b = self.solver.macroscopic_blocks()
-        rho_b, u_b = self.gathered(rho_b), self.gathered(u_b, axis=1)
+        rho_b, u_b = self.grid.gather_rows(rho_b), self.grid.gather_rows(u_b, axis=1)
         if rho_b is None:
             return None
         return self.global_forest.to_dense(rho_b), self.global_forest.to_dense(u_b)
 
     def is_finite(self) -> bool:
-        finite = math.isfinite(self.solver.mass())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(math.isfinite(self.solver.mass()))
 
     def diagnostics(self) -> dict[str, float]:
         """Fluid mass (kg), kinetic energy (J), largest speed (m/s) and largest lattice speed (u dt/dx); on an MPI
@@ -194,8 +189,7 @@ class FluidModel(Model):
         mass = float(u.density_to_physical(rho_lat[fluid]).sum() * cell_m3)
         ke = float(0.5 * (u.density_to_physical(rho_lat[fluid]) * u.velocity_to_physical(1.0) ** 2
                           * speed2).sum() * cell_m3)
-        if self.decomp is not None:
-            mass, ke, umax_lat = self.decomp.sum(mass), self.decomp.sum(ke), self.decomp.max(umax_lat)
+        mass, ke, umax_lat = self.grid.sum(mass), self.grid.sum(ke), self.grid.max(umax_lat)
         return {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax_lat)),
                 "max_lattice_speed": umax_lat}
 
@@ -211,16 +205,14 @@ class FluidModel(Model):
             u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
                         0.1 * self.scene.numerics.mach)
             probe = fluid_probe(*dense, self._fluid_dense, 0.5 * self.cells * u_ref ** 2)
-        return probe if self.decomp is None else self.decomp.bcast(probe)
+        return self.grid.bcast(probe)
 
     def state(self) -> dict | None:
         """Populations in storage precision (bit for bit), in global block order, and the iteration; on an MPI
         run gathered on rank 0 (None on the other ranks), so a checkpoint restarts on any number of ranks."""
-        f = self.solver.populations().astype(self.solver.real)
-        if self.decomp is not None:
-            f = self.decomp.gather_rows(f)
-            if f is None:
-                return None
+        f = self.grid.gather_rows(self.solver.populations().astype(self.solver.real))
+        if f is None:
+            return None
         return {"f": f, "iteration": np.int64(self.iteration), "precision": self.precision}
 
     def load_state(self, state: dict):
@@ -232,9 +224,7 @@ class FluidModel(Model):
         if f.shape != expected:
             raise InputError(f"checkpoint populations have shape {f.shape}, this scene needs {expected}: "
                              f"it belongs to another scene")
-        if self.decomp is not None:
-            f = self.decomp.local_rows(f)
-        _set_populations(self.solver, f.astype(self.solver.real))
+        _set_populations(self.solver, self.grid.local_rows(f).astype(self.solver.real))
         self.solver.iteration = int(state["iteration"])
 
     def describe(self) -> dict:
@@ -242,9 +232,7 @@ class FluidModel(Model):
                "blocks": int(self.global_forest.nblocks), "operator": self.scene.fluid.operator,
                "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
                "force_lattice": list(self.force_lattice), "bytes_per_cell": int(self.solver.bytes_per_cell),
-               "unit_system": self.scene.scene.units}
-        if self.decomp is not None:
-            out["mpi"] = self.decomp.describe()
+               "unit_system": self.scene.scene.units, **self.grid.describe()}
         return out
 
     def allocation(self) -> dict[str, int]:
@@ -295,13 +283,12 @@ class FreeSurfaceModel(Model):
         self.backend = backend or scene.numerics.backend
         self.precision = precision or scene.numerics.precision
         self.target = resolve_target(self.backend)
-        self.global_forest = self.forest = BlockForest.uniform(self.shape_cells, forest_faces(scene, u))
+        self.grid = Grid.uniform(self.shape_cells, forest_faces(scene, u), comm=comm)
+        self.global_forest, self.forest = self.grid.global_forest, self.grid.forest
+        self.comm, self.decomp = self.grid.comm, self.grid.decomp
         self.gravity_lattice = float(u.acceleration_to_lattice(-gz))
         margin = None if fs.f_pool_margin == "full" else float(fs.f_pool_margin)
-        if comm is not None and comm.size > 1:
-            self.comm = comm
-            self.decomp = Decomposition(self.global_forest, comm)
-            self.forest = self.decomp.local
+        if self.comm is not None:
             margin = None      # on several ranks every block holds populations (the halo blocks of the water too)
         self.fluid = FreeSurfaceFluid(self.forest, tau=u.tau, gravity_lattice=self.gravity_lattice,
                                       depth_cells=self.depth_cells, mobility=fs.mobility_lattice,
@@ -321,10 +308,8 @@ class FreeSurfaceModel(Model):
         passes reach at most 5 cells into the halo from its outer side (the fused update, the velocity extension's
         layers, the phase field's stream and normal), so the cells next to this rank's blocks stay exact through a
         step (:meth:`Decomposition.exchange` with ``full``)."""
-        if self.decomp is None:
-            return
         for arr in self.fluid.halo_state:
-            self.decomp.exchange(arr, self.target, full=True)
+            self.grid.exchange(arr, self.target, full=True)
 
     def volume(self) -> float:
         """Water volume sum phi (cells^3): per-block sums on the target, added up in global block order (the same
@@ -383,8 +368,9 @@ class FreeSurfaceModel(Model):
         rho[~liquid] = np.nan
         u[:, ~liquid] = np.nan
         phi = fs.phase.phi_host().astype(np.float64)
-        parts = [self.gathered(rho), self.gathered(u, axis=1), self.gathered(phi),
-                 self.gathered(flags.astype(np.float64))]
+        g = self.grid
+        parts = [g.gather_rows(rho), g.gather_rows(u, axis=1), g.gather_rows(phi),
+                 g.gather_rows(flags.astype(np.float64))]
         if parts[0] is None:
             return None
         fo = self.global_forest
@@ -421,8 +407,7 @@ class FreeSurfaceModel(Model):
         return units
 
     def is_finite(self) -> bool:
-        finite = math.isfinite(self.fluid.volume()) and bool(np.isfinite(self.fluid.fluid.rows()[1]).all())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(math.isfinite(self.fluid.volume()) and bool(np.isfinite(self.fluid.fluid.rows()[1]).all()))
 
     def watchdog_probe(self) -> dict:
         """Finite state only (:meth:`is_finite`): the free-surface scenes run below the lattice limits by
@@ -435,8 +420,7 @@ class FreeSurfaceModel(Model):
         population rows in use; on several ranks from the gathered fields, the same numbers on every rank."""
         vol = self.volume()
         dense = self._dense_state()
-        out = None if dense is None else self._diagnostics(dense, vol)
-        return out if self.decomp is None else self.decomp.bcast(out)
+        return self.grid.bcast(None if dense is None else self._diagnostics(dense, vol))
 
     def _diagnostics(self, dense, vol) -> dict[str, float]:
         rho_lat, u_lat, liquid = self._liquid(dense)
@@ -483,9 +467,7 @@ class FreeSurfaceModel(Model):
                "h_lattice": fs.h_lattice, "mobility_lattice": fs.mobility_lattice,
                "interface_width_cells": fs.interface_width_cells, "f_pool_rows": int(pool.capacity),
                "f_pool_margin": fs.f_pool_margin, "allocated_bytes": self.fluid.allocated_bytes(),
-               "unit_system": self.scene.scene.units}
-        if self.decomp is not None:
-            out["mpi"] = self.decomp.describe()
+               "unit_system": self.scene.scene.units, **self.grid.describe()}
         return out
 
     def allocation(self) -> dict[str, int]:

@@ -18,7 +18,7 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
-from iceresist.grid.levels import level_views
+from iceresist.grid.grid import Grid, several
 from iceresist.grid.octree import BlockOctree
 from iceresist.grid.regrid import any_in_boxes, carry_over, vorticity_magnitude
 from iceresist.lattice import Q
@@ -28,7 +28,6 @@ from iceresist.models.base import Model
 from iceresist.models.bodies import body_mesh, half_extent
 from iceresist.models.fluid import FluidModel, _set_populations, check_block_shape, forest_faces, resolve_target
 from iceresist.models.probe import fluid_probe
-from iceresist.parallel.levels import LevelDecomposition
 from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)
@@ -137,7 +136,7 @@ class RefinedFluidModel(Model):
 
     def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.scene = scene
-        self.comm = comm if comm is not None and comm.size > 1 else None
+        self.comm = several(comm)
         self.units = u = scene.units()
         if scene.domain.pad_to_blocks:
             raise InputError("domain.pad_to_blocks: a refined scene needs whole 8x8x8 blocks; give domain cells in "
@@ -157,7 +156,8 @@ class RefinedFluidModel(Model):
             raise InputError(f"mpirun -n {self.comm.size}: refinement.scheme: the interpolating level interface runs "
                              "on one process; use scheme = \"conservative\" on several ranks")
         self.octree = build_octree(scene, body_boxes_m=self.body_boxes_m())
-        views, self.decomp = self._split(self.octree)
+        self.grid = self._split(self.octree)
+        self.decomp, views = self.grid.decomp, self.grid.views
         self.level_bytes = self._level_bytes(views)
         share = "" if self.decomp is None else " on this rank"
         for lv, nbytes in self.level_bytes.items():
@@ -176,14 +176,10 @@ class RefinedFluidModel(Model):
         """The fluid's stability limits (:func:`iceresist.limits.check_fluid`)."""
         check_fluid(scene, u)
 
-    def _split(self, octree):
-        """The levels of ``octree`` this process holds and their :class:`~iceresist.parallel.levels.LevelDecomposition`
-        over the ranks (None on one process, where it holds them all)."""
-        views = level_views(octree, forest_faces(self.scene, self.units))
-        if self.comm is None:
-            return views, None
-        decomp = LevelDecomposition(octree, views, self.comm)
-        return decomp.views, decomp
+    def _split(self, octree) -> Grid:
+        """The levels of ``octree`` (:class:`~iceresist.grid.grid.Grid`: this process's views of them and their
+        :class:`~iceresist.parallel.levels.LevelDecomposition` over the ranks, none on one process)."""
+        return Grid.levels(octree, forest_faces(self.scene, self.units), self.comm)
 
     def _check_memory(self, level_bytes: dict):
         total = sum(level_bytes.values())
@@ -248,34 +244,33 @@ class RefinedFluidModel(Model):
         octree = build_octree(self.scene, self.hot_cells(), self.body_boxes_m())
         if self._is_current(octree.level, octree.coord):
             return False
-        views, decomp = self._split(octree)
-        level_bytes = self._level_bytes(views)
+        grid = self._split(octree)
+        level_bytes = self._level_bytes(grid.views)
         refused = None
         try:
             self._check_memory(level_bytes)
         except InputError as err:
             refused = str(err)
-        if self.comm is not None:           # every rank keeps the grid if one cannot take the new one
-            refused = next((r for r in self.comm.allgather(refused) if r is not None), None)
+        refused = self.grid.first_given(refused)      # every rank keeps the grid if one cannot take the new one
         if refused is not None:
             log.warning("regrid at step %d skipped, the grid stays as it is: %s", self.level0_steps, refused)
             return False
-        self._rebuild(octree, level_bytes, decomp)
+        self._rebuild(octree, level_bytes, grid)
         self.regrid_count += 1
         log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.level0_steps,
                  [int(n) for n in octree.blocks_per_level()])
         return True
 
-    def _rebuild(self, octree, level_bytes: dict, decomp=None):
+    def _rebuild(self, octree, level_bytes: dict, grid: Grid):
         """The levels built on ``octree`` and every level's populations carried over from the present ones
         (:func:`iceresist.grid.regrid.carry_over`; onto the same octree, a rebuild changes nothing:
-        tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``decomp``: the new split) the old
+        tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``grid``: the new split) the old
         levels are gathered on rank 0, carried over there and the new ones dealt out to the ranks."""
         old_views = self.lbm.views
         old = {lv: self._populations(lv) for lv in self.lbm.levels}
         finest = self._finest_extra()
-        old_decomp = self.decomp
-        self._adopt(octree, level_bytes, decomp)
+        old_decomp, decomp = self.decomp, grid.decomp
+        self._adopt(octree, level_bytes, grid)
         whole = None
         if old_decomp is None:
             new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
@@ -304,12 +299,12 @@ class RefinedFluidModel(Model):
         """Whether the leaves (``level``, ``coord``) are those of the current octree."""
         return np.array_equal(level, self.octree.level) and np.array_equal(coord, self.octree.coord)
 
-    def _adopt(self, octree, level_bytes: dict, decomp=None):
-        """New levels' solvers on ``octree`` (their populations to be filled; ``decomp``: their split over the
-        ranks), the iteration kept."""
+    def _adopt(self, octree, level_bytes: dict, grid: Grid):
+        """New levels' solvers on ``octree`` (their populations to be filled; ``grid``: its levels and their split
+        over the ranks), the iteration kept."""
         iteration = self.level0_steps
         self.octree = octree
-        self.decomp = decomp
+        self.grid, self.decomp = grid, grid.decomp
         self.level_bytes = level_bytes
         self._build(initialize=False)
         self.lbm.iteration = iteration
@@ -357,7 +352,7 @@ class RefinedFluidModel(Model):
         own leaves (all of them on one process)."""
         if self.decomp is None:
             return rho, u, xyz
-        n = self.decomp.nown[lv]
+        n = self.grid.own_leaves(lv)
         return rho[:n], u[:, :n], None if xyz is None else tuple(c[:n] for c in xyz)
 
     def _leaf_extra(self, lv: int) -> list:
@@ -380,18 +375,14 @@ class RefinedFluidModel(Model):
             np.add.at(weight, idx, w)
             for k, v in enumerate(values):
                 np.add.at(acc[k], idx, w * np.asarray(v).ravel())
-        if self.comm is not None:       # every level-0 cell lies in one rank's trees: the others add zeros
-            from mpi4py import MPI
-
-            self.comm.Allreduce(MPI.IN_PLACE, acc, op=MPI.SUM)
-            self.comm.Allreduce(MPI.IN_PLACE, weight, op=MPI.SUM)
+        self.grid.sum_arrays(acc, weight)      # every level-0 cell lies in one rank's trees: the others add zeros
         acc /= np.where(weight > 0, weight, np.nan)
         return acc[0], acc[1:4], list(acc[4:])
 
     def fields(self) -> dict[str, np.ndarray]:
         """rho (kg/m^3), u (m/s), pressure (Pa, gauge) and flags on the level-0 grid."""
         rho_lat, u_lat, _ = self._level0()
-        if self.comm is not None and self.comm.rank != 0:
+        if not self.grid.root:
             return None
         u = self.units
         return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
@@ -405,11 +396,11 @@ class RefinedFluidModel(Model):
         out = []
         for lv in self.lbm.levels:
             rho, vel, (x, y, z) = self._leaf(lv)
-            if self.decomp is not None:     # the whole level on rank 0, in the order of one process
-                rho, vel = self.decomp.gather_leaves(lv, rho), self.decomp.gather_leaves(lv, vel, axis=1)
-                x, y, z = (self.decomp.gather_leaves(lv, c) for c in (x, y, z))
-                if rho is None:
-                    continue
+            g = self.grid                   # the whole level on rank 0, in the order of one process
+            rho, vel = g.gather_leaves(lv, rho), g.gather_leaves(lv, vel, axis=1)
+            x, y, z = (g.gather_leaves(lv, c) for c in (x, y, z))
+            if rho is None:
+                continue
             rho = rho.ravel()
             f = {"rho": u.density_to_physical(rho), "u": u.velocity_to_physical(vel.reshape(3, -1).T),
                  "pressure": u.pressure_to_physical((rho - 1.0) / 3.0)}
@@ -423,8 +414,7 @@ class RefinedFluidModel(Model):
     field_units = staticmethod(FluidModel.field_units)
 
     def is_finite(self) -> bool:
-        finite = math.isfinite(self.lbm.mass())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(math.isfinite(self.lbm.mass()))
 
     def diagnostics(self) -> dict[str, float]:
         """Fluid mass (kg) and kinetic energy (J) over every leaf with its own cell volume, the largest speed."""
@@ -438,8 +428,7 @@ class RefinedFluidModel(Model):
             mass += float(u.density_to_physical(rho).sum() * vol)
             ke += float(0.5 * (u.density_to_physical(rho) * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
             umax = max(umax, float(np.sqrt(speed2.max())) if speed2.size else 0.0)
-        if self.decomp is not None:
-            mass, ke, umax = self.decomp.sum(mass), self.decomp.sum(ke), self.decomp.max(umax)
+        mass, ke, umax = self.grid.sum(mass), self.grid.sum(ke), self.grid.max(umax)
         out = {"mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
                "max_lattice_speed": umax}
         if self.regrid_every:
@@ -455,11 +444,9 @@ class RefinedFluidModel(Model):
     def state(self) -> dict:
         """Every level's populations in storage precision (bit for bit), the iteration and the block octree
         (the level and coordinates of every leaf)."""
-        f = {str(lv): s.populations().astype(s.real) for lv, s in self.lbm.solvers.items()}
-        if self.decomp is not None:
-            f = {k: self.decomp.gather(int(k), v) for k, v in f.items()}
-            if self.comm.rank != 0:
-                return None
+        f = {str(lv): self.grid.gather(lv, s.populations().astype(s.real)) for lv, s in self.lbm.solvers.items()}
+        if not self.grid.root:
+            return None
         return {"f": f,
                 "iteration": np.int64(self.level0_steps), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
@@ -498,8 +485,8 @@ class RefinedFluidModel(Model):
         """After :meth:`check_checkpoint`: a regridding run picks up on the checkpoint's last grid."""
         if not self._is_current(state["octree_level"], state["octree_coord"]):
             octree = self._octree_of(state)
-            views, decomp = self._split(octree)
-            self._adopt(octree, self._level_bytes(views), decomp)
+            grid = self._split(octree)
+            self._adopt(octree, self._level_bytes(grid.views), grid)
         self.regrid_count = int(state.get("regrid_count", self.regrid_count))
 
     def load_state(self, state: dict):
@@ -508,14 +495,11 @@ class RefinedFluidModel(Model):
         f = state.get("f", {})
         for lv, s in self.lbm.solvers.items():
             arr = np.asarray(f.get(str(lv), np.zeros(0)))
-            d = self.decomp
-            nblocks = s.forest.nblocks if d is None else d.global_views[lv].forest.nblocks
+            nblocks = self.grid.global_views[lv].forest.nblocks
             if arr.shape != (nblocks, Q, CELLS):
                 raise InputError(f"checkpoint populations of level {lv} have shape {arr.shape}, this scene needs "
                                  f"{(nblocks, Q, CELLS)}: it belongs to another scene or refinement")
-            if d is not None:
-                arr = arr[d.global_ids[lv]]
-            _set_populations(s, arr.astype(s.real))
+            _set_populations(s, self.grid.level_rows(lv, arr).astype(s.real))
             s.iteration = int(state["iteration"]) * 2 ** lv
         self.lbm.iteration = int(state["iteration"])
 
@@ -528,7 +512,7 @@ class RefinedFluidModel(Model):
                 "vorticity_1_s": self.scene.refinement.vorticity_1_s, "operator": self.scene.fluid.operator,
                 "precision": self.precision, "backend": self.target.name, "units": self.units.describe(),
                 "force_lattice": list(self.force_lattice), "unit_system": self.scene.scene.units,
-                **({} if self.decomp is None else {"mpi": self.decomp.describe()})}
+                **self.grid.describe()}
 
     def allocation(self) -> dict[str, int]:
         """Bytes of the populations of every level (leaves and ghost blocks, both buffers)."""

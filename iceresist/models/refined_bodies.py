@@ -262,8 +262,7 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         return {**self.body_columns(), **super().diagnostics()}
 
     def is_finite(self) -> bool:
-        finite = self._bodies_finite() and math.isfinite(self.lbm.mass())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(self._bodies_finite() and math.isfinite(self.lbm.mass()))
 
     def state(self) -> dict:
         """The levels' populations (:meth:`RefinedFluidModel.state`), the finest level's cell flags (the cells the
@@ -272,10 +271,9 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         finest = self.lbm.solvers[self.finest]
         flags = np.array(self.target.to_host(finest.flags), copy=True)
         levels, coupling = super().state(), self.coupling.state()
-        if self.decomp is not None:
-            flags = self.decomp.gather(self.finest, flags)
-            if levels is None:
-                return None
+        flags = self.grid.gather(self.finest, flags)
+        if levels is None:
+            return None
         return {**levels, "flags_finest": flags, "coupling": coupling, "dem": self.dem.state()}
 
     def load_state(self, state: dict):
@@ -283,9 +281,7 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
             raise InputError("the checkpoint holds no bodies on refined levels: it belongs to another scene; run "
                              "again without --pickup")
         super().load_state(state)
-        flags = np.asarray(state["flags_finest"])
-        if self.decomp is not None:
-            flags = flags[self.decomp.global_ids[self.finest]]
+        flags = self.grid.level_rows(self.finest, np.asarray(state["flags_finest"]))
         copy_into(self.lbm.solvers[self.finest].flags, flags.astype(np.uint8))
         self.coupling.load_state(state["coupling"])
         self.dem.load_state(state["dem"])

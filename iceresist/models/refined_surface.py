@@ -120,10 +120,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             hi = np.minimum(((origin + 8) >> L_) + edge, np.array(shape))
             for (x0, y0, z0), (x1, y1, z1) in zip(lo, hi):
                 mark[x0:x1, y0:y1, z0:z1] = 1
-        if self.comm is not None:
-            from mpi4py import MPI
-
-            self.comm.Allreduce(MPI.IN_PLACE, mark, op=MPI.MAX)
+        self.grid.sum_arrays(mark, op="max")
         mark = mark.astype(bool)
         return mark if hot is None else hot | mark
 
@@ -134,7 +131,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
     # -- values per leaf ---------------------------------------------------------------------------------
     def _phi_leaves(self) -> np.ndarray:
         """phi of the finest level's leaves (this rank's own on several ranks)."""
-        n = self.lbm.views[self.finest].nleaves if self.decomp is None else self.decomp.nown[self.finest]
+        n = self.grid.own_leaves(self.finest)
         return np.asarray(self.target.to_host(self.fs.surface.phase.phi), dtype=np.float64)[:n]
 
     def _leaf(self, lv: int):
@@ -151,8 +148,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         """phi of the leaves (1 on the coarser levels: all water)."""
         if lv == self.finest:
             return [self._phi_leaves()]
-        n = self.lbm.views[lv].nleaves if self.decomp is None else self.decomp.nown[lv]
-        return [np.ones((n, CELLS))]
+        return [np.ones((self.grid.own_leaves(lv), CELLS))]
 
     def surface_cells(self, covered_as_water: bool = False) -> np.ndarray:
         """Height of phi = 1/2 over each level-0 column (nx, ny), level-0 cells: the mean of the finest level's
@@ -189,9 +185,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
 
     def level_fields(self, names=None) -> list[dict]:
         out = super().level_fields(None)
-        phis = {lv: self._leaf_extra(lv)[0] for lv in self.lbm.levels}
-        if self.decomp is not None:
-            phis = {lv: self.decomp.gather_leaves(lv, phi) for lv, phi in phis.items()}
+        phis = {lv: self.grid.gather_leaves(lv, self._leaf_extra(lv)[0]) for lv in self.lbm.levels}
         for entry in out:
             entry["fields"]["phi"] = phis[entry["level"]].ravel()
             if names is not None:
@@ -199,8 +193,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         return out
 
     def is_finite(self) -> bool:
-        finite = math.isfinite(self.fs.volume()) and math.isfinite(self.lbm.mass())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(math.isfinite(self.fs.volume()) and math.isfinite(self.lbm.mass()))
 
     def diagnostics(self) -> dict[str, float]:
         """Water volume (m^3, :meth:`RefinedFreeSurface.volume`) and its drift, liquid mass (kg) and kinetic energy
@@ -218,13 +211,10 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             ke += float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
             if speed2.size:
                 umax = max(umax, float(np.sqrt(speed2.max())))
-        if self.decomp is not None:
-            mass, ke, umax = self.decomp.sum(mass), self.decomp.sum(ke), self.decomp.max(umax)
+        mass, ke, umax = self.grid.sum(mass), self.grid.sum(ke), self.grid.max(umax)
         v = self.fs.volume()
         surface = self.surface_cells()
-        surface_mean = None if surface is None else float(np.nanmean(surface))
-        if self.decomp is not None:
-            surface_mean = self.decomp.bcast(surface_mean)
+        surface_mean = self.grid.bcast(None if surface is None else float(np.nanmean(surface)))
         out = {"water_volume_m3": float(v * u.dx_m ** 3),
                "water_volume_drift": float((v - self.volume0_cells) / self.volume0_cells),
                "mass_kg": mass, "kinetic_energy_J": ke, "max_speed_m_s": float(u.velocity_to_physical(umax)),
@@ -239,10 +229,9 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
         iteration, the initial volume and the block octree: a bit-for-bit restart."""
         coarse = {str(lv): self.lbm.solvers[lv].fluid.rows()[1] for lv in self.lbm.levels[:-1]}
         surface = self.fs.surface.state()
-        if self.decomp is not None:     # the whole levels on rank 0, in the order of one process
-            coarse = {k: self.decomp.gather(int(k), f) for k, f in coarse.items()}
-            if self.comm.rank != 0:
-                return None
+        coarse = {k: self.grid.gather(int(k), f) for k, f in coarse.items()}  # whole levels on rank 0
+        if not self.grid.root:
+            return None
         return {"f": coarse, "surface": surface, "iteration": np.int64(self.level0_steps),
                 "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),
@@ -257,13 +246,11 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             level = self.lbm.solvers[lv]
             f = np.asarray(state["f"].get(str(lv), np.zeros(0)))
             n = level.forest.nblocks
-            d = self.decomp
-            whole = n if d is None else d.global_views[lv].forest.nblocks
+            whole = self.grid.global_views[lv].forest.nblocks
             if f.shape != (whole, Q, CELLS):
                 raise InputError(f"checkpoint populations of level {lv} have shape {f.shape}, this scene needs "
                                  f"{(whole, Q, CELLS)}: it belongs to another scene or refinement")
-            if d is not None:
-                f = f[d.global_ids[lv]]
+            f = self.grid.level_rows(lv, f)
             level.fluid.set_rows(np.arange(n), f.astype(level.fluid.real), n)
             level.fluid.iteration = int(state["iteration"]) * 2 ** lv
         self.fs.surface.load_state(state["surface"])

@@ -98,7 +98,7 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
 
     def _covered(self) -> np.ndarray:
         """The finest level's leaf cells a body covers (nleaves, 512; this rank's own leaves on several ranks)."""
-        n = self.lbm.views[self.finest].nleaves if self.decomp is None else self.decomp.nown[self.finest]
+        n = self.grid.own_leaves(self.finest)
         return self.coupling.owners()[:n] >= 0
 
     def _leaf(self, lv: int):
@@ -129,8 +129,7 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
 
     def is_finite(self) -> bool:
         volume = self.water_volume_cells()          # on several ranks a collective call: every rank takes it
-        finite = self._bodies_finite() and math.isfinite(volume) and math.isfinite(self.lbm.mass())
-        return finite if self.decomp is None else self.decomp.all(finite)
+        return self.grid.all(self._bodies_finite() and math.isfinite(volume) and math.isfinite(self.lbm.mass()))
 
     def state(self) -> dict:
         """The water's state (:meth:`RefinedFreeSurfaceModel.state`: the finest level's flags, with the cells the

@@ -234,7 +234,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
             return probe
         if full:
             finite = math.isfinite(self.lbm.mass())         # this rank's leaves: every rank must agree
-            if not (finite if self.decomp is None else self.decomp.all(finite)):
+            if not self.grid.all(finite):
                 return {"finite": (False, None)}
         ice = self.ice_probe()
         if not ice["finite"][0]:
@@ -297,4 +297,4 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
                 "cells_per_cube": self.cells_per_cube, "bodies_level": self.finest,
                 "precision": self.precision, "backend": self.target.name, "allocation_bytes": self.allocation(),
-                **({} if self.decomp is None else {"mpi": self.decomp.describe()})}
+                **self.grid.describe()}

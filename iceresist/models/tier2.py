@@ -38,6 +38,7 @@ from iceresist.backends.graphs import StepReplay
 from iceresist.coupling.floating import FloatingBodies
 from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
 from iceresist.errors import InputError
+from iceresist.grid.grid import Grid
 from iceresist.models.base import array_bytes
 from iceresist.models.fluid import check_block_shape, resolve_target
 from iceresist.models.ship import ShipModel, ship_start_x_m, steady_window_m
@@ -150,9 +151,7 @@ class Tier2Ship(ShipModel):
         ice = self.ice_state()
         ahead = ice["positions_m"][:, 0] > self.x_bow_m
         drift = float(ice["velocities_m_s"][ahead, 0].mean()) if ahead.any() else math.nan
-        levels = None if h is None else self._level_bands(h - self.level_m)
-        if getattr(self, "decomp", None) is not None:
-            levels = self.decomp.bcast(levels)
+        levels = self.grid.bcast(None if h is None else self._level_bands(h - self.level_m))
         return {**levels, "ice_drift_ahead_m_s": drift}
 
     def _level_bands(self, h) -> dict:
@@ -201,8 +200,8 @@ class Tier2Model(Tier2Ship):
                                  target=self.target, mobility=scene.free_surface.mobility_lattice,
                                  width=scene.free_surface.interface_width_cells, dem=dem,
                                  contact_film=con.fluid_film, comm=comm)
-        self.decomp = self.fb.decomp
-        self.comm = None if self.decomp is None else comm
+        self.grid = Grid.of_forest(self.fb.global_forest, comm, self.fb.decomp)
+        self.comm, self.decomp = self.grid.comm, self.grid.decomp
         self.dem = dem
         self.hull_body = 0                      # the hull first (:meth:`coupled_bodies`)
         for geometry, shape, kw in self.coupled_bodies():
@@ -380,4 +379,4 @@ class Tier2Model(Tier2Ship):
                 "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
                 "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
-                **({} if self.decomp is None else {"mpi": self.decomp.describe()})}
+                **self.grid.describe()}

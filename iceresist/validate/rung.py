@@ -75,16 +75,18 @@ def rung_folder(out_dir, case: str, label: str):
 
 
 def run_rung(model, scene, out_dir, case: str, params: dict, *, steps: int, sample_every: int,
-             probes: dict | None = None, fields: tuple[str, ...] = (), initial: str | None = None) -> Rung:
+             probes: dict | None = None, fields: tuple[str, ...] = (), initial: str | None = None,
+             callbacks: dict | None = None) -> Rung:
     """Run ``model`` for ``steps`` steps into :func:`result_path`, a time-series row every ``sample_every`` steps
     (and at the start and the end) with the ``probes`` columns ``{name: func(model)}``, the ``fields`` at the
-    end; ``initial`` describes an initial condition set on the model beside the scene's (written to ``meta``).
+    end; ``initial`` describes an initial condition set on the model beside the scene's (written to ``meta``);
+    ``callbacks``: ``{name: (func(sim), every_steps)}`` (:func:`iceresist.driver.run_model`).
     No checkpoint: a rung is short, and a killed ladder reruns the rungs not yet in ``ladder.csv``.
     ``out_dir`` None: a scratch folder, removed after the run (the returned path no longer exists)."""
     if out_dir is None:
         with tempfile.TemporaryDirectory(prefix="iceresist-rung-") as tmp:
             return run_rung(model, scene, tmp, case, params, steps=steps, sample_every=sample_every, probes=probes,
-                            fields=fields, initial=initial)
+                            fields=fields, initial=initial, callbacks=callbacks)
     path = result_path(out_dir, case, params["label"])
     outputs = Outputs(timeseries=IterationInterval(sample_every), fields=tuple(fields), checkpoint=None,
                       checkpoint_final=False, probes=dict(probes or {}))
@@ -92,7 +94,7 @@ def run_rung(model, scene, out_dir, case: str, params: dict, *, steps: int, samp
     if initial:
         meta["initial_condition"] = initial
     res = run_model(model, scene, path, None, stop=Stop(iteration=steps), outputs=outputs, meta=meta,
-                    lattice_units=scene.scene.units == "lattice", progress=False)
+                    lattice_units=scene.scene.units == "lattice", progress=False, callbacks=callbacks)
     sim = res.sim
     if not sim.completed:
         raise RuntimeError(f"{case} {params['label']}: {sim.stop_reason} ({path})")

@@ -22,7 +22,6 @@ and the first gas cell, so the level is resolved to half a cell; see docs/notes/
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 
@@ -139,23 +138,20 @@ def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshol
 
 
 def simulate(n: int, periods: float, *, release_draft: float = 0.8, sample_every: int = 5, **kw):
-    """Run the cube for ``periods`` estimated periods (C_a = 0.5), stepping :func:`build`'s model here; the time
-    series (t_s, submerged fraction, fluid force z N, water volume relative change), the model, the steps and the
-    wall time of the stepping (the first step, which compiles, excluded)."""
-    model = build(n, release_draft=release_draft, **kw)
-    v0 = model.water_volume_m3()
+    """Run the cube for ``periods`` estimated periods (C_a = 0.5) through the driver into a scratch folder
+    (:func:`~iceresist.validate.rung.run_rung`, ``kw`` as :func:`scene`); the time series every ``sample_every``
+    steps (t_s, submerged fraction, fluid force z N, water volume relative change), the model, the steps and the
+    wall time of the stepping (the first, compiling chunk excluded)."""
+    sc = scene(n, release_draft=release_draft, **kw)
+    model = build_model(sc)
     steps = steps_for(periods, model.dt_s)
-    model.step(1)
-    t0 = time.perf_counter()
-    rows = []
-    for i in range(1, steps):
-        model.step(1)
-        if i % sample_every == 0:
-            z_bottom = model.dem.positions[0, 2] - 0.5 * EDGE_M
-            rows.append((model.time_s, (model.water_level_m() - z_bottom) / EDGE_M, model.fluid_force_N[0, 2],
-                         model.water_volume_m3() / v0 - 1.0))
-    wall = time.perf_counter() - t0
-    return np.array(rows), model, steps, wall
+    rung = run_rung(model, sc, None, NAME, {"label": f"{n} cells/edge", "resolution": n, "periods": periods,
+                                            "release_draft": release_draft}, steps=steps, sample_every=sample_every)
+    ts = rung.timeseries
+    after = ts["iteration"] > 0
+    frac = (ts["water_level_m"] - (ts["cube_z_m"] - 0.5 * EDGE_M)) / EDGE_M
+    rows = np.stack([ts["time_s"], frac, ts["cube_Fz_N"], ts["water_volume_drift"]], axis=1)[after]
+    return rows, model, steps, rung.wall_s
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float64", out_dir=None) -> CaseResult:

@@ -17,8 +17,6 @@ over it and runs it through the driver.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from iceresist.models import build_model
@@ -84,33 +82,30 @@ def scene(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float 
     return scene_of(data, f"{NAME} {case} {d_cells:g} cells/diameter")
 
 
+#: Steps between time-series rows of a rung (the peak velocity is read from them; E1 peaks on a plateau, where 5
+#: steps change the velocity by less than 1e-4 of it, and a row every step doubled the run with its watchdog check).
+SAMPLE_EVERY = 5
+
+
 def settle(case: str, d_cells: float, *, u_lattice: float = 0.04, t_end_s: float = 1.2, operator: str = "cumulant",
-           backend: str = "cpu", precision: str = "float32", levels: int = 0):
+           backend: str = "cpu", precision: str = "float32", levels: int = 0, sample_every: int = SAMPLE_EVERY):
     """Settling velocity history (t_s, w_m_s) of case ``case`` at ``d_cells`` cells per diameter, a value every
-    step, with the cell count, the number of steps and the wall time of the stepping (first step, which compiles,
-    excluded) and the cell updates (every level's cells times its sub-steps, summed over the steps): the model of
-    :func:`scene` (``levels``: on levels that follow the sphere) stepped here, outside the driver."""
+    ``sample_every`` steps, with the cell count, the number of steps, the wall time of the stepping (the first,
+    compiling chunk excluded) and the cell updates (every level's cells times its sub-steps, summed over the
+    steps): the model of :func:`scene` (``levels``: on levels that follow the sphere) run through the driver into a
+    scratch folder (:func:`~iceresist.validate.rung.run_rung`)."""
     sc = scene(case, d_cells, u_lattice=u_lattice, t_end_s=t_end_s, operator=operator, backend=backend,
                precision=precision, levels=levels)
     model = build_model(sc)
     steps = int(sc.run.steps)
-    t, w = [], []
-    wall = 0.0
-    updates = 0
-    for i in range(steps):
-        t0 = time.perf_counter()
-        updates += model.lattice_updates_per_step
-        model.step(1)
-        if i > 0:
-            wall += time.perf_counter() - t0
-        t.append(model.dem.time_s)
-        w.append(-model.dem.velocities[0, 2])
-    return np.array(t), np.array(w), int(model.cells), steps, wall, int(updates)
-
-
-#: Steps between time-series rows of a rung (the peak velocity is read from them; E1 peaks on a plateau, where 5
-#: steps change the velocity by less than 1e-4 of it, and a row every step doubled the run with its watchdog check).
-SAMPLE_EVERY = 5
+    updates = []
+    count = {"updates": (lambda sim: updates.append(sim.model.lattice_updates_per_step), 1)}
+    rung = run_rung(model, sc, None, NAME, {"label": f"{case} {d_cells:g} cells/diameter", "case": case,
+                                            "resolution": d_cells, "levels": levels},
+                    steps=steps, sample_every=sample_every, callbacks=count)
+    ts = rung.timeseries
+    after = ts["iteration"] > 0
+    return ts["time_s"][after], -ts["sphere_vz_m_s"][after], int(model.cells), steps, rung.wall_s, int(sum(updates))
 
 
 def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_dir=None) -> CaseResult:

@@ -27,8 +27,8 @@ except ImportError:
 pytestmark = [pytest.mark.mpi, pytest.mark.skipif(not HAVE_MPI, reason="the `mpi` extra is not installed")]
 
 
-#: Two-rank runs beyond those CI keeps (the fluid, free surface, ships and refined levels), 18-58 s each with two
-#: test processes on a 2-core x86 VM: slow, for the CI time.
+#: Two-rank runs beyond those CI keeps (the fluid, the free surface, the sweep, refined levels and tier 2 on levels),
+#: 18 s to 20 min each with two test processes on a 2-core x86 VM: slow, for the CI time.
 BEYOND_CI = pytest.mark.slow
 
 
@@ -313,6 +313,7 @@ def test_a_floating_cube_on_two_ranks_is_the_one_process_run(tmp_path):
     _close(read_checkpoint(tmp_path / "cut" / "floating_cube.checkpoint.h5")["model"], a)
 
 
+@BEYOND_CI      # 1 169 s in a full test run on a 2-core x86 VM: tier 2 on two ranks stays in CI on levels (below)
 def test_a_tier2_ship_on_two_ranks_is_the_one_process_run(tmp_path):
     """The CI-sized tier-2 case (quick A-c68, 64 x 16 x 16 cells, the hull and the ice cubes in water with a free
     surface), float64, 6 records: on two ranks the records (ice and fluid forces on the hull, water volume, the

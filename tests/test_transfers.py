@@ -8,6 +8,7 @@ in the GPU build check's trace (tests/test_gpu_build.py), where the CI-sized tie
 """
 
 import numpy as np
+import pytest
 
 from iceresist.backends import jit, transfers
 from iceresist.coupling import Box
@@ -31,8 +32,16 @@ def _box_and_cube(target):
     return model
 
 
-def test_a_coupled_step_on_the_device_copies_nothing_between_host_and_device():
-    model = _box_and_cube(jit.cuda())
+@pytest.fixture(scope="module")
+def simulated():
+    """The tank on the CUDA target, built and stepped once (on the simulator a coupled step takes about 90 s on a
+    2-core x86 VM: both tests share it)."""
+    return _box_and_cube(jit.cuda())
+
+
+@pytest.mark.xdist_group("simulated_tank")
+def test_a_coupled_step_on_the_device_copies_nothing_between_host_and_device(simulated):
+    model = simulated
     steps = 4
     owners = model.coupling.owners()
     with transfers.counting() as tally:
@@ -43,9 +52,10 @@ def test_a_coupled_step_on_the_device_copies_nothing_between_host_and_device():
     assert (np.abs(model.fluid_force_N).max(axis=1) > 0).all()
 
 
-def test_the_count_sees_reads_uploads_and_host_arrays_handed_to_kernels():
+@pytest.mark.xdist_group("simulated_tank")
+def test_the_count_sees_reads_uploads_and_host_arrays_handed_to_kernels(simulated):
     """The counter is not blind: a read of the loads, an upload and a host array launched all count, with where."""
-    model = _box_and_cube(jit.cuda())
+    model = simulated
     cp = model.coupling
     with transfers.counting() as tally:
         cp.force_lattice

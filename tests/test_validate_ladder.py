@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from iceresist.post import convergence as C
+from iceresist.validate import cli as validate_cli
 from iceresist.validate import ladder as L
 from iceresist.validate.result import CaseResult, relative_error
 
@@ -186,7 +187,7 @@ def test_iceresist_validate_runs_the_ladders_then_draws_the_report_from_their_fi
                                                                                       index=False)
         return C.load_table(out)
 
-    monkeypatch.setattr(L, "run_ladders", fake_run_ladders)
+    monkeypatch.setattr(validate_cli, "run_ladders", fake_run_ladders)      # where the command binds it
     assert main(["validate", "--out", str(tmp_path), "--cases", "poiseuille"]) == 0
     out = capsys.readouterr().out
     assert "| poiseuille | quick | 32 cells |" in out and "report.html" in out

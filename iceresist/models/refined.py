@@ -261,14 +261,16 @@ class RefinedFluidModel(Model):
                  [int(n) for n in octree.blocks_per_level()])
         return True
 
-    def _rebuild(self, octree, level_bytes: dict, grid: Grid):
+    def _rebuild(self, octree, level_bytes: dict, grid: Grid | None = None):
         """The levels built on ``octree`` and every level's populations carried over from the present ones
         (:func:`iceresist.grid.regrid.carry_over`; onto the same octree, a rebuild changes nothing:
-        tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``grid``: the new split) the old
-        levels are gathered on rank 0, carried over there and the new ones dealt out to the ranks."""
+        tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``grid``: the new split, by default
+        :meth:`_split` of ``octree``) the old levels are gathered on rank 0, carried over there and the new ones dealt
+        out to the ranks."""
         old_views = self.lbm.views
         old = {lv: self._populations(lv) for lv in self.lbm.levels}
         finest = self._finest_extra()
+        grid = self._split(octree) if grid is None else grid
         old_decomp, decomp = self.decomp, grid.decomp
         self._adopt(octree, level_bytes, grid)
         whole = None

@@ -141,7 +141,7 @@ def test_a_grid_on_one_process_gives_each_value_itself():
     assert g.sum(2.5) == 2.5 and g.max(3) == 3.0 and g.all(np.True_) is True and g.bcast("x") == "x"
     assert g.first_given(None) is None
     g.exchange(rows)
-    g.sum_arrays(rows)
+    g.reduce_arrays(rows)
     assert rows.sum() == 15.0
     levels = Grid.levels(BlockOctree((2, 1, 1), 1).refine(lambda lo, hi: (lo[:, 0] < 8).astype(int)), None)
     assert [v is not None for v in levels.views] == [True, True]

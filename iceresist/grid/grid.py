@@ -9,10 +9,10 @@ rank 0 or a halo exchange and never branches on how many ranks it runs on (after
 architecture is a property of the grid, and waLBerla, whose block forest owns the split and its communication).
 
 Over the ranks, every rank gets the result: :meth:`Grid.sum`, :meth:`Grid.max`, :meth:`Grid.all`,
-:meth:`Grid.bcast` (rank 0's value), :meth:`Grid.sum_arrays` (element-wise, in place). Whole domain on rank 0
-(None on the others): :meth:`Grid.gather_rows` (a uniform forest's per-block rows), :meth:`Grid.gather` and
-:meth:`Grid.gather_leaves` (a level's blocks or own leaves). Back to this rank: :meth:`Grid.local_rows`,
-:meth:`Grid.scatter`.
+:meth:`Grid.bcast` (rank 0's value), :meth:`Grid.reduce_arrays` (element-wise sum or maximum, in place). Whole
+domain on rank 0 (None on the others): :meth:`Grid.gather_rows` (a uniform forest's per-block rows),
+:meth:`Grid.gather` and :meth:`Grid.gather_leaves` (a level's blocks or own leaves). Back to this rank:
+:meth:`Grid.local_rows`, :meth:`Grid.level_rows`.
 """
 
 from __future__ import annotations
@@ -103,7 +103,7 @@ class Grid:
             return value
         return next((v for v in self.comm.allgather(value) if v is not None), None)
 
-    def sum_arrays(self, *arrays, op: str = "sum") -> None:
+    def reduce_arrays(self, *arrays, op: str = "sum") -> None:
         """Each host array summed (``op="max"``: the largest) element-wise over the ranks, in place."""
         if self.comm is None:
             return

@@ -377,7 +377,7 @@ class RefinedFluidModel(Model):
             np.add.at(weight, idx, w)
             for k, v in enumerate(values):
                 np.add.at(acc[k], idx, w * np.asarray(v).ravel())
-        self.grid.sum_arrays(acc, weight)      # every level-0 cell lies in one rank's trees: the others add zeros
+        self.grid.reduce_arrays(acc, weight)      # every level-0 cell lies in one rank's trees: the others add zeros
         acc /= np.where(weight > 0, weight, np.nan)
         return acc[0], acc[1:4], list(acc[4:])
 

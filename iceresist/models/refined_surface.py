@@ -120,7 +120,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
             hi = np.minimum(((origin + 8) >> L_) + edge, np.array(shape))
             for (x0, y0, z0), (x1, y1, z1) in zip(lo, hi):
                 mark[x0:x1, y0:y1, z0:z1] = 1
-        self.grid.sum_arrays(mark, op="max")
+        self.grid.reduce_arrays(mark, op="max")
         mark = mark.astype(bool)
         return mark if hot is None else hot | mark
 

@@ -133,6 +133,7 @@ def _drift(model, records: int, steps_per_record: int) -> np.ndarray:
     return np.array(rows)
 
 
+@pytest.mark.slow   # 185 s on a 2-core x86 VM; CI keeps the cube on static levels and the sinking sphere's regrids
 def test_a_floating_cube_drifting_through_regrids_follows_the_uniform_fine_grid():
     """The issue's check of a body drifting through a regrid: 80 records (800 level-1 steps) in which the cube
     drifts 9 level-1 cells and its fine blocks follow it twice (a level-0 block refined ahead of it at the first

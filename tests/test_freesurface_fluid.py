@@ -216,6 +216,31 @@ def test_surface_height_over_a_covered_column():
     assert np.allclose(over[rest], DEPTH, atol=1e-12)
 
 
+def test_the_columns_kernel_finds_the_top_most_crossing_of_the_dense_reference():
+    """A wavy surface with a droplet above it in some columns (two crossings: the top one counts) and dry and full
+    columns: the columns kernel (:mod:`iceresist.freesurface.columns`) gives the dense reference
+    :func:`~iceresist.freesurface.fluid.column_crossing`, NaN where it does, to round-off (the kernel's fast math).
+    Planted: the interpolation's sign flipped in the kernel fails."""
+    from iceresist.freesurface.columns import SurfaceColumns
+    from iceresist.freesurface.fluid import column_crossing
+
+    forest = _tank()
+    nx, ny, nz = forest.shape_cells
+    x, y, z = np.meshgrid(np.arange(nx) + 0.5, np.arange(ny) + 0.5, np.arange(nz) + 0.5, indexing="ij")
+    level = DEPTH + 2.0 * np.sin(2 * np.pi * x / nx) * np.cos(2 * np.pi * y / ny)
+    phi = 0.5 - 0.5 * np.tanh((z - level) / 1.5)
+    drop = (np.abs(x - 2.5) < 1.1) & (np.abs(z - 13.5) < 0.6)
+    phi = np.where(drop, 0.9, phi)
+    phi[6, :, :] = 1.0                          # full columns
+    phi[7, :, :] = 0.0                          # dry columns
+    want = column_crossing(phi)
+    got = SurfaceColumns(forest, jit.cpu).height(forest.from_dense(phi), np.zeros((forest.nblocks, 512), np.uint8),
+                                                 False)
+    assert np.isnan(want[6:]).all() and np.isfinite(want[:6]).all() and (want[1:4] > 13.0).all()
+    assert np.array_equal(np.isnan(got), np.isnan(want))
+    assert np.allclose(got[:6], want[:6], rtol=0, atol=1e-12)
+
+
 def test_surface_height_is_nan_in_a_column_without_a_surface():
     """A body standing through the whole depth of one column, read as water: no crossing there, NaN (not a
     division by zero); the other columns keep 10.0."""

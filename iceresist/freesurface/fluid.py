@@ -660,46 +660,26 @@ class FreeSurfaceFluid:
         top-most crossing); NaN in a column with no crossing (all water or all gas). ``covered_as_water``: a cell
         a body covers (GHOST) counts as phi = 1, so the surface runs over the top of a floating body (within half
         a cell) rather than through the phi that the coupling mirrors into it; a column through a body that
-        stands out of the water then reads the body's top. Only the layers of blocks that can hold the crossing
-        are made dense (:func:`surface_window`); on one process the columns are walked on the target
-        (:mod:`iceresist.freesurface.columns`) and only the map is read."""
-        if self.decomp is None:
-            if self._columns is None:
-                self._columns = SurfaceColumns(self.forest, self.target)
-            return self._columns.height(self.phase.phi, self.fluid.flags, covered_as_water)
-        phi = self.phase.phi_host().astype(np.float64)
-        if covered_as_water:
-            phi[(np.asarray(self._host(self.fluid.flags)) & FL.GHOST) != 0] = 1.0
-        forest = self.forest
+        stands out of the water then reads the body's top. The columns are walked on the target
+        (:mod:`iceresist.freesurface.columns`) and only the map is read; on several ranks over the whole domain's
+        phi and flags gathered on rank 0 (None on the others), by the same kernel, so the heights are one
+        process's bit for bit."""
+        phi, flags, forest = self.phase.phi, self.fluid.flags, self.forest
         if self.decomp is not None:     # the whole domain's blocks on rank 0
-            phi = self.decomp.gather_rows(phi)
-            forest = self.decomp.forest
-        if phi is None:         # an MPI rank other than 0
-            return None
-        lo, hi = surface_window(forest, phi)
-        return column_crossing(forest.to_dense(phi, z_blocks=(lo, hi))) + lo * BLOCK
-
-
-def surface_window(forest, phi: np.ndarray) -> tuple[int, int]:
-    """The layers of blocks (lo, hi: lo <= bz < hi) that hold every column's top-most phi = 1/2 crossing: for each
-    column of cells the block holding its top-most cell with phi >= 1/2 and the block above it (the crossing is
-    inside the one or on the face between them). ``phi``: (nblocks, 512)."""
-    n = len(phi)
-    wet = (np.nan_to_num(phi, nan=0.0).reshape(n, BLOCK, BLOCK, BLOCK) >= 0.5).any(axis=1)   # (n, y, x)
-    b, y, x = np.nonzero(wet)
-    if not len(b):
-        return 0, 1
-    o = forest.origin[b]
-    nbx, nby, _ = forest.shape_blocks
-    top = np.full((nbx * BLOCK, nby * BLOCK), -1, dtype=np.int64)
-    np.maximum.at(top, (o[:, 0] * BLOCK + x, o[:, 1] * BLOCK + y), o[:, 2])
-    top = top[top >= 0]
-    return int(top.min()), int(top.max()) + 2
+            phi = self.decomp.gather_rows(self.phase.phi_host())
+            flags = self.decomp.gather_rows(np.asarray(self._host(self.fluid.flags)))
+            if phi is None:         # an MPI rank other than 0
+                return None
+            phi, flags, forest = self._to_target(phi), self._to_target(flags), self.decomp.forest
+        if self._columns is None:
+            self._columns = SurfaceColumns(forest, self.target)
+        return self._columns.height(phi, flags, covered_as_water)
 
 
 def column_crossing(phi: np.ndarray) -> np.ndarray:
     """Height z (cells from the array's bottom) where the dense ``phi`` (nx, ny, nz) crosses 1/2 in each column,
-    the top-most crossing, by linear interpolation; NaN where a column has none."""
+    the top-most crossing, by linear interpolation; NaN where a column has none: the reference of the columns kernel
+    (:mod:`iceresist.freesurface.columns`, tests/test_freesurface_fluid.py)."""
     nz = phi.shape[2]
     z = np.arange(nz) + 0.5
     below = phi[:, :, :-1] >= 0.5

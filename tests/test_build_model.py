@@ -7,7 +7,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.models import (MODELS, BodiesModel, FluidModel, FreeSurfaceModel, RefinedBodiesModel,
-                              RefinedFluidModel, RefinedFreeSurfaceModel, RefinedSurfaceBodiesModel, RefinedTier2Model,
+                              RefinedFreeSurfaceModel, RefinedSurfaceBodiesModel, RefinedTier2Model,
                               Tier1Model, Tier2Model, build_model, physics_of)
 from iceresist.scene.case_scenes import case_scene
 from iceresist.scene.load import parse_scene, preset_text
@@ -17,7 +17,7 @@ CASE = "A-c68-v1.0"
 
 
 def test_every_physics_has_one_model_per_grid():
-    assert MODELS == {"fluid": (FluidModel, RefinedFluidModel),
+    assert MODELS == {"fluid": (FluidModel, FluidModel),
                       "free_surface": (FreeSurfaceModel, RefinedFreeSurfaceModel),
                       "bodies": (BodiesModel, RefinedBodiesModel),
                       "floating_bodies": (BodiesModel, RefinedSurfaceBodiesModel),

@@ -1,11 +1,11 @@
-"""A fluid scene with ``[refinement]`` (iceresist.models.refined): the built-in `refined_channel` scene against the
+"""A fluid scene with ``[refinement]`` (iceresist.models.fluid): the built-in `refined_channel` scene against the
 same channel on a uniform grid, mass to round-off, a bit-for-bit restart, and bad refinement input refused with one
 line and exit 2."""
 
 import numpy as np
 import pytest
 
-from iceresist.models import RefinedFluidModel, build_model
+from iceresist.models import FluidModel, build_model
 from iceresist.scene import parse_scene, preset_text
 
 from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
@@ -26,7 +26,7 @@ def test_the_refined_channel_follows_the_fine_grid_where_refined_and_keeps_its_m
     (measured 0.1 % and 0.06 %; the uniform 1 mm grid is 7.7 % below the fine one at the wall cell). Mass to 1e-12
     (measured 0). 2-core x86 VM, 2026-11-26."""
     refined = build_model(_scene())
-    assert isinstance(refined, RefinedFluidModel)
+    assert isinstance(refined, FluidModel)
     uniform_text = REFINED.split("[refinement]")[0] + "[run]" + REFINED.split("[run]")[1]
     coarse = build_model(_scene(uniform_text))
     fine = build_model(_scene(uniform_text.replace("dx_m = 0.001 ", "dx_m = 0.0005 ")))
@@ -172,7 +172,7 @@ def test_a_band_along_the_walls_refines_the_boundary_layers():
     """The refined channel 48 mm high (6 level-0 blocks across it) with refinement.wall_band_m = 4 mm instead of
     boxes: the blocks touching the walls at z = 0 and z = 48 mm are on level 1, the four between on level 0; the
     periodic faces take no band. The run steps and keeps its mass."""
-    from iceresist.models.refined import build_octree
+    from iceresist.models.regions import build_octree
 
     text = REFINED.replace("size_m = [0.008, 0.008, 0.016]", "size_m = [0.008, 0.008, 0.048]")
     text = text.split("[[refinement.boxes]]")[0] + "wall_band_m = 0.004\n\n[run]" + text.split("[run]")[1]

@@ -1,4 +1,4 @@
-"""Regridding (iceresist.grid.regrid, ``refinement.regrid_every_steps`` in iceresist.models.refined): the state
+"""Regridding (iceresist.grid.regrid, ``refinement.regrid_every_steps`` in iceresist.models.fluid): the state
 carried between two block octrees, the criteria's helpers, and a vortex advected through a periodic box whose fine
 blocks follow it, against the same vortex on the uniform fine grid."""
 
@@ -8,7 +8,7 @@ import pytest
 from iceresist.grid.levels import level_views
 from iceresist.grid.octree import BlockOctree
 from iceresist.grid.regrid import any_in_boxes, carry_over, vorticity_magnitude
-from iceresist.models import RefinedFluidModel, build_model
+from iceresist.models import FluidModel, build_model
 from iceresist.scene import parse_scene
 
 from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
@@ -175,7 +175,7 @@ def test_the_fine_blocks_follow_an_advected_vortex():
     the fine grid's cell updates; the level-1 blocks sit on the vortex and the mass is kept to 1e-12 across the
     regrids. 2-core x86 VM, 2026-11-27. Planted: no regrid after the first (the static patch) fails the 1 %."""
     model = build_model(_vortex_scene(refinement=REGRID))
-    assert isinstance(model, RefinedFluidModel)
+    assert isinstance(model, FluidModel)
     _start(model)
     m0 = model.diagnostics()["mass_kg"]
     updates = 0
@@ -190,7 +190,7 @@ def test_the_fine_blocks_follow_an_advected_vortex():
     assert fine.any() and np.abs(centre[:, 0].mean() - (X0 + U0 * 320)) < 4 and np.abs(centre[:, 1].mean() - Y0) < 4
 
     uniform = build_model(_vortex_scene(cells=(128, 64, 32), tau=0.54))
-    _set_swirl([(uniform.solver, 2)], 2)
+    _set_swirl([(uniform.lbm.solvers[0], 2)], 2)
     uniform.step(640)
     reference = _swirl_velocity(uniform, fine_grid=True)
     swirl = np.sqrt(((reference - np.array([U0, 0, 0])[:, None, None, None]) ** 2).sum(axis=0)).max()

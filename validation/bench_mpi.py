@@ -94,12 +94,12 @@ def amr_worker(n: int, steps: int, precision: str) -> dict | None:
     """Level-0 steps of the refined box in this MPI job (or one process), after one untimed step; rank 0's figures,
     None on the others."""
     from iceresist import parallel
-    from iceresist.models.refined import RefinedFluidModel
+    from iceresist.models.fluid import FluidModel
     from iceresist.scene.load import parse_scene
 
     comm = parallel.world()
     scene = parse_scene(AMR_SCENE.format(n=n, lo=n / 4, hi=3 * n / 4, precision=precision), "amr_bench.toml")
-    model = RefinedFluidModel(scene, backend="cpu", comm=comm)
+    model = FluidModel(scene, backend="cpu", comm=comm)
     return _levels_timed(model, model.lattice_updates_per_step, comm, steps, precision)
 
 

@@ -62,11 +62,11 @@ class Grid:
         return cls(comm, decomp, global_forest=global_forest, forest=forest)
 
     @classmethod
-    def levels(cls, octree, faces: dict, comm=None) -> Grid:
-        """The levels of ``octree`` (:func:`~iceresist.grid.levels.level_views` with ``faces``), split into whole
-        level-0 trees where ``comm`` spans several ranks."""
+    def levels(cls, octree, faces: dict, comm=None, solid=None) -> Grid:
+        """The levels of ``octree`` (:func:`~iceresist.grid.levels.level_views` with ``faces`` and ``solid``), split
+        into whole level-0 trees where ``comm`` spans several ranks. A uniform grid is the octree of one level."""
         comm = several(comm)
-        views = level_views(octree, faces)
+        views = level_views(octree, faces, solid)
         decomp = None if comm is None else LevelDecomposition(octree, views, comm)
         return cls(comm, decomp, octree=octree, global_views=views, views=views if decomp is None else decomp.views)
 

@@ -48,10 +48,11 @@ class LevelView:
         return self._block_map
 
 
-def level_views(octree: BlockOctree, faces: dict | None = None) -> list[LevelView]:
+def level_views(octree: BlockOctree, faces: dict | None = None, solid=None) -> list[LevelView]:
     """The :class:`LevelView` of every level of ``octree`` that has leaves (a list indexed by level; None for a
     level without leaves). ``faces`` as for :meth:`BlockForest.uniform`; periodic faces must match the octree's
-    ``periodic``."""
+    ``periodic``. ``solid(x, y, z)``: as for :meth:`BlockForest.uniform`, the solid cells of level 0 (integer
+    level-0 cell indices; the padding of ``domain.pad_to_blocks``, which only a grid of one level has)."""
     faces = _check_faces(faces)
     views: list[LevelView | None] = []
     for lv in range(octree.max_level + 1):
@@ -76,7 +77,10 @@ def level_views(octree: BlockOctree, faces: dict | None = None) -> list[LevelVie
             g, source = g[order], source[order]
         origin = np.concatenate([co, g])
         shape_cells = tuple(int(n) * BLOCK << lv for n in octree.root)
-        forest = BlockForest(shape_cells, faces, np.full(len(origin), lv), origin,
-                             np.ones((len(origin), CELLS), dtype=bool))
+        fluid = np.ones((len(origin), CELLS), dtype=bool)
+        forest = BlockForest(shape_cells, faces, np.full(len(origin), lv), origin, fluid)
+        if solid is not None and lv == 0:
+            fluid = ~np.asarray(solid(*forest.cell_coordinates()), dtype=bool)
+            forest = BlockForest(shape_cells, faces, np.full(len(origin), lv), origin, fluid)
         views.append(LevelView(lv, forest, len(leaves), leaves, source))
     return views

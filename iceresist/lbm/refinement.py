@@ -545,13 +545,14 @@ class RefinedLBM:
 
     ``views``: the levels to hold, if not every block of ``octree`` (:func:`~iceresist.grid.levels.level_views`): an
     MPI rank's region (:class:`~iceresist.parallel.levels.LevelDecomposition`); the level transfers then leave out
-    the cells whose sources lie beyond it.
+    the cells whose sources lie beyond it. ``solid``: the solid cells of level 0 (:func:`level_views`; ``views``
+    carry their own).
     """
 
     def __init__(self, octree: BlockOctree, *, tau0: float, force0=(0.0, 0.0, 0.0), faces: dict | None = None,
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
                  scheme: str = "conservative", reconstruction: str = "linear", target=None, solver_factory=None,
-                 views: list | None = None):
+                 views: list | None = None, solid=None):
         self.target = target or jit.cpu
         if self.target.is_cuda and scheme != "conservative":
             raise InputError("scheme: the interpolating level interface runs on the CPU only; use the conservative "
@@ -572,7 +573,7 @@ class RefinedLBM:
         partial = views is not None
         if partial and scheme != "conservative":
             raise InputError("scheme: a rank's share of the levels runs the conservative level interface only")
-        self.views = views if partial else level_views(octree, faces)
+        self.views = views if partial else level_views(octree, faces, solid)
         self.periodic = tuple(bool(p) for p in octree.periodic)
         for v in self.views:
             if v is not None and tuple(v.forest.faces[a + "-"].kind == "periodic" for a in "xyz") != self.periodic:
@@ -654,7 +655,7 @@ class RefinedLBM:
             keys = ("db", "dq", "dc", "tag", "sb", "sc", "sq", "off", "nb", "nc", "nok")
             return len(p["db"]), tuple(dev(p[k]) for k in keys)
 
-        self._transfer = transfer_launcher(self.target, real)
+        self._transfer = transfer_launcher(self.target, real) if len(self.levels) > 1 else None   # one level: none
         self._real = real
         self._k_explode = {lv: None if t is None else (packed(t[0]), packed(t[1])) for lv, t in self.explode.items()}
         self._k_coalesce = {lv: packed(t) for lv, t in self.coalesce.items()}
@@ -666,7 +667,9 @@ class RefinedLBM:
             keep = None if t is None else next_to_leaves(self.views[lv], t[0][:, 0])
             self._k_restrict[lv] = packed(restriction_as_transfer(t, keep))
         shape = {lv: (self.views[lv].forest.nblocks, 27, 512) for lv in self.levels}
-        self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv in self.levels for k in ("t", "half")}
+        # the copies the interfaces read: each coarse level at t, each finer one at t and t + 1/2 (none on one level)
+        keys = sorted({(lv, "t") for lv in self.levels[:-1]} | {(lv, k) for lv in self.levels[1:] for k in ("t", "half")})
+        self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv, k in keys}
         # the blocks each scratch copy must hold: those some table reads from it (a coarse packet's neighbours
         # included); a level's "t" copy serves both as the coarse level of the interface below it and the fine
         # level of the one above, so it holds both sets at either copy

@@ -3,12 +3,11 @@
 ==========================  ======================================================  =============================
 model                       what it holds                                           scene sections
 ==========================  ======================================================  =============================
-:class:`FluidModel`         block forest + LBM                                      no optional section
+:class:`FluidModel`         LBM on one level or on refined levels                   no optional section (``[refinement]``)
 :class:`FreeSurfaceModel`   LBM + phase field (eqs. 1-11)                           ``[free_surface]``
 :class:`Tier1Model`         DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
 :class:`Tier2Model`         free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
 :class:`BodiesModel`        LBM (free surface optional) + DEM + coupling            ``[[bodies]]`` (no ship)
-:class:`RefinedFluidModel`  LBM on refined levels                                   ``[refinement]`` alone
 :class:`RefinedFreeSurfaceModel` free surface on the finest of refined levels       ``[refinement]`` + ``[free_surface]``
 :class:`RefinedBodiesModel`  bodies and their coupling on the finest level            ``[refinement]`` + ``[[bodies]]``
 :class:`RefinedSurfaceBodiesModel` bodies in water with a free surface, on the finest level ``[refinement]`` + ``[free_surface]`` + ``[[bodies]]``
@@ -25,7 +24,6 @@ from iceresist.errors import InputError
 from iceresist.models.base import Model
 from iceresist.models.bodies import BodiesModel
 from iceresist.models.fluid import FluidModel, FreeSurfaceModel
-from iceresist.models.refined import RefinedFluidModel
 from iceresist.models.refined_bodies import RefinedBodiesModel
 from iceresist.models.refined_surface import RefinedFreeSurfaceModel
 from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
@@ -33,14 +31,14 @@ from iceresist.models.refined_tier2 import RefinedTier2Model
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFluidModel", "RefinedFreeSurfaceModel",
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFreeSurfaceModel",
            "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "RefinedTier2Model", "Tier1Model", "Tier2Model", "BodiesModel", "MODELS", "physics_of", "build_model"]
 
 
 #: The model of each physics a scene asks for (:func:`physics_of`): on one uniform grid, and on the levels of a
 #: ``[refinement]`` (None: that physics has no lattice to refine).
 MODELS: dict[str, tuple[type, type | None]] = {
-    "fluid": (FluidModel, RefinedFluidModel),
+    "fluid": (FluidModel, FluidModel),
     "free_surface": (FreeSurfaceModel, RefinedFreeSurfaceModel),
     "bodies": (BodiesModel, RefinedBodiesModel),
     "floating_bodies": (BodiesModel, RefinedSurfaceBodiesModel),

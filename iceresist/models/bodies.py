@@ -31,8 +31,6 @@ import math
 
 import numpy as np
 
-from fsicr.errors import FsicrInputError
-from fsicr.hullmesh import MeshKeys, read_mesh
 from iceresist.backends.launch import copy_into
 from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, Sphere
 from iceresist.coupling.floating import FloatingBodies
@@ -46,8 +44,8 @@ from iceresist.models.base import Model, array_bytes
 from iceresist.models.fluid import (BLOCK, FluidModel, FreeSurfaceModel, check_block_shape, check_free_surface_forces,
                                     forest_faces, padding_solid, resolve_target)
 from iceresist.models.probe import fluid_probe
+from iceresist.models.regions import body_mesh, half_extent
 from iceresist.scene.schema import Scene
-from iceresist.ship.meshhull import resolve_mesh_path
 
 log = logging.getLogger(__name__)
 
@@ -60,29 +58,6 @@ BODY_COLUMNS = ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "Fx_N", "Fy_N
 
 def _g(v) -> str:
     return f"{float(v):.6g}"
-
-
-def body_mesh(body, index: int, scene_source: str | None = None):
-    """A mesh body's checked surface: vertices (n, 3) m about the centre of its bounding box, faces, and the
-    fraction of its convex hull it fills; one line naming ``bodies[i].mesh_file`` (or ``mesh_unit``) on a bad
-    file."""
-    keys = MeshKeys(file=f"bodies[{index}].mesh_file", unit=f"bodies[{index}].mesh_unit")
-    try:
-        mesh = read_mesh(resolve_mesh_path(body.mesh_file, scene_source), unit=body.mesh_unit, keys=keys, what="body")
-    except FsicrInputError as exc:
-        raise InputError(str(exc)) from None
-    v = mesh.vertices
-    return v - 0.5 * (v.min(axis=0) + v.max(axis=0)), mesh.faces, mesh.convex_fill
-
-
-def half_extent(body, mesh=None) -> np.ndarray:
-    """Half the body's extent along x, y, z (m): its radius, half its edges (boxes are axis-aligned), or half a
-    mesh's bounding box (``mesh``: its vertices about that box's centre)."""
-    if body.shape == "sphere":
-        return np.full(3, float(body.radius_m))
-    if body.shape == "mesh":
-        return np.abs(np.asarray(mesh[0] if isinstance(mesh, tuple) else mesh, dtype=float)).max(axis=0)
-    return 0.5 * np.asarray(body.size_m, dtype=float)
 
 
 def _overlap(a, b, ma=None, mb=None) -> bool:

@@ -1,6 +1,6 @@
 """Rigid bodies in a fluid on refined levels: a scene with ``[[bodies]]`` and ``[refinement]`` (paper sections 2.3-2.5).
 
-:class:`RefinedBodiesModel` is :class:`~iceresist.models.refined.RefinedFluidModel` with the bodies of
+:class:`RefinedBodiesModel` is :class:`~iceresist.models.fluid.FluidModel` with the bodies of
 :class:`~iceresist.models.bodies.BodiesModel` on its finest level: the coupling (interpolated bounce-back, momentum
 exchange, refill, eqs. 16-21) runs on that level's forest at that level's own time step
 (:meth:`~iceresist.lbm.refinement.RefinedLBM.set_stepper`), the DEM advances with it. Every body, with two cells to
@@ -26,8 +26,8 @@ from iceresist.errors import InputError, StabilityError
 from iceresist.grid.regrid import same_blocks
 from iceresist.lbm.refinement import RefinedLBM
 from iceresist.models.bodies import BodiesModel, body_mesh, check_bodies
-from iceresist.models.fluid import forest_faces
-from iceresist.models.refined import RefinedFluidModel, body_half_extents_m
+from iceresist.models.fluid import FluidModel, forest_faces
+from iceresist.models.regions import body_half_extents_m
 from iceresist.parallel.levels import LevelShare
 
 
@@ -114,7 +114,7 @@ class FinestLevelBodies:
 
     # -- regridding -------------------------------------------------------------------------------------
     def regrid(self) -> bool:
-        """As :meth:`RefinedFluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
+        """As :meth:`FluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
         where they are. A body that left the finest level since the last regrid (it moved further than the band)
         stops the run with a StabilityError naming the two keys; after the regrid every body lies on the finest
         level with two cells to spare (asserted)."""
@@ -181,7 +181,7 @@ class FinestLevelBodies:
                 "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion} for b in self.scene.bodies]}
 
 
-class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
+class RefinedBodiesModel(FinestLevelBodies, FluidModel):
     """Boxes, spheres and convex meshes, fixed, prescribed or free, in a fluid on refined levels (module docstring)."""
 
     components = ("fluid", "dem", "coupling", "refinement")
@@ -265,7 +265,7 @@ class RefinedBodiesModel(FinestLevelBodies, RefinedFluidModel):
         return self.grid.all(self._bodies_finite() and math.isfinite(self.lbm.mass()))
 
     def state(self) -> dict:
-        """The levels' populations (:meth:`RefinedFluidModel.state`), the finest level's cell flags (the cells the
+        """The levels' populations (:meth:`FluidModel.state`), the finest level's cell flags (the cells the
         bodies cover), the coupling and the DEM: a bit-for-bit restart (on several ranks the whole levels on rank 0,
         None on the others)."""
         finest = self.lbm.solvers[self.finest]

@@ -1,7 +1,7 @@
 """Water with a free surface on refined levels: a scene with ``[free_surface]`` and ``[refinement]`` (paper sections
 2.2 and 2.5).
 
-:class:`RefinedFreeSurfaceModel` is :class:`~iceresist.models.refined.RefinedFluidModel` with
+:class:`RefinedFreeSurfaceModel` is :class:`~iceresist.models.fluid.FluidModel` with
 :class:`~iceresist.freesurface.refined.RefinedFreeSurface` as its solver: the surface in the finest level (the
 scene's boxes or ``refinement.surface_band_m`` must put it there; a scene whose coarser levels reach the surface is
 refused naming ``refinement.regions``), the coarser levels all water. Fields on the level-0 grid add phi, flags and
@@ -21,11 +21,10 @@ from iceresist.freesurface.refined import PHI_BULK_TOL, RefinedFreeSurface
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import Q
-from iceresist.models.fluid import FreeSurfaceModel, check_free_surface_forces, forest_faces
-from iceresist.models.refined import RefinedFluidModel
+from iceresist.models.fluid import FluidModel, FreeSurfaceModel, check_free_surface_forces, forest_faces
 
 
-class RefinedFreeSurfaceModel(RefinedFluidModel):
+class RefinedFreeSurfaceModel(FluidModel):
     """Water with a free surface on the levels of a scene's ``[refinement]`` (CPU or CUDA); on several MPI ranks
     (``comm``) each takes its share of the levels (:class:`RefinedFreeSurface` with a ``decomp``)."""
 
@@ -101,7 +100,7 @@ class RefinedFreeSurfaceModel(RefinedFluidModel):
 
     # -- regridding ---------------------------------------------------------------------------------------
     def hot_cells(self) -> np.ndarray:
-        """The level-0 cells of :meth:`RefinedFluidModel.hot_cells` and those within one finest block of a finest
+        """The level-0 cells of :meth:`FluidModel.hot_cells` and those within one finest block of a finest
         leaf block the surface reaches (a cell with phi below 1 - ``PHI_BULK_TOL``, :meth:`_surface_reach`). The
         static band of ``refinement.surface_band_m`` lies about the still-water level; a wave or a piece of ice
         pushed down can carry the surface beyond it, onto blocks that are finest only because a body's band covered

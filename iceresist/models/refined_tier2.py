@@ -30,7 +30,7 @@ from iceresist.errors import InputError
 from iceresist.grid.levels import level_views
 from iceresist.models.base import array_bytes
 from iceresist.models.fluid import forest_faces
-from iceresist.models.refined import build_octree
+from iceresist.models.regions import build_octree
 from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
 from iceresist.models.ship import ShipModel
 from iceresist.models.tier2 import Tier2Ship
@@ -41,7 +41,7 @@ log = logging.getLogger(__name__)
 class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
     """Coupled LBM-DEM ship + ice + water on refined levels (module docstring); ``backend``, ``precision`` override
     the scene's ``[numerics]``; ``comm``: an MPI communicator of several ranks (CPU or CUDA; the levels split as
-    :class:`~iceresist.models.refined.RefinedFluidModel` splits them, the DEM replicated on every rank)."""
+    :class:`~iceresist.models.fluid.FluidModel` splits them, the DEM replicated on every rank)."""
 
     components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice", "refinement")
     tier = 2
@@ -94,7 +94,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
     def plan(cls, scene) -> dict:
         """The levels a scene would start on, without building them (no populations allocated): the ship and ice
         placed as :meth:`__init__` places them, the octree of the scene's criteria about them
-        (:func:`~iceresist.models.refined.build_octree`) and the ghost blocks of every level. Returns
+        (:func:`~iceresist.models.regions.build_octree`) and the ghost blocks of every level. Returns
         ``cells_per_level`` (leaf cells), ``ghost_cells_per_level``, ``cells_per_cube`` (at the finest level),
         ``updates_per_step`` (cell updates per level-0 step), ``dt_s`` (level 0's step), ``level0_steps`` (the
         case's) and ``level_bytes`` (what :meth:`__init__` checks against the memory: every level's populations, the

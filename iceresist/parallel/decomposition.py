@@ -52,6 +52,42 @@ def block_weights(forest) -> np.ndarray:
     return forest.fluid.sum(axis=1).astype(np.float64) * 2.0 ** forest.levels
 
 
+def pulled_populations(forest, owner, sender: int, receiver: int):
+    """(global blocks, populations, cells) of ``sender``'s blocks of ``forest`` (``owner``: the rank of each block)
+    that ``receiver``'s blocks pull: for a block h next to a receiving block o, the cells of h on its side facing o
+    (one layer; an edge or a corner for diagonal neighbours) and of them the populations that stream from h into o
+    (9 across a face, 3 across an edge, 1 across a corner), sorted by block, population, cell."""
+    nbr = forest.nbr
+    local = (LX, LY, LZ)
+    mine = np.flatnonzero(owner == receiver)
+    mask: dict[int, np.ndarray] = {}
+    for q in range(1, C.shape[0]):
+        h = nbr[mine, q]
+        h = np.unique(h[(h >= 0) & (owner[np.maximum(h, 0)] == sender)])
+        if not len(h):
+            continue
+        m = np.ones(512, dtype=bool)
+        for a in range(3):            # h lies at +C[q] from o: o is at -C[q] from h
+            if C[q, a] == 1:
+                m &= local[a] == 0
+            elif C[q, a] == -1:
+                m &= local[a] == 7
+        axes = C[q] != 0              # a cell x of o pulls f_p from x - c_p: in h where c_p = -C[q] on these axes
+        pops = np.flatnonzero((C[:, axes] == -C[q, axes]).all(axis=1))
+        for b in h.tolist():
+            if b not in mask:
+                mask[b] = np.zeros((C.shape[0], 512), dtype=bool)
+            mask[b][pops] |= m
+    if not mask:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    order = sorted(mask)
+    pairs = [np.nonzero(mask[b]) for b in order]
+    blocks = np.concatenate([np.full(len(p), b, np.int64) for b, (p, _) in zip(order, pairs)])
+    comps = np.concatenate([p for p, _ in pairs]).astype(np.int64)
+    cells = np.concatenate([c for _, c in pairs]).astype(np.int64)
+    return blocks, comps, cells
+
+
 class SolverHalo:
     """What :meth:`~iceresist.lbm.solver.LBMSolver.step` asks of a rank's halo exchange so that it can update its
     interior while the messages travel: ``sent`` (a flag per local block on the target: the own blocks whose cells
@@ -147,39 +183,9 @@ class Decomposition(Collectives, Exchanges):
         self._plans = {}
 
     def _needed(self, sender: int, receiver: int):
-        """(global blocks, populations, cells) of ``sender``'s blocks that ``receiver``'s blocks pull: for a block h
-        next to a receiving block o, the cells of h on its side facing o (one layer; an edge or a corner for
-        diagonal neighbours) and of them the populations that stream from h into o (9 across a face, 3 across an
-        edge, 1 across a corner), sorted by block, population, cell."""
-        nbr, owner = self.forest.nbr, self.owner
-        local = (LX, LY, LZ)
-        mine = np.flatnonzero(owner == receiver)
-        mask: dict[int, np.ndarray] = {}
-        for q in range(1, C.shape[0]):
-            h = nbr[mine, q]
-            h = np.unique(h[(h >= 0) & (owner[np.maximum(h, 0)] == sender)])
-            if not len(h):
-                continue
-            m = np.ones(512, dtype=bool)
-            for a in range(3):            # h lies at +C[q] from o: o is at -C[q] from h
-                if C[q, a] == 1:
-                    m &= local[a] == 0
-                elif C[q, a] == -1:
-                    m &= local[a] == 7
-            axes = C[q] != 0              # a cell x of o pulls f_p from x - c_p: in h where c_p = -C[q] on these axes
-            pops = np.flatnonzero((C[:, axes] == -C[q, axes]).all(axis=1))
-            for b in h.tolist():
-                if b not in mask:
-                    mask[b] = np.zeros((C.shape[0], 512), dtype=bool)
-                mask[b][pops] |= m
-        if not mask:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
-        order = sorted(mask)
-        pairs = [np.nonzero(mask[b]) for b in order]
-        blocks = np.concatenate([np.full(len(p), b, np.int64) for b, (p, _) in zip(order, pairs)])
-        comps = np.concatenate([p for p, _ in pairs]).astype(np.int64)
-        cells = np.concatenate([c for _, c in pairs]).astype(np.int64)
-        return blocks, comps, cells
+        """(global blocks, populations, cells) of ``sender``'s blocks that ``receiver``'s blocks pull
+        (:func:`pulled_populations`)."""
+        return pulled_populations(self.forest, self.owner, sender, receiver)
 
     # -- halo exchange ------------------------------------------------------------------------------
     def exchange(self, arr, target=None, full: bool = False) -> None:

@@ -33,7 +33,7 @@ import numpy as np
 from iceresist.errors import InputError
 from iceresist.grid.forest import BlockForest, morton_key
 from iceresist.grid.levels import LevelView
-from iceresist.parallel.decomposition import Collectives, SolverHalo, morton_partition
+from iceresist.parallel.decomposition import Collectives, SolverHalo, morton_partition, pulled_populations
 from iceresist.parallel.messages import Exchanges, Pending, swap_start
 from iceresist.parallel.staging import DevicePlan
 
@@ -56,7 +56,7 @@ def tree_partition(octree, nranks: int) -> np.ndarray:
     equal in cells x sub-steps. More ranks than trees is an error naming the cause."""
     root = octree.root
     ntrees = int(np.prod(root))
-    if nranks > ntrees:
+    if nranks > ntrees and octree.max_level > 0:     # one level: morton_partition names the blocks
         raise InputError(f"mpirun -n {nranks}: the refined scene has {ntrees} level-0 blocks of 8x8x8 cells, fewer "
                          f"than the ranks; run with at most {ntrees} ranks (or a finer level 0)")
     x, y, z = np.unravel_index(np.arange(ntrees), tuple(root), order="F")
@@ -143,6 +143,26 @@ class LevelDecomposition(Collectives, Exchanges):
                                for r in range(self.size) if r != self.rank]
             self._sends[lv] = [(r, rows) for r, rows in self._sends[lv] if len(rows)]
             self._recvs[lv] = [(r, rows) for r, rows in self._recvs[lv] if len(rows)]
+        #: On a grid of one level (no level transfers read the halo), the LBM step's swap sends only what the
+        #: neighbours' cells pull (:func:`pulled_populations`, as on a uniform forest): (rank, rows, populations,
+        #: cells) to send and to receive, in the level's global (block, population, cell) order on both sides
+        self._pulled = None
+        if sum(v is not None for v in views) == 1:
+            lv = next(v.level for v in views if v is not None)
+            f = views[lv].forest
+            t = tree_of(views[lv])
+            owner = self.tree_owner[t[:, 0] + root[0] * (t[:, 1] + root[1] * t[:, 2])]
+            pos = np.full(f.nblocks, -1, dtype=np.int64)
+            pos[self.global_ids[lv]] = np.arange(len(self.global_ids[lv]))
+            sends, recvs = [], []
+            for r in range(self.size):
+                if r == self.rank:
+                    continue
+                for msgs, sender, receiver in ((sends, self.rank, r), (recvs, r, self.rank)):
+                    blocks, comps, cells = pulled_populations(f, owner, sender, receiver)
+                    if len(blocks):
+                        msgs.append((r, pos[blocks], comps, cells))
+            self._pulled = (lv, recvs, sends)
         #: Leaf blocks (all levels) each rank steps.
         t = octree.coord >> octree.level[:, None]
         leaf_owner = self.tree_owner[t[:, 0] + root[0] * (t[:, 1] + root[1] * t[:, 2])]
@@ -158,19 +178,27 @@ class LevelDecomposition(Collectives, Exchanges):
         level, a host or a device array of ``target``) with their owners' values."""
         self.finish_exchange(self.start_exchange(lv, arr, target))
 
-    def start_exchange(self, lv: int, arr, target=None) -> Pending:
+    def start_exchange(self, lv: int, arr, target=None, pulled: bool = False) -> Pending:
         """Post :meth:`exchange`'s messages (this rank's leaves copied out now, on a device packed there:
-        :mod:`iceresist.parallel.staging`) and return without waiting."""
+        :mod:`iceresist.parallel.staging`) and return without waiting; ``pulled``: on a grid of one level, only the
+        populations the neighbours' cells pull (the LBM step's swap)."""
         t0 = time.perf_counter()
+        pulled = pulled and self._pulled is not None and self._pulled[0] == lv
+        if pulled:
+            recvs, sends = self._pulled[1:]
+        else:
+            recvs = [(r, rows, None, None) for r, rows in self._recvs[lv]]
+            sends = [(r, rows, None, None) for r, rows in self._sends[lv]]
         if target is not None and target.is_cuda:
-            key = (lv, tuple(arr.shape), str(arr.dtype))
+            key = (lv, pulled, tuple(arr.shape), str(arr.dtype))
             if key not in self._plans:
-                self._plans[key] = DevicePlan(target, arr.shape, arr.dtype,
-                                              [(r, rows, None, None) for r, rows in self._recvs[lv]],
-                                              [(r, rows, None, None) for r, rows in self._sends[lv]])
+                self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends)
             pending = self._plans[key].start(self.comm, arr, tag=100 + lv)
         else:
-            pending = swap_start(self.comm, arr, self._recvs[lv], self._sends[lv], tag=100 + lv)
+            def index(msgs):
+                return [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in msgs]
+
+            pending = swap_start(self.comm, arr, index(recvs), index(sends), tag=100 + lv)
         return self._posted(pending, t0)
 
     def step_own(self, lv: int, solver, target=None) -> None:
@@ -181,7 +209,7 @@ class LevelDecomposition(Collectives, Exchanges):
         sends = self._sends[lv]
         sent = np.unique(np.concatenate([rows for _, rows in sends])) if sends else []
         solver.halo = SolverHalo(target, self.views[lv].forest.nblocks, self.nown[lv], sent,
-                                 lambda arr: self.start_exchange(lv, arr, target), self.finish_exchange)
+                                 lambda arr: self.start_exchange(lv, arr, target, pulled=True), self.finish_exchange)
 
     # -- whole levels on rank 0 ------------------------------------------------------------------------
     def gather(self, lv: int, local: np.ndarray):

@@ -81,7 +81,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     sc = scene(params, backend=backend, precision=precision)
     model = FluidModel(sc)
     rho, u = vortex(n, amplitude)
-    model.solver.initialize(rho, u)
+    model.lbm.initialize(rho, u)
     steps = steps_for(n)
     rung = run_rung(model, sc, out_dir, NAME, params, steps=steps, sample_every=max(1, steps // SAMPLES),
                     initial=f"Taylor-Green vortex (Brachet et al. 1983), amplitude {amplitude:.6g}, k = 2 pi / {n}")

@@ -7,7 +7,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.models import (MODELS, BodiesModel, FluidModel, FreeSurfaceModel, RefinedBodiesModel,
-                              RefinedFreeSurfaceModel, RefinedSurfaceBodiesModel, RefinedTier2Model,
+                              RefinedSurfaceBodiesModel, RefinedTier2Model,
                               Tier1Model, Tier2Model, build_model, physics_of)
 from iceresist.scene.case_scenes import case_scene
 from iceresist.scene.load import parse_scene, preset_text
@@ -18,7 +18,7 @@ CASE = "A-c68-v1.0"
 
 def test_every_physics_has_one_model_per_grid():
     assert MODELS == {"fluid": (FluidModel, FluidModel),
-                      "free_surface": (FreeSurfaceModel, RefinedFreeSurfaceModel),
+                      "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
                       "bodies": (BodiesModel, RefinedBodiesModel),
                       "floating_bodies": (BodiesModel, RefinedSurfaceBodiesModel),
                       "tier1": (Tier1Model, None), "tier2": (Tier2Model, RefinedTier2Model)}

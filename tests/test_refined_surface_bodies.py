@@ -260,7 +260,7 @@ def test_a_sinking_sphere_picks_up_bit_for_bit_across_a_regrid():
 
 def test_a_regrid_keeps_the_finest_blocks_the_surface_reaches():
     """The regrid's criteria keep on the finest level every block the surface reaches (phi below 1 - 1e-4) and the
-    blocks within one finest block of it (:meth:`RefinedFreeSurfaceModel.hot_cells`): a wave or a piece of ice
+    blocks within one finest block of it (:meth:`FreeSurfaceModel.hot_cells`): a wave or a piece of ice
     pushed down can carry the surface out of the band of ``refinement.surface_band_m`` onto blocks refined for a
     body alone, which the level must not drop when the body moves on (the regrid stopped there, phi = 0.992, in the
     quick tier-2 case on levels). The sinking-sphere tank at the start: the surface's profile reaches 7 level-1 cells

@@ -5,7 +5,7 @@ refinement of a free surface refused with one line and exit 2."""
 import numpy as np
 import pytest
 
-from iceresist.models import RefinedFreeSurfaceModel, build_model
+from iceresist.models import FreeSurfaceModel, build_model
 from iceresist.scene import parse_scene, preset_text
 
 from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
@@ -23,7 +23,7 @@ def test_the_refined_tank_stays_still_and_keeps_its_water():
     0.01 cell of 20 (measured -7e-4) and flat, the largest speed in the water below 1e-4 (lattice; measured 6.7e-5,
     the start's half-force shift 1e-4 relaxing), the level-0 fields phi = 1 in the deep water and 0 at the lid."""
     m = build_model(_scene())
-    assert isinstance(m, RefinedFreeSurfaceModel)
+    assert isinstance(m, FreeSurfaceModel)
     assert m.describe()["leaf_blocks_per_level"] == [4, 96]
     m.step(500)
     d = m.diagnostics()

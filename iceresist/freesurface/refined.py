@@ -231,16 +231,18 @@ class RefinedFreeSurface:
     ``lbm`` is the :class:`RefinedLBM` that steps the levels; ``surface`` the finest level's
     :class:`FreeSurfaceFluid`.
 
-    ``decomp``: the :class:`~iceresist.parallel.levels.LevelDecomposition` of an MPI run; the levels are then this
+    ``f_pool_margin``: the finest level's spare population rows (:class:`FreeSurfaceFluid`; None: every block
+    holds its populations). ``decomp``: the :class:`~iceresist.parallel.levels.LevelDecomposition` of an MPI run; the levels are then this
     rank's share. A coarser level steps its own leaves and swaps its halo leaves after each step; the finest level
     steps its halo leaves too (the phase field's passes read the velocity the fused update gives them) and swaps
     their whole state (populations, h, phi, flags) after each step: the passes reach at most 5 cells into its one
-    block of halo, as on a uniform grid (:class:`~iceresist.models.fluid.FreeSurfaceModel`).
+    block of halo, as on a uniform grid (:class:`~iceresist.models.surface.FreeSurfaceModel`).
     """
 
     def __init__(self, octree: BlockOctree, *, tau0: float, gravity0: float, depth0: float, mobility: float = 0.05,
                  width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
-                 precision: str = "float32", target=None, faces: dict | None = None, decomp=None):
+                 precision: str = "float32", target=None, faces: dict | None = None, decomp=None,
+                 f_pool_margin: float | None = None):
         self.target = target or jit.cpu
         self.precision = precision
         self.octree = octree
@@ -256,7 +258,7 @@ class RefinedFreeSurface:
             if lv == finest:
                 fs = FreeSurfaceFluid(forest, tau=tau, gravity_lattice=-force[2], depth_cells=self.depth0 * 2 ** lv,
                                       mobility=mobility, width=width, h_lattice=h_lattice, operator=operator,
-                                      precision=precision, target=self.target, f_pool_margin=None)
+                                      precision=precision, target=self.target, f_pool_margin=f_pool_margin)
                 built["surface"] = fs
                 return _SurfaceLevel(fs, self.refill_ghosts)
             return _LiquidLevel(forest, tau, force, operator=operator, precision=precision, target=self.target,
@@ -435,6 +437,8 @@ class RefinedFreeSurface:
         the level's global block order: the same float64 sum on any number of ranks), plus every coarser level's
         leaf cells (liquid throughout) over 8^l. ``per_block``: the finest level's volume per block of this rank
         (its leaves first) to add instead of phi's sums (the bodies': :meth:`PhaseField.volume_per_block`)."""
+        if per_block is None and len(self.levels) == 1:        # one level: the surface's own sum
+            return self.surface.volume() / 8.0 ** self.finest
         if per_block is None:
             phi = np.asarray(self.target.to_host(self.surface.phase.phi), dtype=np.float64)
             per_block = phi.sum(axis=1)

@@ -4,11 +4,10 @@
 model                       what it holds                                           scene sections
 ==========================  ======================================================  =============================
 :class:`FluidModel`         LBM on one level or on refined levels                   no optional section (``[refinement]``)
-:class:`FreeSurfaceModel`   LBM + phase field (eqs. 1-11)                           ``[free_surface]``
+:class:`FreeSurfaceModel`   LBM + phase field (eqs. 1-11), on one level or levels   ``[free_surface]`` (``[refinement]``)
 :class:`Tier1Model`         DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
 :class:`Tier2Model`         free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
 :class:`BodiesModel`        LBM (free surface optional) + DEM + coupling            ``[[bodies]]`` (no ship)
-:class:`RefinedFreeSurfaceModel` free surface on the finest of refined levels       ``[refinement]`` + ``[free_surface]``
 :class:`RefinedBodiesModel`  bodies and their coupling on the finest level            ``[refinement]`` + ``[[bodies]]``
 :class:`RefinedSurfaceBodiesModel` bodies in water with a free surface, on the finest level ``[refinement]`` + ``[free_surface]`` + ``[[bodies]]``
 :class:`RefinedTier2Model`  tier 2 with the ship, ice and surface on the finest level    ``[ship]`` tier 2, ``[ice]``, ``[refinement]``
@@ -23,15 +22,15 @@ from __future__ import annotations
 from iceresist.errors import InputError
 from iceresist.models.base import Model
 from iceresist.models.bodies import BodiesModel
-from iceresist.models.fluid import FluidModel, FreeSurfaceModel
+from iceresist.models.fluid import FluidModel
 from iceresist.models.refined_bodies import RefinedBodiesModel
-from iceresist.models.refined_surface import RefinedFreeSurfaceModel
 from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
+from iceresist.models.surface import FreeSurfaceModel
 from iceresist.models.refined_tier2 import RefinedTier2Model
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFreeSurfaceModel",
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel",
            "RefinedBodiesModel", "RefinedSurfaceBodiesModel", "RefinedTier2Model", "Tier1Model", "Tier2Model", "BodiesModel", "MODELS", "physics_of", "build_model"]
 
 
@@ -39,7 +38,7 @@ __all__ = ["Model", "FluidModel", "FreeSurfaceModel", "RefinedFreeSurfaceModel",
 #: ``[refinement]`` (None: that physics has no lattice to refine).
 MODELS: dict[str, tuple[type, type | None]] = {
     "fluid": (FluidModel, FluidModel),
-    "free_surface": (FreeSurfaceModel, RefinedFreeSurfaceModel),
+    "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
     "bodies": (BodiesModel, RefinedBodiesModel),
     "floating_bodies": (BodiesModel, RefinedSurfaceBodiesModel),
     "tier1": (Tier1Model, None),

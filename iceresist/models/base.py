@@ -1,6 +1,6 @@
 """The model contract: state plus one time step of the components a scene uses, no I/O (docs/ARCHITECTURE.md, "The model contract").
 
-Every model (:class:`~iceresist.models.fluid.FluidModel`, :class:`~iceresist.models.fluid.FreeSurfaceModel`,
+Every model (:class:`~iceresist.models.fluid.FluidModel`, :class:`~iceresist.models.surface.FreeSurfaceModel`,
 :class:`~iceresist.models.tier1.Tier1Model`, :class:`~iceresist.models.tier2.Tier2Model`) derives from
 :class:`Model`, so the driver (:mod:`iceresist.driver`), the time loop (:mod:`iceresist.simulation`) and the
 watchdog ask every model the same questions and never test what it happens to have. After Oceananigans'

@@ -41,10 +41,11 @@ from iceresist.grid.grid import Grid, several
 from iceresist.lbm.solver import LBMSolver
 from iceresist.limits import check_fluid
 from iceresist.models.base import Model, array_bytes
-from iceresist.models.fluid import (BLOCK, FluidModel, FreeSurfaceModel, check_block_shape, check_free_surface_forces,
+from iceresist.models.fluid import (BLOCK, FluidModel, check_block_shape, check_free_surface_forces,
                                     forest_faces, padding_solid, resolve_target)
 from iceresist.models.probe import fluid_probe
 from iceresist.models.regions import body_mesh, half_extent
+from iceresist.models.surface import FreeSurfaceModel
 from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)

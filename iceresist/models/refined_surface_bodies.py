@@ -1,7 +1,7 @@
 """Rigid bodies in water with a free surface on refined levels: a scene with ``[[bodies]]``, ``[free_surface]`` and
 ``[refinement]`` (paper sections 2.2-2.5; the floating cube, and tier 2's ice and hull, on the levels of its figure 1).
 
-:class:`RefinedSurfaceBodiesModel` is :class:`~iceresist.models.refined_surface.RefinedFreeSurfaceModel` (the surface
+:class:`RefinedSurfaceBodiesModel` is :class:`~iceresist.models.surface.FreeSurfaceModel` (the surface
 in the finest level, the coarser levels all water) with the bodies of :class:`~iceresist.models.bodies.BodiesModel`
 on the finest level: the coupling (interpolated bounce-back, momentum exchange, refill with h and phi, the contact
 film, eqs. 16-21) runs on that level's free-surface fluid at that level's own time step, after the level's ghost
@@ -26,16 +26,16 @@ import numpy as np
 from iceresist.coupling import FluidStructureCoupling
 from iceresist.errors import InputError
 from iceresist.models.refined_bodies import FinestLevelBodies
-from iceresist.models.refined_surface import RefinedFreeSurfaceModel
+from iceresist.models.surface import FreeSurfaceModel
 
 
-class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
+class RefinedSurfaceBodiesModel(FinestLevelBodies, FreeSurfaceModel):
     """Bodies, fixed, prescribed or free, in water with a free surface on refined levels (module docstring)."""
 
     components = ("fluid", "free_surface", "dem", "coupling", "refinement")
 
     def _build(self, initialize: bool = True):
-        """The levels with the surface (:meth:`RefinedFreeSurfaceModel._build`) and the coupling on the finest
+        """The levels with the surface (:meth:`FreeSurfaceModel._build`) and the coupling on the finest
         level's free-surface fluid. The first call also builds the DEM and places the bodies in the still water; a
         later one (a regrid, a pickup onto another octree) keeps the DEM and carries the coupling's state
         (:meth:`FinestLevelBodies._carry_finest`)."""
@@ -102,7 +102,7 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         return self.coupling.owners()[:n] >= 0
 
     def _leaf(self, lv: int):
-        """As :meth:`RefinedFreeSurfaceModel._leaf`, the cells the bodies cover at the reference state too."""
+        """As :meth:`FreeSurfaceModel._leaf`, the cells the bodies cover at the reference state too."""
         rho, u, xyz = super()._leaf(lv)
         if lv == self.finest:
             covered = self._covered()
@@ -119,7 +119,7 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
 
     # -- protocol ------------------------------------------------------------------------------------------
     def diagnostics(self) -> dict[str, float]:
-        """The per-body columns (:meth:`BodiesModel.body_columns`) and the water's (:meth:`RefinedFreeSurfaceModel.
+        """The per-body columns (:meth:`BodiesModel.body_columns`) and the water's (:meth:`FreeSurfaceModel.
         diagnostics`) with the volume outside the bodies."""
         out = super().diagnostics()
         v = self.water_volume_cells()
@@ -132,7 +132,7 @@ class RefinedSurfaceBodiesModel(FinestLevelBodies, RefinedFreeSurfaceModel):
         return self.grid.all(self._bodies_finite() and math.isfinite(volume) and math.isfinite(self.lbm.mass()))
 
     def state(self) -> dict:
-        """The water's state (:meth:`RefinedFreeSurfaceModel.state`: the finest level's flags, with the cells the
+        """The water's state (:meth:`FreeSurfaceModel.state`: the finest level's flags, with the cells the
         bodies cover, among it), the coupling and the DEM: a bit-for-bit restart (on several ranks the whole levels
         on rank 0, None on the others)."""
         water, coupling = super().state(), self.coupling.state()

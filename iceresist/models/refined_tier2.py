@@ -207,7 +207,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
 
     def _surface_height_m(self) -> np.ndarray:
         """The free surface over each level-0 column (m from the bottom), a floe counted as water
-        (:meth:`RefinedFreeSurfaceModel.surface_cells`); None on an MPI rank other than 0."""
+        (:meth:`FreeSurfaceModel.surface_cells`); None on an MPI rank other than 0."""
         h = self.surface_cells(covered_as_water=True)
         return None if h is None else h * self.units.dx_m
 

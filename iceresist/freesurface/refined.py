@@ -232,8 +232,8 @@ class RefinedFreeSurface:
     :class:`FreeSurfaceFluid`.
 
     ``f_pool_margin``: the finest level's spare population rows (:class:`FreeSurfaceFluid`; None: every block
-    holds its populations). ``decomp``: the :class:`~iceresist.parallel.levels.LevelDecomposition` of an MPI run; the levels are then this
-    rank's share. A coarser level steps its own leaves and swaps its halo leaves after each step; the finest level
+    holds its populations). ``decomp``: the :class:`~iceresist.parallel.levels.LevelDecomposition` of an MPI run;
+    the levels are then this rank's share. A coarser level steps its own leaves and swaps its halo leaves after each step; the finest level
     steps its halo leaves too (the phase field's passes read the velocity the fused update gives them) and swaps
     their whole state (populations, h, phi, flags) after each step: the passes reach at most 5 cells into its one
     block of halo, as on a uniform grid (:class:`~iceresist.models.surface.FreeSurfaceModel`).

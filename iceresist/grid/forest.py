@@ -93,6 +93,12 @@ def _check_faces(faces):
     return out
 
 
+def cell_coordinates(origin):
+    """Global integer cell coordinates (x, y, z), each (nblocks, 512), of the blocks at ``origin`` (nblocks, 3)."""
+    o = np.asarray(origin) * BLOCK
+    return o[:, 0:1] + LX, o[:, 1:2] + LY, o[:, 2:3] + LZ
+
+
 class BlockForest:
     """Blocks of 8x8x8 cells, Morton-ordered, with a D3Q27 neighbour table and cell flags."""
 
@@ -283,8 +289,7 @@ class BlockForest:
 
     def cell_coordinates(self):
         """Global integer cell coordinates (x, y, z), each (nblocks, 512)."""
-        o = self.origin * BLOCK
-        return o[:, 0:1] + LX, o[:, 1:2] + LY, o[:, 2:3] + LZ
+        return cell_coordinates(self.origin)
 
     def __repr__(self):
         return (f"BlockForest(shape_cells={self.shape_cells}, nblocks={self.nblocks}, cells={self.cells}, "

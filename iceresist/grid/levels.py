@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from iceresist.grid.forest import BLOCK, CELLS, BlockForest, _check_faces, morton_key
+from iceresist.grid.forest import BLOCK, CELLS, BlockForest, _check_faces, cell_coordinates, morton_key
 from iceresist.grid.octree import OFFSETS, BlockOctree
 
 #: Where a ghost block's values come from.
@@ -78,9 +78,8 @@ def level_views(octree: BlockOctree, faces: dict | None = None, solid=None) -> l
         origin = np.concatenate([co, g])
         shape_cells = tuple(int(n) * BLOCK << lv for n in octree.root)
         fluid = np.ones((len(origin), CELLS), dtype=bool)
-        forest = BlockForest(shape_cells, faces, np.full(len(origin), lv), origin, fluid)
         if solid is not None and lv == 0:
-            fluid = ~np.asarray(solid(*forest.cell_coordinates()), dtype=bool)
-            forest = BlockForest(shape_cells, faces, np.full(len(origin), lv), origin, fluid)
+            fluid = ~np.asarray(solid(*cell_coordinates(origin)), dtype=bool)
+        forest = BlockForest(shape_cells, faces, np.full(len(origin), lv), origin, fluid)
         views.append(LevelView(lv, forest, len(leaves), leaves, source))
     return views

@@ -668,7 +668,8 @@ class RefinedLBM:
             self._k_restrict[lv] = packed(restriction_as_transfer(t, keep))
         shape = {lv: (self.views[lv].forest.nblocks, 27, 512) for lv in self.levels}
         # the copies the interfaces read: each coarse level at t, each finer one at t and t + 1/2 (none on one level)
-        keys = sorted({(lv, "t") for lv in self.levels[:-1]} | {(lv, k) for lv in self.levels[1:] for k in ("t", "half")})
+        keys = sorted({(lv, "t") for lv in self.levels[:-1]}
+                      | {(lv, k) for lv in self.levels[1:] for k in ("t", "half")})
         self._scratch = {(lv, k): dev(np.zeros(shape[lv], dtype=real)) for lv, k in keys}
         # the blocks each scratch copy must hold: those some table reads from it (a coarse packet's neighbours
         # included); a level's "t" copy serves both as the coarse level of the interface below it and the fine

@@ -166,9 +166,8 @@ class FluidModel(Model):
         return Grid.levels(octree, forest_faces(self.scene, self.units), self.comm, solid=padding_solid(self.scene))
 
     def _count_cells(self):
-        self.cells_per_level = {lv: int(self.grid.global_views[lv].forest.cells) if self.uniform
-                                else int(n) * CELLS for lv, n in enumerate(self.octree.blocks_per_level())
-                                if lv in self.lbm.levels}
+        views = self.grid.global_views          # the fluid cells of every level's leaves
+        self.cells_per_level = {lv: int(views[lv].forest.fluid[:views[lv].nleaves].sum()) for lv in self.lbm.levels}
         self.cells = int(sum(self.cells_per_level.values()))
 
     def _level_bytes(self, views) -> dict[int, int]:
@@ -346,7 +345,8 @@ class FluidModel(Model):
         if self.uniform:
             rho, u, _ = self._leaf(0)
             g = self.grid
-            values = [g.gather_leaves(0, v, axis=a) for v, a in ((rho, 0), (u, 1), *((x, 0) for x in self._leaf_extra(0)))]
+            parts = ((rho, 0), (u, 1), *((x, 0) for x in self._leaf_extra(0)))
+            values = [g.gather_leaves(0, v, axis=a) for v, a in parts]
             dense = None if values[0] is None else [g.global_views[0].forest.to_dense(v) for v in values]
             if everywhere:
                 dense = g.bcast(dense)

@@ -22,13 +22,8 @@ from iceresist.freesurface.refined import PHI_BULK_TOL, RefinedFreeSurface
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import Q
-from iceresist.lattice import C as _C
 from iceresist.limits import check_fluid
 from iceresist.models.fluid import FluidModel, check_block_shape, check_free_surface_forces, forest_faces
-
-
-#: D3Q27 velocities as float64 (the free surface's per-block fields).
-C_F64 = _C.astype(np.float64)
 
 
 class FreeSurfaceModel(FluidModel):
@@ -54,7 +49,6 @@ class FreeSurfaceModel(FluidModel):
     def fluid(self):
         """The finest level's :class:`~iceresist.freesurface.fluid.FreeSurfaceFluid` (on one level, the water)."""
         return self.fs.surface
-
 
     def _level_bytes(self, views) -> dict[int, int]:
         """Bytes each level's blocks take: both population buffers, and on the finest level the phase field (h in
@@ -136,8 +130,7 @@ class FreeSurfaceModel(FluidModel):
 
     def _populations(self, lv: int) -> np.ndarray:
         """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""
-        level = self.lbm.solvers[lv]
-        return (level.fs.fluid if lv == self.finest else level.fluid).populations()
+        return self._pool(lv).populations()
 
     # -- regridding ---------------------------------------------------------------------------------------
     def hot_cells(self) -> np.ndarray:
@@ -211,10 +204,7 @@ class FreeSurfaceModel(FluidModel):
         """Dense rho and u (lattice, NaN outside the liquid), phi and flags of a grid of one level (on several ranks
         gathered on rank 0; None on the others)."""
         fs = self.fluid
-        f = fs.fluid.populations()
-        rho = 1.0 + f.sum(axis=1)
-        u = np.einsum("qa,bqc->abc", C_F64, f) / rho
-        u[2] += 0.5 * fs.g
+        rho, u = self.lbm.solvers[0].macroscopic_blocks()
         flags = np.asarray(fs._host(fs.fluid.flags))
         liquid = (flags & FL.FLUID) != 0
         rho[~liquid] = np.nan

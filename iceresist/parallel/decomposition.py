@@ -169,11 +169,11 @@ class Decomposition(Collectives, Exchanges):
         for r in range(self.size):
             if r == self.rank:
                 continue
-            blocks, comps, cells = self._needed(sender=self.rank, receiver=r)
+            blocks, comps, cells = pulled_populations(forest, self.owner, sender=self.rank, receiver=r)
             if len(blocks):
                 self.sends.append((r, pos[blocks], comps, cells))
                 self.sends_full.append((r, pos[np.intersect1d(self.owned, halos[r])]))
-            blocks, comps, cells = self._needed(sender=r, receiver=self.rank)
+            blocks, comps, cells = pulled_populations(forest, self.owner, sender=r, receiver=self.rank)
             if len(blocks):
                 self.recvs.append((r, pos[blocks], comps, cells))
                 self.recvs_full.append((r, pos[self.halo[self.owner[self.halo] == r]]))
@@ -181,11 +181,6 @@ class Decomposition(Collectives, Exchanges):
         self.exchanges, self.bytes_sent, self.exchange_s = 0, 0, 0.0
         #: Device exchanges by (full, shape, dtype) (:class:`~iceresist.parallel.staging.DevicePlan`)
         self._plans = {}
-
-    def _needed(self, sender: int, receiver: int):
-        """(global blocks, populations, cells) of ``sender``'s blocks that ``receiver``'s blocks pull
-        (:func:`pulled_populations`)."""
-        return pulled_populations(self.forest, self.owner, sender, receiver)
 
     # -- halo exchange ------------------------------------------------------------------------------
     def exchange(self, arr, target=None, full: bool = False) -> None:
@@ -211,10 +206,7 @@ class Decomposition(Collectives, Exchanges):
                 self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends)
             pending = self._plans[key].start(self.comm, arr, tag=7)
         else:
-            def index(msgs):
-                return [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in msgs]
-
-            pending = swap_start(self.comm, arr, index(recvs), index(sends))
+            pending = swap_start(self.comm, arr, recvs, sends)
         return self._posted(pending, t0)
 
     def solver_halo(self, target=None) -> SolverHalo:

@@ -110,6 +110,7 @@ class LevelDecomposition(Collectives, Exchanges):
         self.views: list[LevelView | None] = []
         self.global_ids, self.nown, self.owned_rows = {}, {}, {}
         self._sends, self._recvs = {}, {}
+        owners = {}             # the rank owning each block of a level (global order)
         for v in views:
             if v is None:
                 self.views.append(None)
@@ -117,7 +118,7 @@ class LevelDecomposition(Collectives, Exchanges):
             lv = v.level
             t = tree_of(v)
             tid = t[:, 0] + root[0] * (t[:, 1] + root[1] * t[:, 2])
-            owner = self.tree_owner[tid]
+            owner = owners[lv] = self.tree_owner[tid]
             near = near_owners(v, self.tree_owner, root, periodic)
             inside = (near == self.rank).any(axis=1)
             is_leaf = np.arange(v.forest.nblocks) < v.nleaves
@@ -150,8 +151,6 @@ class LevelDecomposition(Collectives, Exchanges):
         if sum(v is not None for v in views) == 1:
             lv = next(v.level for v in views if v is not None)
             f = views[lv].forest
-            t = tree_of(views[lv])
-            owner = self.tree_owner[t[:, 0] + root[0] * (t[:, 1] + root[1] * t[:, 2])]
             pos = np.full(f.nblocks, -1, dtype=np.int64)
             pos[self.global_ids[lv]] = np.arange(len(self.global_ids[lv]))
             sends, recvs = [], []
@@ -159,7 +158,7 @@ class LevelDecomposition(Collectives, Exchanges):
                 if r == self.rank:
                     continue
                 for msgs, sender, receiver in ((sends, self.rank, r), (recvs, r, self.rank)):
-                    blocks, comps, cells = pulled_populations(f, owner, sender, receiver)
+                    blocks, comps, cells = pulled_populations(f, owners[lv], sender, receiver)
                     if len(blocks):
                         msgs.append((r, pos[blocks], comps, cells))
             self._pulled = (lv, recvs, sends)
@@ -195,10 +194,7 @@ class LevelDecomposition(Collectives, Exchanges):
                 self._plans[key] = DevicePlan(target, arr.shape, arr.dtype, recvs, sends)
             pending = self._plans[key].start(self.comm, arr, tag=100 + lv)
         else:
-            def index(msgs):
-                return [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in msgs]
-
-            pending = swap_start(self.comm, arr, index(recvs), index(sends), tag=100 + lv)
+            pending = swap_start(self.comm, arr, recvs, sends, tag=100 + lv)
         return self._posted(pending, t0)
 
     def step_own(self, lv: int, solver, target=None) -> None:

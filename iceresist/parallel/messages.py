@@ -19,10 +19,13 @@ class Pending:
 
 
 def swap_start(comm, view: np.ndarray, recvs, sends, tag: int = 7) -> Pending:
-    """Post one non-blocking exchange over ``comm``: for each ``(rank, index)`` of ``sends`` the values
-    ``view[index]`` go to that rank (copied into send buffers now), for each of ``recvs`` a receive is posted;
-    :func:`swap_finish` waits for them and writes what arrived into ``view[index]`` (that rank's sends to this rank
-    list the same values in the same order)."""
+    """Post one non-blocking exchange over ``comm``: for each ``(rank, rows, populations, cells)`` of ``sends`` the
+    values ``view[rows]`` (populations and cells None: whole rows) or ``view[rows, populations, cells]`` go to that
+    rank (copied into send buffers now), for each of ``recvs`` a receive is posted; :func:`swap_finish` waits for
+    them and writes what arrived there (that rank's sends to this rank list the same values in the same order). The
+    messages of :class:`~iceresist.parallel.staging.DevicePlan` on the host."""
+    recvs = [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in recvs]
+    sends = [(r, rows if c is None else (rows, p, c)) for r, rows, p, c in sends]
     bufs_in, reqs, outs, sent = [], [], [], 0
     for r, index in recvs:
         buf = np.empty_like(view[index])

@@ -117,3 +117,46 @@ def test_second_process_loads_every_free_surface_kernel_from_the_cache(capsys):
     for name, (hits, misses) in there["stats"].items():
         assert misses == 0 and hits >= 1, name  # loaded, not compiled
     assert there["mass"] == here["mass"]
+
+
+SCRIPT_SCALE = textwrap.dedent("""
+    import math
+    import sys
+    import numpy as np
+    from iceresist.backends import cache, jit
+    from iceresist.lbm.codegen import compile_source
+
+    def launcher(k):
+        # a function of the constant k compiled apart and too long for LLVM to inline, like the fused LBM step of
+        # each operator
+        body = "".join(f"    x = math.sqrt(x + {k}.0 + {j})\\n" for j in range(300))
+        item = compile_source(f"def scale_item(i, a):\\n    x = 1.0 * i\\n{body}    a[i] = x\\n", "scale_item",
+                              {"math": math}, lambda fn: jit.cpu.kernel(fn, parallel=False))
+        src = "def t_scale(n, a):\\n    for i in prange(n):\\n        item(i, a)\\n"
+        return cache.cpu_launcher("t_scale", src, {"item": item}, [("t_scale", True)], f"scale={k}")
+
+    out = []
+    for k in map(int, sys.argv[1:]):
+        a = np.zeros(3)
+        launcher(k)(3, a)
+        out.append(float(a[1]))
+    print(out)
+""")
+
+
+def test_two_variants_compiled_in_two_processes_keep_their_own_code(tmp_path):
+    """Two processes compile one closure with another constant in the same order (so numba numbers both
+    functions alike, under one hash seed); a third loads both from the cache and each must run its own constant. Planted: numba's
+    counter from 1 again (``conf._distinct_function_ids`` not called): the third process runs the first one loaded twice."""
+    # one hash seed: numba's names carry the fast-math flags in set order, which string hashing shuffles
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "ICERESIST_CACHE": str(tmp_path), "PYTHONHASHSEED": "0"}
+    env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), env.get("PYTHONPATH", "")])
+
+    def child(*ks):
+        run = subprocess.run([sys.executable, "-c", SCRIPT_SCALE, *map(str, ks)], env=env, check=True,
+                             capture_output=True, text=True)
+        return run.stdout.strip().splitlines()[-1]
+
+    two, three = child(2), child(3)
+    assert two != three
+    assert child(2, 3) == f"[{two[1:-1]}, {three[1:-1]}]" and child(3, 2) == f"[{three[1:-1]}, {two[1:-1]}]"

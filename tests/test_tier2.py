@@ -232,7 +232,7 @@ def test_scenes_allocate_only_what_they_use():
         "domain": {"cells": [8, 8, 8], "dx_m": 0.01}, "fluid": {"nu_m2_s": 1e-4},
         "numerics": {"u_max_m_s": 0.1}, "run": {"steps": 1}}), backend="cpu", precision="float32")
     assert not any(hasattr(fluid, k) for k in ("phase", "fb", "dem", "coupling"))
-    assert not hasattr(fluid.solver, "phase")
+    assert not hasattr(fluid.lbm.solvers[0], "phase")
     assert fluid.allocated_bytes() == 2 * 27 * 4 * 512
 
 

@@ -8,9 +8,12 @@ from those three and import no numba themselves.
 
 from __future__ import annotations
 
+import itertools
+import os
 import weakref
 
 import numba
+from numba.core import bytecode
 
 from iceresist.errors import InputError
 
@@ -20,6 +23,23 @@ from iceresist.errors import InputError
 #: the free surface (1 ulp in 3 175 of 92 160 velocity components, so a tier-2 run depended on whether its kernels were
 #: compiled or loaded); measured flag by flag (tests/test_cache_determinism.py).
 CPU_FASTMATH = {"contract", "afn", "reassoc"}
+
+
+def _distinct_function_ids():
+    """Number this process's compiled functions from a random start instead of 1.
+
+    numba names a compiled function by module, qualified name, argument types and a counter of the process
+    (``FunctionIdentity.unique_id``). Two processes that build the same closure with different constants in the
+    same order (the fused LBM step of BGK and of the cumulant operator: both ``<dynamic>.stream_collide_block``,
+    both number 9) write libraries with one symbol name for two bodies to the on-disk kernel cache; a third process
+    that loads both links every call to the first one loaded. Measured: the Poiseuille rung ran with BGK
+    (relative error 1.11e-2 against 4.27e-3) once a BGK kernel of float32 had been loaded in the same process
+    (numba issue 10486). A random 48-bit start makes the counters of two processes overlap with negligible
+    chance; tests/test_kernel_cache.py guards it."""
+    bytecode.FunctionIdentity._unique_ids = itertools.count(int.from_bytes(os.urandom(6), "little") << 16)
+
+
+_distinct_function_ids()
 
 #: Threads per block for one-thread-per-cell CUDA launches (8x8x8 cells = 512).
 CUDA_BLOCK_CELLS = 512

@@ -9,7 +9,7 @@ import pytest
 
 from iceresist import cli
 from iceresist.io import RunFile
-from iceresist.models import BodiesModel, build_model
+from iceresist.models import BodiesModel, FloatingBodiesModel, build_model
 from iceresist.models.bodies import BODY_COLUMNS
 from iceresist.scene.load import parse_scene
 
@@ -113,7 +113,7 @@ def _one_line_error(rc, err, *needles):
 def test_body_scenes_build_and_their_rows_hold_every_body_column(text, components):
     scene = parse_scene(text, "s.toml")
     model = build_model(scene)
-    assert isinstance(model, BodiesModel) and model.components == components
+    assert isinstance(model, (BodiesModel, FloatingBodiesModel)) and model.components == components
     model.step(2)
     row = model.diagnostics()
     name = scene.bodies[0].name
@@ -250,11 +250,11 @@ def test_the_body_examples_of_scenes_md_parse(k):
 def test_the_refined_sphere_example_builds_with_the_sphere_on_level_1():
     """The refined example of docs/SCENES.md: level 1 covers the 27 blocks around the sphere (22 % of the uniform
     1 mm grid's cells, 10 level-1 cells per diameter), and a step runs."""
-    from iceresist.models import RefinedBodiesModel, build_model
+    from iceresist.models import BodiesModel, build_model
     from iceresist.scene.docs import BODY_EXAMPLES
 
     model = build_model(parse_scene(BODY_EXAMPLES[2][1], "example.toml"))
-    assert isinstance(model, RefinedBodiesModel)
+    assert isinstance(model, BodiesModel)
     assert model.units_finest.dx_m == pytest.approx(0.001)
     fine_equivalent = 80 * 40 * 40 * 8
     assert model.cells == (250 - 27) * 512 + 27 * 8 * 512 and model.cells < 0.23 * fine_equivalent
@@ -266,13 +266,13 @@ def test_the_settling_sphere_example_regrids_as_the_validation_case():
     """The regridding example of docs/SCENES.md is ten Cate's E1 on two levels as
     iceresist.validate.cases.settling_sphere builds it (tests/test_settling.py, slow): the same octree, and its
     first 10 steps (a regrid at the 10th) give the sphere the same velocity to the bit."""
-    from iceresist.models import RefinedBodiesModel, build_model
+    from iceresist.models import BodiesModel, build_model
     from iceresist.scene.docs import BODY_EXAMPLES
     from iceresist.validate.cases.settling_sphere import scene as settling
 
     example = build_model(parse_scene(BODY_EXAMPLES[3][1], "example.toml"))
     case = build_model(settling("E1", 12, t_end_s=2.0, operator="bgk", levels=1))
-    assert isinstance(example, RefinedBodiesModel) and example.regrid_every == 10
+    assert isinstance(example, BodiesModel) and example.regrid_every == 10
     assert np.array_equal(example.octree.coord, case.octree.coord)
     example.step(10)
     case.step(10)

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import pytest
 
 from iceresist.errors import InputError
-from iceresist.models import (MODELS, BodiesModel, FluidModel, FreeSurfaceModel, RefinedBodiesModel,
+from iceresist.models import (MODELS, BodiesModel, FloatingBodiesModel, FluidModel, FreeSurfaceModel,
                               RefinedSurfaceBodiesModel, RefinedTier2Model,
                               Tier1Model, Tier2Model, build_model, physics_of)
 from iceresist.scene.case_scenes import case_scene
@@ -19,8 +19,8 @@ CASE = "A-c68-v1.0"
 def test_every_physics_has_one_model_per_grid():
     assert MODELS == {"fluid": (FluidModel, FluidModel),
                       "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
-                      "bodies": (BodiesModel, RefinedBodiesModel),
-                      "floating_bodies": (BodiesModel, RefinedSurfaceBodiesModel),
+                      "bodies": (BodiesModel, BodiesModel),
+                      "floating_bodies": (FloatingBodiesModel, RefinedSurfaceBodiesModel),
                       "tier1": (Tier1Model, None), "tier2": (Tier2Model, RefinedTier2Model)}
 
 

@@ -1,4 +1,4 @@
-"""A scene with ``[[bodies]]`` and ``[refinement]`` (iceresist.models.refined_bodies): the sphere of
+"""A scene with ``[[bodies]]`` and ``[refinement]`` (iceresist.models.bodies): the sphere of
 tests/test_refined_sphere.py written as a scene runs as the engine-level set-up does, the band around the bodies
 refines where they are, a restart is bit for bit, and a body outside the finest level is refused."""
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from iceresist.models import RefinedBodiesModel, build_model
+from iceresist.models import BodiesModel, build_model
 from iceresist.scene import parse_scene
 from tests.test_refined_sphere import U, refined_sphere_drag
 
@@ -56,7 +56,7 @@ def test_a_refined_sphere_scene_runs_as_the_engine_set_up():
     """4 d / U: the drag coefficient of the scene (its sphere and coupling on level 1, stepped at level 1's time
     step) equals the engine-level run's (tests/test_refined_sphere.py) to 1e-6."""
     m = build_model(parse_scene(SPHERE, "refined_sphere.toml"))
-    assert isinstance(m, RefinedBodiesModel)
+    assert isinstance(m, BodiesModel)
     fx = []
     step = m.lbm.steppers[1]
 

@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from iceresist.models import BodiesModel, RefinedSurfaceBodiesModel, build_model
+from iceresist.models import FloatingBodiesModel, RefinedSurfaceBodiesModel, build_model
 from iceresist.scene import parse_scene
 
 from test_refined_surface_model import assert_same_water
@@ -103,7 +103,7 @@ def test_a_floating_cube_on_levels_follows_the_uniform_fine_grid():
     assert isinstance(ref, RefinedSurfaceBodiesModel)
     assert ref.cells_per_level == {0: 2048, 1: 32768}
     uni = build_model(parse_scene(_cube_text(refined=False), "cube.toml"))
-    assert isinstance(uni, BodiesModel)
+    assert isinstance(uni, FloatingBodiesModel)
     z, drift = _heave(ref, 80, 5)
     z_ref, drift_ref = _heave(uni, 80, 10)
     assert z_ref.max() - z_ref.min() > 1.0

@@ -1,4 +1,4 @@
-"""Bodies on regridded levels (iceresist.models.refined_bodies, block AMR part 2): the band of
+"""Bodies on regridded levels (iceresist.models.bodies, block AMR part 2): the band of
 ``refinement.body_band_m`` follows a settling sphere, the coupling's cell owners carried block by block at each
 regrid; the run equals the uniform fine grid's, picks up bit for bit across regrids,
 and a body that outruns its band stops the run with one line."""
@@ -6,7 +6,7 @@ and a body that outruns its band stops the run with one line."""
 import numpy as np
 import pytest
 
-from iceresist.models import RefinedBodiesModel, build_model
+from iceresist.models import BodiesModel, build_model
 from iceresist.scene import parse_scene
 
 from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
@@ -73,7 +73,7 @@ def test_a_settling_sphere_on_regridded_levels_follows_the_uniform_fine_grid():
     follow it) fails (the watchdog's probe is the guard; see below). The carries themselves change the speed by
     less than the tolerance: they are held bit for bit by the rebuild test below."""
     amr = build_model(parse_scene(_settle_text(), "settle.toml"))
-    assert isinstance(amr, RefinedBodiesModel)
+    assert isinstance(amr, BodiesModel)
     fine = build_model(parse_scene(_settle_text(fine=True), "settle.toml"))
     first = amr.octree.coord[amr.octree.level == 1].copy()
     w, z = _settle(amr, 400)

@@ -1,17 +1,22 @@
-"""Rigid bodies in a fluid: the model of a scene with ``[[bodies]]`` (boxes and spheres), without a ship.
+"""Rigid bodies in a fluid: the model of a scene with ``[[bodies]]`` (boxes, spheres, convex meshes), no ship
+(paper sections 2.3-2.5), on any grid.
 
-Two set-ups, chosen by the scene:
+:class:`BodiesModel` is :class:`~iceresist.models.fluid.FluidModel` (one level without ``[refinement]``, the levels
+of one with it) with the bodies on its finest level: the coupling (interpolated bounce-back, momentum exchange,
+refill, eqs. 16-21) of :class:`~iceresist.coupling.FluidStructureCoupling` runs on that level's forest at that level's
+own time step (:meth:`~iceresist.lbm.refinement.RefinedLBM.set_stepper`), the DEM advances with it. Gravity
+(``fluid.gravity_m_s2``) acts on the bodies in the DEM, and the fluid adds the buoyancy -rho_f V g to each (the flow
+carries no hydrostatic pressure: in a closed or through-flow box of one fluid the pressure of gravity changes nothing
+but the buoyancy); the LBM carries ``fluid.body_force_N_m3`` alone. The set-up of the fixed sphere in a channel and
+of the sphere settling in a closed box (:mod:`iceresist.validate.cases.sphere_drag`, ``settling_sphere``).
 
-* **fluid only** (no ``[free_surface]``): a block forest and an :class:`~iceresist.lbm.solver.LBMSolver` (the
-  scene's faces, ``domain.pad_to_blocks``, ``fluid.body_force_N_m3`` as the LBM's force), a
-  :class:`~iceresist.dem.DEMSystem` and a :class:`~iceresist.coupling.FluidStructureCoupling` joining them (paper
-  eqs. 16-21). Gravity (``fluid.gravity_m_s2``) acts on the bodies in the DEM, and the fluid adds the buoyancy
-  -rho_f V g to each (the flow carries no hydrostatic pressure: in a closed or through-flow box of one fluid the
-  pressure of gravity changes nothing but the buoyancy). The set-up of the fixed sphere in a channel and of the
-  sphere settling in a closed box (:mod:`iceresist.validate.cases.sphere_drag`, ``settling_sphere``).
-* **free surface** (``[free_surface]``): a closed tank of walls, water at ``free_surface.water_depth_m``, and the
-  bodies, all in a :class:`~iceresist.coupling.floating.FloatingBodies`: the hydrostatic pressure of the gravity
-  body force is the buoyancy. The set-up of the floating cube (:mod:`iceresist.validate.cases.floating_cube`).
+On levels every body, with two cells to spare, must lie inside the finest level's leaves at the start
+(``refinement.body_band_m`` refines around them); a scene where one does not is refused naming ``refinement``. With
+``refinement.regrid_every_steps`` the band follows the bodies (block AMR part 2): every N steps the octree is drawn
+again around each body's bounding sphere where it is, the populations carried to the new blocks and the coupling's
+cell owners copied block by block (:meth:`FinestLevelBodies.regrid`); the DEM goes on as it was. Bodies in water
+with a free surface are :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel` on levels and
+:class:`~iceresist.models.floating_bodies.FloatingBodiesModel` on one grid.
 
 Motion (``bodies[].motion``): ``free`` bodies move under gravity, the fluid force and the DEM contacts (their
 ``density_kg_m3`` sets mass and inertia); ``fixed`` bodies stay at rest and ``prescribed`` bodies move at
@@ -20,35 +25,28 @@ domain's wall faces (``wall``, ``moving_wall``, ``slip``) are DEM contact planes
 the DEM keeps its own contact law (:class:`~iceresist.dem.ContactParameters`, sub-step 0.05 of the critical step).
 
 Units: a physical scene gives dx (``domain.dx_m``) and dt (``numerics.dt_s`` or the Mach rule of
-docs/SCENES.md, "Rules"); a lattice-unit scene has dx = dt = rho0 = 1, and the bodies' sizes, positions, speeds and densities
-are read in lattice units too.
+docs/SCENES.md, "Rules"); a lattice-unit scene has dx = dt = rho0 = 1, and the bodies' sizes, positions, speeds and
+densities are read in lattice units too.
 """
 
 from __future__ import annotations
 
-import logging
+import dataclasses
 import math
 
 import numpy as np
 
 from iceresist.backends.launch import copy_into
 from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, Sphere
-from iceresist.coupling.floating import FloatingBodies
 from iceresist.dem import ContactParameters, DEMSystem, box, convex_polyhedron, sphere
-from iceresist.errors import InputError
-from iceresist.grid import flags as FL
-from iceresist.grid.grid import Grid, several
-from iceresist.lbm.solver import LBMSolver
-from iceresist.limits import check_fluid
-from iceresist.models.base import Model, array_bytes
-from iceresist.models.fluid import (BLOCK, FluidModel, check_block_shape, check_free_surface_forces,
-                                    forest_faces, padding_solid, resolve_target)
-from iceresist.models.probe import fluid_probe
-from iceresist.models.regions import body_mesh, half_extent
-from iceresist.models.surface import FreeSurfaceModel
+from iceresist.errors import InputError, StabilityError
+from iceresist.grid.regrid import same_blocks
+from iceresist.lbm.refinement import RefinedLBM
+from iceresist.models.base import array_bytes
+from iceresist.models.fluid import FluidModel, forest_faces, padding_solid
+from iceresist.models.regions import body_half_extents_m, body_mesh, half_extent
+from iceresist.parallel.levels import LevelShare
 from iceresist.scene.schema import Scene
-
-log = logging.getLogger(__name__)
 
 #: Face kinds that are walls for the bodies (DEM contact planes).
 WALL_KINDS = ("wall", "moving_wall", "slip")
@@ -113,60 +111,12 @@ def check_bodies(scene: Scene, box_m, meshes: dict | None = None) -> None:
                              f"clear, e.g. position_m = [{', '.join(_g(v) for v in fix)}]")
 
 
-def _check_free_surface(scene: Scene) -> None:
-    """What the closed tank of :class:`~iceresist.coupling.floating.FloatingBodies` takes."""
-    fl, fs = scene.fluid, scene.free_surface
-    check_free_surface_forces(scene)
-    for name, face in scene.domain.faces.items():
-        if face.kind != "wall":
-            raise InputError(f"domain.faces.{name}: a free-surface scene with [[bodies]] is a closed tank: set "
-                             f"{name} = \"wall\" (not {face.kind!r})")
-    if fs.column_length_m is not None:
-        raise InputError("free_surface.column_length_m: a scene with [[bodies]] starts with water over the whole "
-                         "floor: leave column_length_m out")
-    if any(fl.initial_velocity_m_s):
-        raise InputError("fluid.initial_velocity_m_s: a free-surface scene with [[bodies]] starts from still "
-                         "water: leave initial_velocity_m_s out")
+class BodyShapes:
+    """What every model of ``[[bodies]]`` builds from the scene alike: the DEM with the scene's contact law, the
+    domain's walls as contact planes, each body's geometry and DEM shape, the per-body time-series columns and the
+    fluid's force and torque on them. Mixed in before the model it extends (which sets ``scene``, ``box_m``,
+    ``meshes``, ``names``, ``dem_backend``, ``coupling`` and ``_buoyancy_N``)."""
 
-
-class BodiesModel(Model):
-    """Boxes and spheres, free, fixed or prescribed, in a fluid (with or without a free surface); see the module
-    docstring. ``backend`` and ``precision`` override the scene's ``[numerics]``.
-
-    Time series (:meth:`diagnostics`): per body ``<name>_x_m`` ... ``_z_m`` (centre of mass), ``_vx_m_s`` ...,
-    the fluid force ``_Fx_N`` ... (eq. 20, with the buoyancy) and torque ``_Tx_N_m`` ... (eq. 21) about the
-    centre of mass; and the fluid's own columns.
-    """
-
-    def __init__(self, scene: Scene, *, backend: str | None = None, precision: str | None = None, comm=None):
-        self.scene = scene
-        self.comm = several(comm)
-        if not scene.bodies:
-            raise InputError(f"{scene.source_name}: BodiesModel needs a [[bodies]] section")
-        self.free_surface = scene.free_surface is not None
-        self.components = ("fluid", "free_surface", "dem", "coupling") if self.free_surface else \
-            ("fluid", "dem", "coupling")
-        self.backend = backend or scene.numerics.backend
-        self.precision = precision or scene.numerics.precision
-        self.target = resolve_target(self.backend)
-        self.dem_backend = "cuda" if self.target.is_cuda else "cpu"
-        box_cells = scene.domain.shape_cells()
-        u0 = scene.units()
-        self.box_m = tuple(n * u0.dx_m for n in box_cells)
-        self.meshes = {i: body_mesh(b, i, scene.source_name) for i, b in enumerate(scene.bodies) if b.shape == "mesh"}
-        check_bodies(scene, self.box_m, self.meshes)
-        if self.free_surface:
-            self._build_free_surface(u0)
-        else:
-            self._build_fluid(u0)
-        self.names = [b.name for b in scene.bodies]
-        self._probes = 0
-        log.info("bodies: %d (%s) in %s, %d cells, dx %.4g m, dt %.4g s, tau %.6g", len(self.names),
-                 ", ".join(f"{b.name} {b.shape} {b.motion}" for b in scene.bodies),
-                 "water with a free surface" if self.free_surface else "a fluid", self.cells, self.units.dx_m,
-                 self.dt_s, self.units.tau)
-
-    # -- set-up -----------------------------------------------------------------------------------------
     def _make_dem(self, gravity_m_s2):
         con = self.scene.contact
         if con is None:
@@ -214,107 +164,6 @@ class BodiesModel(Model):
             out.append((geom, shape, kinematic, velocity, "ice" if b.motion == "free" else "structure"))
         return out
 
-    def _build_fluid(self, u):
-        scene = self.scene
-        self.units = u
-        self.shape_cells = scene.domain.padded_cells()
-        check_block_shape(self.shape_cells)
-        check_fluid(scene, u)
-        fl = scene.fluid
-        self.grid = Grid.uniform(self.shape_cells, forest_faces(scene, u), solid=padding_solid(scene), comm=self.comm)
-        self.global_forest, self.forest, self.decomp = self.grid.global_forest, self.grid.forest, self.grid.decomp
-        # gravity acts on the bodies (DEM) with the buoyancy -rho_f V g; the LBM carries the driving force alone
-        self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
-        self.solver = LBMSolver(self.forest, tau=u.tau, force=self.force_lattice, operator=fl.operator,
-                                precision=self.precision, target=self.target)
-        self.solver.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        self.dem = self._make_dem(fl.gravity_m_s2)
-        self._add_walls(self.dem)
-        geoms = []
-        for geom, shape, kinematic, velocity, material in self._shapes():
-            geoms.append(geom)
-            body = self.scene.bodies[len(geoms) - 1]
-            self.dem.add_body(shape, position_m=tuple(float(v) for v in body.position_m), velocity_m_s=velocity,
-                              kinematic=kinematic, material=material)
-        con = scene.contact
-        self.coupling = FluidStructureCoupling(self.solver, self.dem, geoms, u, buoyancy=True,
-                                               contact_film=True if con is None else con.fluid_film)
-        if self.decomp is not None:
-            self.coupling.distribute(self.decomp)
-        volumes = np.array([g.volume_m3() for g in geoms])
-        # the buoyancy the coupling adds to the DEM loads (its fluid force leaves it out)
-        self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, dtype=float)[None, :]
-        self.cells = int(self.global_forest.cells)
-        self.dt_s = u.dt_s
-        self.fb = None
-
-    def _build_free_surface(self, u0):
-        scene = self.scene
-        _check_free_surface(scene)
-        fs = scene.free_surface
-        self.shape_cells = scene.shape_cells()
-        check_block_shape(self.shape_cells)
-        nz = self.shape_cells[2]
-        depth_cells = fs.water_depth_m / u0.dx_m
-        if not 0.0 < depth_cells < nz:
-            raise InputError(f"free_surface.water_depth_m: {fs.water_depth_m} m is {depth_cells:g} cells, outside "
-                             f"the {nz}-cell-high domain")
-        g = -float(scene.fluid.gravity_m_s2[2])
-        g_lattice = float(u0.acceleration_to_lattice(g))
-        if not 0.0 < g_lattice <= 0.01:
-            raise InputError(f"numerics.dt_s: gravity is {g_lattice:.4g} in lattice units (g dt^2 / dx), above "
-                             f"0.01: use a smaller time step, numerics.dt_s <= "
-                             f"{_g(math.sqrt(0.01 * u0.dx_m / g))} s")
-        self.dem = self._make_dem((0.0, 0.0, -g))
-        self._add_walls(self.dem)
-        con = scene.contact
-        self.fb = FloatingBodies(self.shape_cells, depth_m=fs.water_depth_m, dx_m=u0.dx_m, tau=u0.tau,
-                                 g_lattice=g_lattice, rho_kg_m3=scene.rho_kg_m3, operator=scene.fluid.operator,
-                                 precision=self.precision, target=self.target, mobility=fs.mobility_lattice,
-                                 width=fs.interface_width_cells, dem=self.dem,
-                                 contact_film=True if con is None else con.fluid_film, h_lattice=fs.h_lattice,
-                                 g_m_s2=g, comm=self.comm)
-        for (geom, shape, kinematic, velocity, material), body in zip(self._shapes(), scene.bodies):
-            self.fb.add_body(geom, shape, position_m=tuple(float(v) for v in body.position_m),
-                             velocity_m_s=velocity, kinematic=kinematic, material=material)
-        self.fb.start()
-        self.units = self.fb.units
-        self.grid = Grid.of_forest(self.fb.global_forest, self.comm, self.fb.decomp)
-        self.global_forest, self.forest, self.decomp = self.fb.global_forest, self.fb.forest, self.fb.decomp
-        self.coupling = self.fb.coupling
-        self.solver = None
-        self.g_lattice = g_lattice
-        self._buoyancy_N = np.zeros((len(scene.bodies), 3))
-        self.volume0_cells = self.coupling.water_volume()
-        self.cells = int(self.global_forest.cells)
-        self.dt_s = self.fb.dt_s
-
-    # -- clock ------------------------------------------------------------------------------------------
-    @property
-    def iteration(self) -> int:
-        return int(self.coupling.iteration)
-
-    def step(self, n: int = 1):
-        if self.fb is not None:         # free surface: FloatingBodies exchanges the halo on several ranks
-            self.fb.step(int(n))
-            return
-        if self.decomp is None:
-            self.coupling.step(int(n))
-            return
-        for _ in range(int(n)):
-            self.coupling.step(1)
-            self._exchange()
-
-    # -- several ranks (a fluid without a free surface) ------------------------------------------------------
-    def _exchange(self):
-        """Every halo block takes its owner's populations and cell flags (the cells bodies cover). The coupling's
-        passes (refill, redistribution, the links' second neighbour) and the LBM step reach at most 6 cells into an
-        8-cell halo block from its outer side, so the cells next to this rank's blocks stay exact through a step;
-        the DEM runs on every rank alike, on the forces summed over the ranks."""
-        for arr in (self.solver.state, self.solver.flags):
-            self.grid.exchange(arr, self.target, full=True)
-
-    # -- bodies -----------------------------------------------------------------------------------------
     @property
     def fluid_force_N(self) -> np.ndarray:
         """Force of the fluid on each body (n, 3), N, the mean of the last two steps (eq. 20), the buoyancy
@@ -336,218 +185,277 @@ class BodiesModel(Model):
             out.update({f"{name}_{col}": float(v) for col, v in zip(BODY_COLUMNS, values)})
         return out
 
-    # -- fluid ------------------------------------------------------------------------------------------
-    def _fluid_now(self) -> np.ndarray:
-        """Cells that are fluid now (nblocks, 512): not solid, not covered by a body (free surface: liquid)."""
-        return self.coupling.fluid_mask()
 
-    def _dense_mask(self, mask_blocks) -> np.ndarray:
-        return np.nan_to_num(self.forest.to_dense(mask_blocks.astype(np.float64)), nan=0.0) > 0.5
+class FinestLevelBodies(BodyShapes):
+    """The bodies of a scene on its finest level (level 0 of a grid without ``[refinement]``), shared by
+    :class:`BodiesModel` and :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`: their
+    checks, the DEM built at the finest level's scales, where they are against that level's leaves, the watchdog's
+    probe and the description. Mixed in before the model it extends."""
 
-    def fields(self) -> dict[str, np.ndarray]:
-        """Fluid only: rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge), flags (uint8; a cell a body
-        covers is GHOST); rho0, u = 0 and pressure 0 in solids and bodies (the field writer takes a NaN for a
-        blow-up). Free surface: as :class:`FreeSurfaceModel` (rho0, u = 0 and pressure 0 in the gas and the
-        bodies), with phi and surface (0 in a column without a crossing of phi = 1/2)."""
-        u = self.units
-        if not self.free_surface:
-            rho_b, u_b = self.solver.macroscopic_blocks()
-            g = self.grid
-            parts = (g.gather_rows(rho_b), g.gather_rows(u_b, axis=1), g.gather_rows(self._fluid_now()),
-                     g.gather_rows(np.asarray(self.target.to_host(self.solver.flags)).astype(np.float64)))
-            if parts[0] is None:
+    def _check_bodies(self):
+        """The scene's bodies checked against the box (:func:`check_bodies`); names, meshes and reaches kept."""
+        scene, u = self.scene, self.units
+        if self.regrid_every and scene.refinement.body_band_m is None:
+            raise InputError("refinement.body_band_m: a regridding scene with bodies needs the band that follows "
+                             "them (e.g. four finest cells)")
+        self.box_m = tuple(n * u.dx_m for n in scene.domain.shape_cells())   # the walls: padding left out
+        self.meshes = {i: body_mesh(b, i, scene.source_name) for i, b in enumerate(scene.bodies) if b.shape == "mesh"}
+        check_bodies(scene, self.box_m, self.meshes)
+        self.dem_backend = "cuda" if self.target.is_cuda else "cpu"
+        self.names = [b.name for b in scene.bodies]
+        h = body_half_extents_m(scene)
+        #: the box the finest level must hold about each body's centre of mass: (n, 2, 3) offsets lo, hi (m)
+        self._reach_m = np.stack([-h, h], axis=1)
+
+    def _make_bodies(self, gravity_m_s2):
+        """The DEM (gravity ``gravity_m_s2``) with its walls and the scene's bodies at the finest level's scales
+        (``units_finest``), once every body is found on that level's leaves with two cells to spare."""
+        scene, u, L = self.scene, self.units, self.finest
+        self._check_in_finest(np.array([b.position_m for b in scene.bodies], dtype=float), margin_cells=2.0)
+        #: the scales of the finest level: cells and time steps 2^L times smaller, tau by acoustic scaling
+        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** L, dt_s=u.dt_s / 2 ** L,
+                                                tau=float(self.lbm.tau[L]))
+        self.dem = self._make_dem(tuple(float(g) for g in gravity_m_s2))
+        self._add_walls(self.dem)
+        self.geoms = []
+        for (geom, shape, kinematic, velocity, material), body in zip(self._shapes(), scene.bodies):
+            self.geoms.append(geom)
+            self.dem.add_body(shape, position_m=tuple(float(v) for v in body.position_m), velocity_m_s=velocity,
+                              kinematic=kinematic, material=material)
+
+    def body_positions_m(self) -> np.ndarray:
+        """The bodies' centres of mass now (n, 3), m."""
+        return self.dem.positions[:len(self.names)]
+
+    def body_boxes_m(self, positions_m: np.ndarray | None = None) -> np.ndarray | None:
+        """The box each body takes (n, 2, 3: lo, hi, m) with its centre of mass at ``positions_m`` (default where
+        it is now); None before the DEM is built (the octree of the scene's start)."""
+        if positions_m is None:
+            if getattr(self, "dem", None) is None:
                 return None
-            fo = self.global_forest
-            rho_lat, u_lat = fo.to_dense(parts[0]), fo.to_dense(parts[1])
-            now = np.nan_to_num(fo.to_dense(parts[2].astype(np.float64)), nan=0.0) > 0.5
-            rho_lat = np.where(now, rho_lat, 1.0)
-            u_lat = np.where(now[None], u_lat, 0.0)
-            flags = fo.to_dense(parts[3])
-            return {"rho": u.density_to_physical(rho_lat),
-                    "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
-                    "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
-                    "flags": np.nan_to_num(flags, nan=FL.SOLID).astype(np.uint8)}
-        phi, rho_lat, u_lat = self.fb.fields()
-        flags, surface = self.fb.dense_flags(), self.fb.fluid.surface_height()
-        if phi is None:         # an MPI rank other than 0
-            return None
-        liquid = np.isfinite(rho_lat)
-        rho_lat = np.where(liquid, rho_lat, 1.0)
-        u_lat = np.where(liquid[None], u_lat, 0.0)
-        surface = np.nan_to_num(surface, nan=0.0)
-        return {"rho": u.density_to_physical(rho_lat),
-                "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
-                "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0),
-                "flags": np.nan_to_num(flags, nan=FL.SOLID).astype(np.uint8),
-                "phi": np.nan_to_num(phi, nan=0.0),
-                "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
+            positions_m = self.body_positions_m()
+        return np.asarray(positions_m, dtype=float)[:, None, :] + self._reach_m
 
-    def field_units(self, lattice: bool) -> dict[str, str]:
-        return FreeSurfaceModel.field_units(lattice) if self.free_surface else FluidModel.field_units(lattice)
-
-    def _fluid_columns(self) -> dict[str, float]:
-        """Fluid mass (kg), kinetic energy (J) and largest speed (m/s and lattice) over the cells that are fluid
-        now; with a free surface also the water volume outside the bodies (m^3), its drift from t = 0 and the
-        water level (m, mean height of phi = 1/2 over the columns no body reaches)."""
-        u = self.units
-        cell_m3 = u.dx_m ** 3
-        out = {}
-        if self.free_surface:
-            rho_d, u_d = self.fb.fluid.macroscopic()
-            vol, level = self.coupling.water_volume(), self.water_level_m()
-            if rho_d is None:       # an MPI rank other than 0: rank 0's columns follow
-                return None
-            now = np.isfinite(rho_d)
-            rho_lat, u_lat = rho_d[now], u_d[:, now]
-            out.update(water_volume_m3=float(vol * cell_m3),
-                       water_volume_drift=float((vol - self.volume0_cells) / self.volume0_cells),
-                       water_level_m=level)
-        else:
-            rho_b, u_b = self.solver.macroscopic_blocks()
-            now = self._fluid_now()
-            g = self.grid
-            rho_b, u_b, now = g.gather_rows(rho_b), g.gather_rows(u_b, axis=1), g.gather_rows(now)
-            if rho_b is None:       # an MPI rank other than 0: rank 0's columns follow
-                return None
-            rho_lat, u_lat = rho_b[now], u_b[:, now]
-        speed2 = (u_lat ** 2).sum(axis=0)
-        rho_kg = u.density_to_physical(rho_lat)
-        umax = float(np.sqrt(speed2.max())) if speed2.size else 0.0
-        out.update(mass_kg=float(rho_kg.sum() * cell_m3),
-                   kinetic_energy_J=float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum()
-                                          * cell_m3),
-                   max_speed_m_s=float(u.velocity_to_physical(umax)), max_lattice_speed=umax)
+    def bodies_outside_finest(self, positions_m: np.ndarray, margin_cells: float) -> list[int]:
+        """The bodies whose box (:meth:`body_boxes_m` at ``positions_m``), ``margin_cells`` finest cells wider, is
+        not wholly on the finest level's leaves (of every rank)."""
+        d = getattr(self, "decomp", None)
+        view = self.lbm.views[self.finest] if d is None else d.global_views[self.finest]
+        dx = self.units.dx_m / 2 ** self.finest
+        bm = view.block_map
+        out = []
+        for i, (blo, bhi) in enumerate(self.body_boxes_m(positions_m) / dx):
+            lo = np.maximum(np.floor(blo - margin_cells).astype(np.int64) >> 3, 0)
+            hi = np.minimum(np.floor(bhi + margin_cells).astype(np.int64) >> 3, np.array(bm.shape) - 1)
+            blocks = bm[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1, lo[2]:hi[2] + 1]
+            if ((blocks < 0) | (blocks >= view.nleaves)).any():
+                out.append(i)
         return out
 
-    def water_level_m(self) -> float:
-        """Free surface: the mean height of phi = 1/2 over the columns no body reaches (all columns where the
-        bodies reach every one), m above z = 0; on several ranks on rank 0 (None on the others)."""
-        owners = self.fb.dense_owners()
-        h = self.fb.fluid.surface_height()
-        if h is None:
-            return None
-        free = (np.nan_to_num(owners, nan=-1) < 0).all(axis=2)
-        sel = h[free] if free.any() else h.ravel()
-        sel = sel[np.isfinite(sel)]
-        return float(sel.mean()) * self.units.dx_m if sel.size else math.nan
+    def _check_in_finest(self, positions_m: np.ndarray, margin_cells: float):
+        """Refuse a scene whose bodies at ``positions_m`` do not lie on the finest level's leaves."""
+        for i in self.bodies_outside_finest(positions_m, margin_cells):
+            raise InputError(f"refinement: body {self.names[i]!r} (bodies[{i}]) reaches beyond the finest level "
+                             f"(level {self.finest}); refine around it with refinement.body_band_m or a "
+                             f"[[refinement.boxes]] box at level {self.finest}")
 
-    def diagnostics(self) -> dict[str, float]:
-        """One row: the per-body columns (:meth:`body_columns`) and the fluid's (:meth:`_fluid_columns`); on several
-        ranks the fluid's from the gathered blocks on rank 0, the same row on every rank."""
-        self.coupling.check_link_list()
-        return {**self.body_columns(), **self.grid.bcast(self._fluid_columns())}
+    # -- regridding -------------------------------------------------------------------------------------
+    def regrid(self) -> bool:
+        """As :meth:`FluidModel.regrid`, the band of ``refinement.body_band_m`` drawn around the bodies
+        where they are. A body that left the finest level since the last regrid (it moved further than the band)
+        stops the run with a StabilityError naming the two keys; after the regrid every body lies on the finest
+        level with two cells to spare (asserted)."""
+        pos = self.body_positions_m()
+        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
+        if gone:
+            i = gone[0]
+            raise StabilityError(f"refinement.body_band_m: body {self.names[i]!r} left the finest level between "
+                                 f"two regrids (step {self.level0_steps}); widen refinement.body_band_m or regrid more "
+                                 f"often (refinement.regrid_every_steps = {max(1, self.regrid_every // 2)})")
+        changed = super().regrid()
+        if changed and self.bodies_outside_finest(pos, margin_cells=2.0):
+            raise RuntimeError("regrid: a body is not on the finest level of the new octree")
+        return changed
 
-    def is_finite(self) -> bool:
-        bodies = bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
-        if self.free_surface:
-            return bodies and math.isfinite(self.coupling.water_volume())
-        return self.grid.all(bodies and math.isfinite(self.solver.mass()))
+    def _finest_state(self) -> dict:
+        """What the finest level holds besides its populations: its view and the coupling's state (on several ranks
+        the whole level's view and the coupling's state gathered on rank 0, None on the others)."""
+        share = self.coupling.decomp
+        view = self.lbm.views[self.finest] if share is None else share.view
+        return {"view": view, "coupling": self.coupling.state()}
 
-    #: Every this many probes (the first included) a free-surface probe reads the populations (as tier 2).
-    full_probe_every = 10
+    def _carry_finest(self, old: dict):
+        """The coupling's cell owners (now and a step earlier) copied block by block from ``old``
+        (:meth:`_finest_state` of the level before a regrid) where the two forests share a block; a block new to
+        the level has no body in it (the band keeps every body on blocks that stay), so no owner. The rest of the
+        coupling's state (boxes, forces, the record's load sum, step count) carries as it is. The cell flags are
+        not carried: the new coupling's first refill sets them from the owners on every block a body touches."""
+        d = self.decomp
+        view = self.lbm.views[self.finest] if d is None else d.global_views[self.finest]
+        st, error = None, None
+        if old["coupling"] is not None:     # one process, or rank 0 of several: the whole level
+            src, dst = same_blocks(old["view"], view)
+            st = dict(old["coupling"])
+            for key in ("owner", "owner_prev"):
+                was = np.asarray(st[key])
+                kept = np.zeros(len(was), dtype=bool)
+                kept[src] = True
+                if (was[~kept] >= 0).any():
+                    error = f"regrid: cells a body covers ({key}) lie on finest blocks the new octree drops"
+                now = np.full((view.forest.nblocks, was.shape[1]), -1, dtype=was.dtype)
+                now[dst] = was[src]
+                st[key] = now
+        if d is not None:       # every rank takes its rows of the whole level (FluidStructureCoupling.load_state)
+            st, error = d.bcast((st, error))
+        if error is not None:
+            raise RuntimeError(error)
+        self.coupling.load_state(st)
+
+    def _bodies_finite(self) -> bool:
+        return bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
 
     def watchdog_probe(self) -> dict:
-        """Finite bodies, and the fluid's quantities (:mod:`iceresist.watchdog`) on the cells that are fluid now;
-        the reference kinetic energy is that of the whole fluid moving at the scene's largest speed (at least a
-        tenth of numerics.mach)."""
-        if not np.isfinite(self.dem.positions).all():
+        """The fluid's probe, and the bodies that left the finest level (count, the first's index)."""
+        pos = self.body_positions_m()
+        if not np.isfinite(pos).all():
             return {"finite": (False, None)}
-        u_ref = max(float(self.units.velocity_to_lattice(self.scene.largest_speed_m_s())),
-                    0.1 * self.scene.numerics.mach)
-        ke_ref = 0.5 * self.cells * u_ref ** 2
-        if self.free_surface:
-            full = self._probes % self.full_probe_every == 0
-            self._probes += 1
-            return self.fb.fluid.probe(full, ke_ref)
-        if self.decomp is None:
-            rho_lat, u_lat = self.solver.macroscopic()
-            return fluid_probe(rho_lat, u_lat, self._dense_mask(self._fluid_now()), ke_ref)
-        rho_b, u_b = self.solver.macroscopic_blocks()
-        g = self.grid
-        parts = (g.gather_rows(rho_b), g.gather_rows(u_b, axis=1), g.gather_rows(self._fluid_now()))
-        probe = None
-        if parts[0] is not None:
-            fo = self.global_forest
-            now = np.nan_to_num(fo.to_dense(parts[2].astype(np.float64)), nan=0.0) > 0.5
-            probe = fluid_probe(fo.to_dense(parts[0]), fo.to_dense(parts[1]), now, ke_ref)
-        return self.grid.bcast(probe)
+        gone = self.bodies_outside_finest(pos, margin_cells=1.0)
+        return {**super().watchdog_probe(), "bodies_outside_finest": (len(gone), gone[0] if gone else None)}
 
-    # -- checkpoints ------------------------------------------------------------------------------------
-    def state(self) -> dict:
-        """Everything a bit-for-bit restart needs: the fluid (fluid only: both population buffers in storage
-        precision and the cell flags; free surface: population rows, h, phi, flags), the coupling (cell owners,
-        the forces of the last step), the DEM with its contact history, and the step count."""
-        if self.free_surface:
-            st = self.fb.state()
-            return None if st is None else {"iteration": np.int64(self.iteration), "precision": self.precision,
-                                            "dem": self.dem.state(), **st,
-                                            "volume0_cells": np.float64(self.volume0_cells)}
-        host = self.target.to_host
-        out = {"iteration": np.int64(self.iteration), "precision": self.precision,
-               "coupling": self.coupling.state(), "dem": self.dem.state(),
-               "f": np.array(host(self.solver._f[0]), copy=True), "f_back": np.array(host(self.solver._f[1]), copy=True),
-               "flags": np.array(host(self.solver.flags), copy=True), "lbm_iteration": np.int64(self.solver.iteration)}
-        for key in ("f", "f_back", "flags"):      # the whole domain in global block order, on rank 0
-            out[key] = self.grid.gather_rows(out[key])
-        return None if out["coupling"] is None else out
-
-    def load_state(self, state: dict):
-        if "coupling" not in state or "dem" not in state:
-            raise InputError("the checkpoint holds no bodies (no coupling or DEM state): it belongs to another "
-                             "scene; run again without --pickup")
-        if str(state.get("precision", self.precision)) != self.precision:
-            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
-                             f"restart with --precision {state.get('precision')}")
-        if self.free_surface:
-            if "fluid" not in state:
-                raise InputError("the checkpoint holds no free-surface state: it belongs to another scene")
-            self.fb.fluid.load_state(state["fluid"])
-            self.volume0_cells = float(state["volume0_cells"])
-        else:
-            if "f" not in state:
-                raise InputError("the checkpoint holds no populations of a fluid-only scene: it belongs to "
-                                 "another scene")
-            expected = (self.global_forest.nblocks, 27, BLOCK ** 3)
-            if tuple(np.shape(state["f"])) != expected:
-                raise InputError(f"checkpoint populations have shape {tuple(np.shape(state['f']))}, this scene "
-                                 f"needs {expected}: it belongs to another scene")
-            state = {**state, **{k: self.grid.local_rows(np.asarray(state[k])) for k in ("f", "f_back", "flags")}}
-            copy_into(self.solver._f[0], np.asarray(state["f"]).astype(self.solver.real))
-            copy_into(self.solver._f[1], np.asarray(state["f_back"]).astype(self.solver.real))
-            copy_into(self.solver.flags, np.asarray(state["flags"]).astype(np.uint8))
-            self.solver.iteration = int(state["lbm_iteration"])
-        self.coupling.load_state(state["coupling"])
-        self.dem.load_state(state["dem"])
-
-    # -- identity ---------------------------------------------------------------------------------------
     def describe(self) -> dict:
-        u = self.units
-        out = {"components": list(self.components), "shape_cells": list(self.shape_cells), "cells": self.cells,
-               "blocks": int(getattr(self, "global_forest", self.forest).nblocks),
-               "operator": self.scene.fluid.operator,
-               "precision": self.precision, "backend": self.target.name, "units": u.describe(),
-               "unit_system": self.scene.scene.units, "box_m": list(self.box_m),
-               "dem_substeps": int(self.dem.substeps_for(self.dt_s)),
-               "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion,
-                           "mass_kg": float(s.mass_kg) if hasattr(s, "mass_kg") else None}
-                          for b, (_, s, *_) in zip(self.scene.bodies, self._shapes())]}
-        if self.free_surface:
-            fs = self.scene.free_surface
-            out.update(gravity_lattice=self.g_lattice, water_depth_cells=fs.water_depth_m / u.dx_m,
-                       h_lattice=fs.h_lattice, mobility_lattice=fs.mobility_lattice,
-                       interface_width_cells=fs.interface_width_cells, f_pool="full")
-        else:
-            out.update(force_lattice=list(self.force_lattice), bytes_per_cell=int(self.solver.bytes_per_cell),
-                       pad_to_blocks=bool(self.scene.domain.pad_to_blocks))
-        return {**out, **self.grid.describe()}
+        return {**super().describe(), "box_m": list(self.box_m), "bodies_level": self.finest,
+                "dem_substeps": int(self.dem.substeps_for(self.units_finest.dt_s)),
+                "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion,
+                            "mass_kg": float(s.mass_kg) if hasattr(s, "mass_kg") else None}
+                           for b, (_, s, *_) in zip(self.scene.bodies, self._shapes())]}
 
     def allocation(self) -> dict[str, int]:
-        """Bytes of state per component: the LBM (populations, both buffers), the phase field (free surface),
-        the DEM and the coupling."""
-        out = {"dem": array_bytes(self.dem), "coupling": array_bytes(self.coupling)}
-        if self.free_surface:
-            fl = self.fb.fluid
-            out.update(lbm=array_bytes(fl.fluid, fl), phase_field=array_bytes(fl.phase))
-        else:
-            out["lbm"] = int(self.solver.bytes_per_cell) * int(self.forest.nblocks) * BLOCK ** 3
-        return out
+        """Bytes of state per component: the fluid's (:meth:`FluidModel.allocation`), the DEM and the coupling."""
+        return {**super().allocation(), "dem": array_bytes(self.dem), "coupling": array_bytes(self.coupling)}
+
+
+class BodiesModel(FinestLevelBodies, FluidModel):
+    """Boxes, spheres and convex meshes, fixed, prescribed or free, in a fluid on any grid (module docstring).
+    ``backend`` and ``precision`` override the scene's ``[numerics]``; ``comm``: several MPI ranks.
+
+    Time series (:meth:`diagnostics`): per body ``<name>_x_m`` ... ``_z_m`` (centre of mass), ``_vx_m_s`` ...,
+    the fluid force ``_Fx_N`` ... (eq. 20, with the buoyancy) and torque ``_Tx_N_m`` ... (eq. 21) about the
+    centre of mass; and the fluid's own columns over the cells that are fluid now.
+    """
+
+    components = ("fluid", "dem", "coupling")
+
+    def _build(self, initialize: bool = True):
+        """The levels' solver, and the coupling on its finest level. The first call also builds the DEM and its
+        bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
+        cell flags and the coupling's state (:meth:`_carry_finest`)."""
+        scene, u, fl = self.scene, self.units, self.scene.fluid
+        first = getattr(self, "coupling", None) is None
+        if first:
+            self._prepare()
+        old = None if first else self._finest_state()
+        d = self.decomp
+        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
+                              operator=fl.operator, precision=self.precision, scheme=self.scheme,
+                              rescale=self.scheme == "interpolate", target=self.target, solid=padding_solid(scene),
+                              views=None if d is None else d.views)
+        if initialize:
+            self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
+        finest = self.lbm.levels[-1]
+        if not first and finest != self.finest:
+            raise RuntimeError(f"regrid: the finest level moved from {self.finest} to {finest}")
+        self.finest = finest
+        if first:
+            self._make_bodies(fl.gravity_m_s2)
+            volumes = np.array([g.volume_m3() for g in self.geoms])
+            self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, float)[None, :]
+        con = scene.contact
+        self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
+                                               buoyancy=True, contact_film=True if con is None else con.fluid_film)
+        self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
+        if d is not None:
+            self._split_steps(d)
+        if old is not None:
+            self._carry_finest(old)
+
+    def _split_steps(self, d):
+        """On several ranks: a coarser level steps its own leaves and swaps its halo leaves after each step; the
+        finest steps its halo leaves too (the coupling's passes reach at most 6 cells into its one block of halo, as
+        on a uniform grid: :class:`~iceresist.models.bodies.BodiesModel`), counts the links of its own leaves into
+        the forces (summed over the ranks) and swaps its halo leaves' populations after each step. The cell flags
+        need no swap: the replicated bodies mark their cells on the halo leaves alike on every rank."""
+        finest, t = self.lbm.solvers[self.finest], self.target
+        self.coupling.distribute(LevelShare(d, self.finest))
+        for lv, level in self.lbm.solvers.items():
+            if lv != self.finest:
+                d.step_own(lv, level, t)
+
+        def step():
+            self.coupling.step(1)
+            d.exchange(self.finest, finest.state, t)
+
+        self.lbm.set_stepper(self.finest, step)
+
+    def _prepare(self):
+        """Checks and constants of the first build (a scene with a free surface is
+        :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`'s)."""
+        scene, u, fl = self.scene, self.units, self.scene.fluid
+        self._check_bodies()
+        # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone
+        self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)
+
+    # -- values per leaf ---------------------------------------------------------------------------------
+    def _leaf(self, lv: int):
+        """rho and u of the leaves; the cells a body covers on the finest level at the reference state (rho0,
+        u = 0), as the fields show them."""
+        rho, u, xyz = self._own(lv, *self.lbm.leaf_fields(lv))
+        if lv == self.finest:
+            now = self.coupling.fluid_mask()[:rho.shape[0]]
+            rho = np.where(now, rho, 1.0)
+            u = np.where(now[None], u, 0.0)
+        return rho, u, xyz
+
+    def _fluid_cells(self, lv: int, rho) -> np.ndarray:
+        """The leaf cells that are fluid now: on the finest level neither solid nor covered by a body."""
+        if lv != self.finest:
+            return super()._fluid_cells(lv, rho)
+        return self.coupling.fluid_mask()[:rho.shape[0]]
+
+    def _flag_rows(self):
+        """The finest level's cell flags now, a cell a body covers GHOST (the whole level on rank 0)."""
+        flags = np.asarray(self.target.to_host(self.lbm.solvers[self.finest].flags))
+        return self.grid.gather(self.finest, flags)
+
+    # -- protocol ------------------------------------------------------------------------------------------
+    def diagnostics(self) -> dict[str, float]:
+        """The per-body columns (:meth:`BodyShapes.body_columns`) and the fluid's over every level, the cells the
+        bodies cover left out."""
+        self.coupling.check_link_list()
+        return {**self.body_columns(), **super().diagnostics()}
+
+    def is_finite(self) -> bool:
+        return self.grid.all(self._bodies_finite() and math.isfinite(self.lbm.mass()))
+
+    def state(self) -> dict:
+        """The levels' populations (:meth:`FluidModel.state`), the finest level's cell flags (the cells the
+        bodies cover; ``flags`` on one level, as before levels existed, else ``flags_finest``), the coupling and the
+        DEM: a bit-for-bit restart (on several ranks the whole levels on rank 0, None on the others)."""
+        flags = self._flag_rows()
+        levels, coupling = super().state(), self.coupling.state()
+        if levels is None:
+            return None
+        return {**levels, self._flags_key: np.array(flags, copy=True), "coupling": coupling, "dem": self.dem.state()}
+
+    @property
+    def _flags_key(self) -> str:
+        return "flags" if self.uniform else "flags_finest"
+
+    def load_state(self, state: dict):
+        if "coupling" not in state or "dem" not in state or self._flags_key not in state:
+            raise InputError("the checkpoint holds no bodies (no coupling or DEM state) on this grid: it belongs to "
+                             "another scene; run again without --pickup")
+        super().load_state(state)
+        flags = self.grid.level_rows(self.finest, np.asarray(state[self._flags_key]))
+        copy_into(self.lbm.solvers[self.finest].flags, flags.astype(np.uint8))
+        self.coupling.load_state(state["coupling"])
+        self.dem.load_state(state["dem"])

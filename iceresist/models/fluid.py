@@ -333,6 +333,10 @@ class FluidModel(Model):
         n = self.grid.own_leaves(lv)
         return rho[:n], u[:, :n], None if xyz is None else tuple(c[:n] for c in xyz)
 
+    def _fluid_cells(self, lv: int, rho) -> np.ndarray:
+        """Which of the leaf values ``rho`` of :meth:`_leaf` are fluid (the rest NaN: solid)."""
+        return np.isfinite(rho)
+
     def _leaf_extra(self, lv: int) -> list:
         """Further per-leaf values :meth:`_level0` averages after rho and u (none here)."""
         return []
@@ -374,6 +378,7 @@ class FluidModel(Model):
         """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)) and flags (uint8) on the
         level-0 grid; in solid cells (``domain.pad_to_blocks``) rho0, u = 0 and pressure 0, so that the field
         writer's NaN check sees only a blow-up."""
+        rows = self._flag_rows() if self.uniform else None
         dense = self._level0(everywhere=False)
         if dense is None:
             return None
@@ -381,13 +386,17 @@ class FluidModel(Model):
         flags = np.full(self.shape_cells, FL.FLUID, dtype=np.uint8)
         if self.uniform:
             fo = self.grid.global_views[0].forest
-            flags = np.nan_to_num(fo.to_dense(fo.flags.astype(np.float64)), nan=FL.SOLID).astype(np.uint8)
+            flags = np.nan_to_num(fo.to_dense(rows.astype(np.float64)), nan=FL.SOLID).astype(np.uint8)
             solid = ~np.isfinite(rho_lat) & ((flags & FL.FLUID) == 0)
             rho_lat = np.where(solid, 1.0, rho_lat)
             u_lat = np.where(solid[None], 0.0, u_lat)
         u = self.units
         return {"rho": u.density_to_physical(rho_lat), "u": u.velocity_to_physical(np.moveaxis(u_lat, 0, -1)),
                 "pressure": u.pressure_to_physical((rho_lat - 1.0) / 3.0), "flags": flags}
+
+    def _flag_rows(self):
+        """The cell flags of a uniform grid's blocks (nblocks, 512) as the fields show them: the forest's."""
+        return self.grid.global_views[0].forest.flags
 
     @staticmethod
     def field_units(lattice: bool) -> dict[str, str]:
@@ -431,7 +440,7 @@ class FluidModel(Model):
         umax = 0.0
         for lv in self.lbm.levels:
             rho, vel, _ = self._leaf(lv)
-            fluid = np.isfinite(rho)
+            fluid = self._fluid_cells(lv, rho)
             rho = rho[fluid]
             vol = (u.dx_m / 2 ** lv) ** 3
             speed2 = (vel ** 2).sum(axis=0)[fluid]

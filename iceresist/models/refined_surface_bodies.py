@@ -25,7 +25,7 @@ import numpy as np
 
 from iceresist.coupling import FluidStructureCoupling
 from iceresist.errors import InputError
-from iceresist.models.refined_bodies import FinestLevelBodies
+from iceresist.models.bodies import FinestLevelBodies
 from iceresist.models.surface import FreeSurfaceModel
 
 

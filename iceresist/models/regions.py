@@ -65,7 +65,8 @@ def body_half_extents_m(scene: Scene) -> np.ndarray:
     for i, body in enumerate(scene.bodies):
         mesh = body_mesh(body, i, scene.source_name) if body.shape == "mesh" else None
         h = half_extent(body, mesh)
-        if scene.refinement.regrid_every_steps is not None and body.shape != "sphere":
+        regrids = scene.refinement is not None and scene.refinement.regrid_every_steps is not None
+        if regrids and body.shape != "sphere":
             h = np.full(3, float(np.linalg.norm(h)))
         out.append(h)
     return np.array(out, dtype=float).reshape(-1, 3)

@@ -489,7 +489,7 @@ class Refinement(_Section):
     viscosity). A block takes the highest level of the regions it overlaps (the boxes, the band around the water
     surface, the band along the walls); 2:1 balance adds the levels between. The fluid alone, or with a `[free_surface]` whose surface lies in
     the finest level (the coarser levels all water; iceresist.freesurface.refined), or with `[[bodies]]` on the
-    finest level (iceresist.models.refined_bodies), on the CPU or (the conservative interface) CUDA
+    finest level (iceresist.models.bodies), on the CPU or (the conservative interface) CUDA
     (iceresist.lbm.refinement)."""
 
     levels: int = Field(..., ge=1, le=6, description="The finest level (cells dx_m / 2^levels).")

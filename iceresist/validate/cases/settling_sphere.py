@@ -120,7 +120,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     u_ref = CASES[case][2]
     value = float(w.max())
     return CaseResult(case=NAME, label=params["label"], resolution=float(params["resolution"]),
-                      cells=int(model.forest.cells), steps=rung.steps, wall_s=rung.run_time_s,
+                      cells=int(model.cells), steps=rung.steps, wall_s=rung.run_time_s,
                       quantity="terminal velocity (m/s)", value=value, reference=u_ref,
                       error=relative_error(value, u_ref), backend=backend, precision=precision,
                       extra={"experiment": case, "operator": params["operator"],

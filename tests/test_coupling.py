@@ -310,7 +310,7 @@ def _two_moving_boxes(target, tile_cells, steps, recount=False):
             rows)
 
 
-@pytest.mark.parametrize("backend", ["cpu", "cuda"])
+@pytest.mark.parametrize("backend", ["cpu", pytest.param("cuda", marks=pytest.mark.slow)])   # cuda: 120 s, CI time
 def test_bodies_split_into_runs_give_the_unsplit_result(backend):
     """Two moving boxes launched as runs of at most 64 cells (20 rows) cover the same cells and give the same
     populations, forces and torques (to the order of summation) as launched whole, over 8 steps in which their

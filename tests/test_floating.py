@@ -164,6 +164,8 @@ def test_floating_cube_settles_at_95_percent_and_its_heave_decays():
     assert np.abs(series[:, 3]).max() < 5e-3
 
 
+# 120 s on the simulator (2-core x86 VM): CI time; test_transfers.py steps floating bodies on it in CI
+@pytest.mark.slow
 def test_cpu_and_cuda_simulator_agree_for_a_cube_moving_through_the_surface():
     """A kinematic 4-cell cube moving down and sideways through the surface of an 8 x 8 x 16 tank, 4 steps: its
     faces cross planes of cell centres, so cells are covered (phi handed over) and uncovered (phi and h refilled,

@@ -146,8 +146,9 @@ SCRIPT_SCALE = textwrap.dedent("""
 
 def test_two_variants_compiled_in_two_processes_keep_their_own_code(tmp_path):
     """Two processes compile one closure with another constant in the same order (so numba numbers both
-    functions alike, under one hash seed); a third loads both from the cache and each must run its own constant. Planted: numba's
-    counter from 1 again (``conf._distinct_function_ids`` not called): the third process runs the first one loaded twice."""
+    functions alike, under one hash seed); a third loads both from the cache and each must run its own constant.
+    Planted: numba's counter from 1 again (``conf._distinct_function_ids`` not called): the third process runs the
+    first one loaded twice."""
     # one hash seed: numba's names carry the fast-math flags in set order, which string hashing shuffles
     env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0", "ICERESIST_CACHE": str(tmp_path), "PYTHONHASHSEED": "0"}
     env["PYTHONPATH"] = os.pathsep.join([os.getcwd(), env.get("PYTHONPATH", "")])

@@ -618,6 +618,7 @@ def test_a_sphere_sinking_in_water_on_levels_on_two_ranks_is_the_one_process_run
     assert all(np.array_equal(x, y) for x, y in zip(want, state("one_two")))
 
 
+@BEYOND_CI      # 253 s on a 2-core x86 VM (three processes compile tier 2 on levels)
 def test_a_tier2_ship_on_levels_on_two_ranks_is_the_one_process_run(tmp_path):
     """The CI-sized tier-2 case on two levels (0.25 m of water, level 1 from 0.109 m up and about the hull and the
     cubes, 48 level-0 trees), float64, 12 records of 6 level-0 steps with a regrid at step 60: on two ranks the

@@ -55,7 +55,8 @@ BODY_COLUMNS = ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "Fx_N", "Fy_N
                 "Tz_N_m")
 
 
-def _g(v) -> str:
+def fmt_g(v) -> str:
+    """A number in six significant digits, for the messages of the bodies' checks."""
     return f"{float(v):.6g}"
 
 
@@ -88,14 +89,14 @@ def check_bodies(scene: Scene, box_m, meshes: dict | None = None) -> None:
                              f"out, or set motion = \"prescribed\" to move it at {list(b.velocity_m_s)} m/s")
         for a, axis in enumerate("xyz"):
             if 2 * h[a] >= box_m[a]:
-                raise InputError(f"bodies[{i}].{key}: body {b.name!r} is {_g(2 * h[a])} m across along {axis}, "
-                                 f"not less than the domain's {_g(box_m[a])} m: make it smaller than that")
+                raise InputError(f"bodies[{i}].{key}: body {b.name!r} is {fmt_g(2 * h[a])} m across along {axis}, "
+                                 f"not less than the domain's {fmt_g(box_m[a])} m: make it smaller than that")
             if c[a] - h[a] < 0.0 or c[a] + h[a] > box_m[a]:
                 fix = c.copy()
                 fix[a] = min(max(c[a], h[a]), box_m[a] - h[a])
-                raise InputError(f"bodies[{i}].position_m: body {b.name!r} reaches {axis} = {_g(c[a] - h[a])} .. "
-                                 f"{_g(c[a] + h[a])} m, outside the domain 0 .. {_g(box_m[a])} m: use e.g. "
-                                 f"position_m = [{', '.join(_g(v) for v in fix)}]")
+                raise InputError(f"bodies[{i}].position_m: body {b.name!r} reaches {axis} = {fmt_g(c[a] - h[a])} .. "
+                                 f"{fmt_g(c[a] + h[a])} m, outside the domain 0 .. {fmt_g(box_m[a])} m: use e.g. "
+                                 f"position_m = [{', '.join(fmt_g(v) for v in fix)}]")
     for j, b in enumerate(scene.bodies):
         for i in range(j):
             a = scene.bodies[i]
@@ -108,7 +109,7 @@ def check_bodies(scene: Scene, box_m, meshes: dict | None = None) -> None:
             ahead, behind = ca[0] + ha[0] + hb[0] + gap, ca[0] - ha[0] - hb[0] - gap
             fix[0] = ahead if ahead + hb[0] <= box_m[0] else behind
             raise InputError(f"bodies[{j}].position_m: body {b.name!r} overlaps body {a.name!r} at t = 0: move it "
-                             f"clear, e.g. position_m = [{', '.join(_g(v) for v in fix)}]")
+                             f"clear, e.g. position_m = [{', '.join(fmt_g(v) for v in fix)}]")
 
 
 class BodyShapes:
@@ -174,6 +175,12 @@ class BodyShapes:
     def fluid_torque_N_m(self) -> np.ndarray:
         """Torque of the fluid on each body (n, 3), N m, about its centre of mass (eq. 21)."""
         return self.coupling.fluid_torque_N_m
+
+    def body_list(self) -> list[dict]:
+        """Name, shape, motion and mass (kg) of each body, for :meth:`describe`."""
+        return [{"name": b.name, "shape": b.shape, "motion": b.motion,
+                 "mass_kg": float(s.mass_kg) if hasattr(s, "mass_kg") else None}
+                for b, (_, s, *_) in zip(self.scene.bodies, self._shapes())]
 
     def body_columns(self) -> dict[str, float]:
         """The per-body time-series columns (:data:`BODY_COLUMNS`)."""
@@ -325,9 +332,7 @@ class FinestLevelBodies(BodyShapes):
     def describe(self) -> dict:
         return {**super().describe(), "box_m": list(self.box_m), "bodies_level": self.finest,
                 "dem_substeps": int(self.dem.substeps_for(self.units_finest.dt_s)),
-                "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion,
-                            "mass_kg": float(s.mass_kg) if hasattr(s, "mass_kg") else None}
-                           for b, (_, s, *_) in zip(self.scene.bodies, self._shapes())]}
+                "bodies": self.body_list()}
 
     def allocation(self) -> dict[str, int]:
         """Bytes of state per component: the fluid's (:meth:`FluidModel.allocation`), the DEM and the coupling."""

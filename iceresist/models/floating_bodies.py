@@ -19,15 +19,11 @@ from iceresist.errors import InputError
 from iceresist.grid import flags as FL
 from iceresist.grid.grid import Grid, several
 from iceresist.models.base import Model, array_bytes
-from iceresist.models.bodies import BodyShapes, check_bodies
+from iceresist.models.bodies import BodyShapes, check_bodies, fmt_g
 from iceresist.models.fluid import check_block_shape, check_free_surface_forces, resolve_target
 from iceresist.models.regions import body_mesh
 from iceresist.models.surface import FreeSurfaceModel
 from iceresist.scene.schema import Scene
-
-
-def _g(v) -> str:
-    return f"{float(v):.6g}"
 
 
 def _check_free_surface(scene: Scene) -> None:
@@ -89,7 +85,7 @@ class FloatingBodiesModel(BodyShapes, Model):
         if not 0.0 < g_lattice <= 0.01:
             raise InputError(f"numerics.dt_s: gravity is {g_lattice:.4g} in lattice units (g dt^2 / dx), above "
                              f"0.01: use a smaller time step, numerics.dt_s <= "
-                             f"{_g(math.sqrt(0.01 * u0.dx_m / g))} s")
+                             f"{fmt_g(math.sqrt(0.01 * u0.dx_m / g))} s")
         self.dem = self._make_dem((0.0, 0.0, -g))
         self._add_walls(self.dem)
         con = scene.contact
@@ -234,9 +230,7 @@ class FloatingBodiesModel(BodyShapes, Model):
                 "precision": self.precision, "backend": self.target.name, "units": u.describe(),
                 "unit_system": self.scene.scene.units, "box_m": list(self.box_m),
                 "dem_substeps": int(self.dem.substeps_for(self.dt_s)),
-                "bodies": [{"name": b.name, "shape": b.shape, "motion": b.motion,
-                            "mass_kg": float(s.mass_kg) if hasattr(s, "mass_kg") else None}
-                           for b, (_, s, *_) in zip(self.scene.bodies, self._shapes())],
+                "bodies": self.body_list(),
                 "gravity_lattice": self.g_lattice, "water_depth_cells": fs.water_depth_m / u.dx_m,
                 "h_lattice": fs.h_lattice, "mobility_lattice": fs.mobility_lattice,
                 "interface_width_cells": fs.interface_width_cells, "f_pool": "full", **self.grid.describe()}

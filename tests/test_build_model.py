@@ -7,8 +7,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.models import (MODELS, BodiesModel, FloatingBodiesModel, FluidModel, FreeSurfaceModel,
-                              RefinedSurfaceBodiesModel, RefinedTier2Model,
-                              Tier1Model, Tier2Model, build_model, physics_of)
+                              RefinedTier2Model, Tier1Model, Tier2Model, build_model, physics_of)
 from iceresist.scene.case_scenes import case_scene
 from iceresist.scene.load import parse_scene, preset_text
 from tests.test_bodies import CHANNEL, TANK
@@ -20,7 +19,7 @@ def test_every_physics_has_one_model_per_grid():
     assert MODELS == {"fluid": (FluidModel, FluidModel),
                       "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
                       "bodies": (BodiesModel, BodiesModel),
-                      "floating_bodies": (FloatingBodiesModel, RefinedSurfaceBodiesModel),
+                      "floating_bodies": (FloatingBodiesModel, FloatingBodiesModel),
                       "tier1": (Tier1Model, None), "tier2": (Tier2Model, RefinedTier2Model)}
 
 

@@ -1,4 +1,4 @@
-"""Bodies in water with a free surface on refined levels (iceresist.models.refined_surface_bodies): the floating
+"""Bodies in water with a free surface on refined levels (iceresist.models.floating_bodies): the floating
 cube with its surface and coupling on level 1 follows the cube of the uniform level-1 grid and keeps the water as
 that grid does, and drifting through regrids follows it too; a sphere sinking out of the surface band takes the fine blocks with it through a regrid as the
 uniform grid's sphere sinks, and picks up bit for bit on either side of it; bad input is refused in one line."""
@@ -8,7 +8,7 @@ import re
 import numpy as np
 import pytest
 
-from iceresist.models import FloatingBodiesModel, RefinedSurfaceBodiesModel, build_model
+from iceresist.models import FloatingBodiesModel, build_model
 from iceresist.scene import parse_scene
 
 from test_refined_surface_model import assert_same_water
@@ -100,10 +100,10 @@ def test_a_floating_cube_on_levels_follows_the_uniform_fine_grid():
     VM, 2026-11-28. Planted: the cube's cells counted as water (3.4e-3) fails. Not caught: the finest level's ghost
     blocks (deep, still water here) left unrefilled after the coupled step."""
     ref = build_model(parse_scene(_cube_text(), "cube.toml"))
-    assert isinstance(ref, RefinedSurfaceBodiesModel)
+    assert isinstance(ref, FloatingBodiesModel) and not ref.uniform
     assert ref.cells_per_level == {0: 2048, 1: 32768}
     uni = build_model(parse_scene(_cube_text(refined=False), "cube.toml"))
-    assert isinstance(uni, FloatingBodiesModel)
+    assert isinstance(uni, FloatingBodiesModel) and uni.uniform
     z, drift = _heave(ref, 80, 5)
     z_ref, drift_ref = _heave(uni, 80, 10)
     assert z_ref.max() - z_ref.min() > 1.0
@@ -145,7 +145,7 @@ def test_a_floating_cube_drifting_through_regrids_follows_the_uniform_fine_grid(
     starting from the reference state (f = w) instead of their coarse cells' populations fails (a jump of 0.70 N,
     the path 0.17 cells off, the volume 4.7e-3)."""
     ref = build_model(parse_scene(_drift_text(True), "drift.toml"))
-    assert isinstance(ref, RefinedSurfaceBodiesModel)
+    assert isinstance(ref, FloatingBodiesModel) and not ref.uniform
     a = _drift(ref, 80, 5)
     b = _drift(build_model(parse_scene(_drift_text(False), "drift.toml")), 80, 10)
     assert a[-1, 0] - a[0, 0] > 8.0                                   # it drifts 9 cells

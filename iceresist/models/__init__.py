@@ -8,8 +8,7 @@ model                       what it holds                                       
 :class:`Tier1Model`         DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
 :class:`Tier2Model`         free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
 :class:`BodiesModel`        LBM + DEM + coupling on the finest level (of one or more) ``[[bodies]]`` (``[refinement]``)
-:class:`FloatingBodiesModel` bodies in water with a free surface on one grid           ``[[bodies]]`` + ``[free_surface]``
-:class:`RefinedSurfaceBodiesModel` bodies in water with a free surface, on the finest level ``[refinement]`` + ``[free_surface]`` + ``[[bodies]]``
+:class:`FloatingBodiesModel` bodies in water with a free surface, on the finest level  ``[[bodies]]`` + ``[free_surface]`` (``[refinement]``)
 :class:`RefinedTier2Model`  tier 2 with the ship, ice and surface on the finest level    ``[ship]`` tier 2, ``[ice]``, ``[refinement]``
 ==========================  ======================================================  =============================
 
@@ -24,14 +23,13 @@ from iceresist.models.base import Model
 from iceresist.models.bodies import BodiesModel
 from iceresist.models.floating_bodies import FloatingBodiesModel
 from iceresist.models.fluid import FluidModel
-from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
 from iceresist.models.surface import FreeSurfaceModel
 from iceresist.models.refined_tier2 import RefinedTier2Model
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "BodiesModel", "FloatingBodiesModel", "RefinedSurfaceBodiesModel",
-           "RefinedTier2Model", "Tier1Model", "Tier2Model", "MODELS", "physics_of", "build_model"]
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "BodiesModel", "FloatingBodiesModel", "RefinedTier2Model",
+           "Tier1Model", "Tier2Model", "MODELS", "physics_of", "build_model"]
 
 
 #: The model of each physics a scene asks for (:func:`physics_of`): on one uniform grid, and on the levels of a
@@ -40,7 +38,7 @@ MODELS: dict[str, tuple[type, type | None]] = {
     "fluid": (FluidModel, FluidModel),
     "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
     "bodies": (BodiesModel, BodiesModel),
-    "floating_bodies": (FloatingBodiesModel, RefinedSurfaceBodiesModel),
+    "floating_bodies": (FloatingBodiesModel, FloatingBodiesModel),
     "tier1": (Tier1Model, None),
     "tier2": (Tier2Model, RefinedTier2Model),
 }

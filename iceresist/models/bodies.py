@@ -15,8 +15,7 @@ On levels every body, with two cells to spare, must lie inside the finest level'
 ``refinement.regrid_every_steps`` the band follows the bodies (block AMR part 2): every N steps the octree is drawn
 again around each body's bounding sphere where it is, the populations carried to the new blocks and the coupling's
 cell owners copied block by block (:meth:`FinestLevelBodies.regrid`); the DEM goes on as it was. Bodies in water
-with a free surface are :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel` on levels and
-:class:`~iceresist.models.floating_bodies.FloatingBodiesModel` on one grid.
+with a free surface are :class:`~iceresist.models.floating_bodies.FloatingBodiesModel`.
 
 Motion (``bodies[].motion``): ``free`` bodies move under gravity, the fluid force and the DEM contacts (their
 ``density_kg_m3`` sets mass and inertia); ``fixed`` bodies stay at rest and ``prescribed`` bodies move at
@@ -195,7 +194,7 @@ class BodyShapes:
 
 class FinestLevelBodies(BodyShapes):
     """The bodies of a scene on its finest level (level 0 of a grid without ``[refinement]``), shared by
-    :class:`BodiesModel` and :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`: their
+    :class:`BodiesModel` and :class:`~iceresist.models.floating_bodies.FloatingBodiesModel`: their
     checks, the DEM built at the finest level's scales, where they are against that level's leaves, the watchdog's
     probe and the description. Mixed in before the model it extends."""
 
@@ -403,7 +402,7 @@ class BodiesModel(FinestLevelBodies, FluidModel):
 
     def _prepare(self):
         """Checks and constants of the first build (a scene with a free surface is
-        :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel`'s)."""
+        :class:`~iceresist.models.floating_bodies.FloatingBodiesModel`'s)."""
         scene, u, fl = self.scene, self.units, self.scene.fluid
         self._check_bodies()
         # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone

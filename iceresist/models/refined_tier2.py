@@ -1,7 +1,7 @@
 """Tier 2 on refined levels: the ship in a brash-ice channel with ``[refinement]`` (paper sections 2.5 and 3, its
 figure 5: fine blocks about the hull, the ice and the water surface, coarse ones in the deep water).
 
-:class:`RefinedTier2Model` is :class:`~iceresist.models.refined_surface_bodies.RefinedSurfaceBodiesModel` (the
+:class:`RefinedTier2Model` is :class:`~iceresist.models.floating_bodies.FloatingBodiesModel` (the
 surface, the gas above it and every body on the finest level, the coarser levels all water) with the ship and ice of
 :class:`~iceresist.models.tier2.Tier2Model`: the hull kinematic at the ship's speed, the ice pieces free, the
 coupling (eqs. 16-21) and the DEM at the finest level's time step, the tank walls as DEM planes. The band of
@@ -31,14 +31,14 @@ from iceresist.grid.levels import level_views
 from iceresist.models.base import array_bytes
 from iceresist.models.fluid import forest_faces
 from iceresist.models.regions import build_octree
-from iceresist.models.refined_surface_bodies import RefinedSurfaceBodiesModel
+from iceresist.models.floating_bodies import FloatingBodiesModel
 from iceresist.models.ship import ShipModel
 from iceresist.models.tier2 import Tier2Ship
 
 log = logging.getLogger(__name__)
 
 
-class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
+class RefinedTier2Model(FloatingBodiesModel, Tier2Ship):
     """Coupled LBM-DEM ship + ice + water on refined levels (module docstring); ``backend``, ``precision`` override
     the scene's ``[numerics]``; ``comm``: an MPI communicator of several ranks (CPU or CUDA; the levels split as
     :class:`~iceresist.models.fluid.FluidModel` splits them, the DEM replicated on every rank)."""
@@ -255,7 +255,7 @@ class RefinedTier2Model(RefinedSurfaceBodiesModel, Tier2Ship):
         return out
 
     def state(self) -> dict:
-        """The levels, the free surface, the coupling and the DEM (:meth:`RefinedSurfaceBodiesModel.state`: a
+        """The levels, the free surface, the coupling and the DEM (:meth:`FloatingBodiesModel.state`: a
         bit-for-bit restart), the records and the last forces, and the ice bodies alone under ``positions_m`` etc.
         (for readers of the checkpoint)."""
         levels = super().state()

@@ -34,6 +34,9 @@ class FreeSurfaceModel(FluidModel):
     ``backend`` and ``precision`` override the scene's ``[numerics]``."""
 
     components = ("fluid", "free_surface")
+    #: Whether one level on one process keeps populations only in the blocks near the water
+    #: (``free_surface.f_pool_margin``).
+    pool_populations = True
 
     def __init__(self, scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         check_block_shape(scene.shape_cells())        # no padding under a free surface
@@ -98,7 +101,7 @@ class FreeSurfaceModel(FluidModel):
     def _levels(self, cls):
         scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
         # pooled populations on one level and one process; on levels, and on several ranks, every block holds them
-        pooled = self.uniform and self.comm is None and fs.f_pool_margin != "full"
+        pooled = self.pool_populations and self.uniform and self.comm is None and fs.f_pool_margin != "full"
         return cls(self.octree, tau0=u.tau, gravity0=self.gravity0, depth0=self.depth0, mobility=fs.mobility_lattice,
                    width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
                    precision=self.precision, target=self.target, faces=forest_faces(scene, u), decomp=self.decomp,

@@ -93,10 +93,10 @@ def steps_for(periods: float, dt_s: float) -> int:
 def build(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: float = 1e-3,
           precision: str = "float64", backend: str = "cpu"):
     """The tank with one cube of ``n`` cells per edge, released at ``release_draft`` of its height under the
-    still-water level; returns the :class:`~iceresist.coupling.floating.FloatingBodies` (started) of the model
-    that :func:`scene` builds."""
+    still-water level; returns the model (:class:`~iceresist.models.floating_bodies.FloatingBodiesModel`) of the
+    scene :func:`scene` writes."""
     return build_model(scene(n, release_draft=release_draft, tau=tau, g_lattice=g_lattice, precision=precision,
-                             backend=backend)).fb
+                             backend=backend))
 
 
 def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshold: float = 0.05) -> dict:

@@ -23,6 +23,7 @@ import copy
 import json
 import logging
 import math
+import tempfile
 import time
 import tomllib
 from dataclasses import dataclass
@@ -30,17 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from iceresist.backends import jit
 from iceresist.driver import Outputs, Stop, run_model
 from iceresist.errors import InputError
-from iceresist.grid.forest import BlockForest, Face
-from iceresist.lbm.solver import LBMSolver
 from iceresist.limits import touching_concentration
 from iceresist.models import build_model
 from iceresist.scene.case_scenes import KNOT_M_S, scene_data, to_toml
 from iceresist.scene.load import parse_scene, preset_text
 from iceresist.simulation import IterationInterval
-from iceresist.watchdog import DENSITY_BAND, LATTICE_SPEED_LIMIT
+from iceresist.validate.cases.taylor_green import vortex
+from iceresist.validate.rung import scene_of
 
 log = logging.getLogger(__name__)
 
@@ -240,43 +239,52 @@ def markdown_table(df) -> str:
 
 
 # -- the measurement behind the operator limits ---------------------------------------------------------
+def _limit_scene(operator: str, case: str, u0: float, tau_excess: float, n: int, steps: int):
+    """The scene of one point of :func:`measure_operator_limits` (lattice units, float32, the limits off): an
+    ``n``^3 lid-driven cavity (lid speed ``u0``) or a periodic box for the Taylor-Green vortex (amplitude ``u0``,
+    set on the model), tau = 1/2 + ``tau_excess``."""
+    sides = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
+    if case == "cavity":
+        faces = {f: "wall" for f in sides}
+        faces["z_max"] = {"kind": "moving_wall", "velocity_m_s": [u0, 0.0, 0.0]}
+    else:
+        faces = {f: "periodic" for f in sides}
+    name = f"limits-{operator}-{case}"
+    return scene_of({"scene": {"name": name, "units": "lattice"}, "domain": {"cells": [n, n, n], "faces": faces},
+                     "fluid": {"operator": operator},
+                     "numerics": {"tau": 0.5 + tau_excess, "u_max_m_s": u0, "precision": "float32",
+                                  "backend": "cpu", "check_limits": False},
+                     "run": {"steps": steps}, "output": {"fields": [], "timeseries_every_steps": 100}},
+                    f"{name} u {u0:g} tau-1/2 {tau_excess:g}")
+
+
 def measure_operator_limits(operators=("cumulant", "bgk"), speeds=(0.02, 0.05, 0.1, 0.2, 0.3),
                             excesses=(1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 1e-4, 1e-5, 1e-6), *, n: int = 16,
                             steps: int = 1000, cases=("cavity", "tgv")):
     """Run each operator on an ``n``^3 lid-driven cavity (lid speed u) and Taylor-Green vortex (amplitude u)
-    for every (u, tau - 1/2) with the limits off; a run is unstable when the watchdog quantities leave their
-    bands within ``steps``. Returns a DataFrame (operator, case, u, tau_excess, cell_reynolds, stable, step)."""
+    for every (u, tau - 1/2) with the limits off, through the driver with the run watchdog checking every 100 steps
+    (:mod:`iceresist.watchdog`: lattice speed, density band, kinetic energy); a run is unstable when the watchdog
+    stops it within ``steps``. Returns a DataFrame (operator, case, u, tau_excess, cell_reynolds, stable, step)."""
     import pandas as pd
 
     rows = []
-    x = (np.arange(n) + 0.5) * 2 * np.pi / n
-    X, Y, Z = np.meshgrid(x, x, x, indexing="ij")
-    for op in operators:
-        for case in cases:
-            for u0 in speeds:
-                for e in excesses:
-                    if case == "cavity":
-                        faces = {k: Face("wall") for k in ("x-", "x+", "y-", "y+", "z-")}
-                        faces["z+"] = Face("moving_wall", (u0, 0.0, 0.0))
-                        s = LBMSolver(BlockForest.uniform((n, n, n), faces), tau=0.5 + e, operator=op, target=jit.cpu)
-                        s.initialize(1.0, (0.0, 0.0, 0.0))
-                    else:
-                        s = LBMSolver(BlockForest.uniform((n, n, n)), tau=0.5 + e, operator=op, target=jit.cpu)
-                        u = np.stack([u0 * np.sin(X) * np.cos(Y) * np.cos(Z), -u0 * np.cos(X) * np.sin(Y) * np.cos(Z),
-                                      0 * X])
-                        rho = 1 + 3 * (u0 ** 2 / 16) * (np.cos(2 * X) + np.cos(2 * Y)) * (np.cos(2 * Z) + 2)
-                        s.initialize(rho, u)
-                    stable, at = True, steps
-                    for k in range(steps // 100):
-                        s.step(100)
-                        r, v = s.macroscopic()
-                        sp = np.sqrt(np.nanmax((v ** 2).sum(0))) if np.isfinite(v).any() else np.nan
-                        if not (sp <= LATTICE_SPEED_LIMIT and DENSITY_BAND[0] <= np.nanmin(r)
-                                and np.nanmax(r) <= DENSITY_BAND[1]):
-                            stable, at = False, (k + 1) * 100
-                            break
-                    rows.append({"operator": op, "case": case, "u": u0, "tau_excess": e,
-                                 "cell_reynolds": 3 * u0 / e, "stable": stable, "step": at})
+    with tempfile.TemporaryDirectory(prefix="iceresist-limits-") as tmp:
+        for op in operators:
+            for case in cases:
+                for u0 in speeds:
+                    for e in excesses:
+                        scene = _limit_scene(op, case, u0, e, n, steps)
+                        model = build_model(scene)
+                        if case == "tgv":
+                            model.lbm.initialize(*vortex(n, u0))
+                        outputs = Outputs(timeseries=IterationInterval(100), checkpoint=None, checkpoint_final=False,
+                                          watchdog_every=100)
+                        res = run_model(model, scene, Path(tmp) / f"{op}-{case}.h5", None, stop=Stop(iteration=steps),
+                                        outputs=outputs, lattice_units=True, progress=False)
+                        stable = res.watchdog.report is None and not res.sim.diverged
+                        rows.append({"operator": op, "case": case, "u": u0, "tau_excess": e,
+                                     "cell_reynolds": 3 * u0 / e, "stable": stable,
+                                     "step": steps if stable else int(res.sim.steps_done)})
     return pd.DataFrame(rows)
 
 

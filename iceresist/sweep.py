@@ -42,7 +42,7 @@ from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
 from iceresist.io.checkpoint import read_checkpoint
 from iceresist.io.paths import check_output_dir
-from iceresist.models import RefinedTier2Model, Tier1Model, Tier2Model
+from iceresist.models import Tier1Model, Tier2Model
 from iceresist.models.fluid import resolve_target
 from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, stored_meta as _stored_meta, sweep_table
 from iceresist.scene.case_scenes import CASES, FIDELITIES, case_scene, get_case
@@ -199,7 +199,7 @@ def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "au
     if tier == 1:
         model = Tier1Model(scene, backend=backend)
     else:
-        model = (Tier2Model if scene.refinement is None else RefinedTier2Model)(scene, backend=backend)
+        model = Tier2Model(scene, backend=backend)
     c = spec.case
 
     def on_new(rf, model):

@@ -7,7 +7,7 @@ import pytest
 
 from iceresist.errors import InputError
 from iceresist.models import (MODELS, BodiesModel, FloatingBodiesModel, FluidModel, FreeSurfaceModel,
-                              RefinedTier2Model, Tier1Model, Tier2Model, build_model, physics_of)
+                              Tier1Model, Tier2Model, build_model, physics_of)
 from iceresist.scene.case_scenes import case_scene
 from iceresist.scene.load import parse_scene, preset_text
 from tests.test_bodies import CHANNEL, TANK
@@ -15,12 +15,9 @@ from tests.test_bodies import CHANNEL, TANK
 CASE = "A-c68-v1.0"
 
 
-def test_every_physics_has_one_model_per_grid():
-    assert MODELS == {"fluid": (FluidModel, FluidModel),
-                      "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
-                      "bodies": (BodiesModel, BodiesModel),
-                      "floating_bodies": (FloatingBodiesModel, FloatingBodiesModel),
-                      "tier1": (Tier1Model, None), "tier2": (Tier2Model, RefinedTier2Model)}
+def test_every_physics_has_one_model_on_any_grid():
+    assert MODELS == {"fluid": FluidModel, "free_surface": FreeSurfaceModel, "bodies": BodiesModel,
+                      "floating_bodies": FloatingBodiesModel, "tier1": Tier1Model, "tier2": Tier2Model}
 
 
 @pytest.mark.parametrize("scene, physics, refined", [

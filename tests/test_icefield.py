@@ -101,7 +101,7 @@ def test_tier2_runs_a_field(tmp_path):
     o = _field_overrides(TINY_TIER2_OVERRIDES, concentration=0.5, size_min_m=0.03, size_max_m=0.05,
                          thickness_m=0.03)
     model = build_model(case_scene(CASE, "quick", 2, **o), backend="cpu")
-    sizes = np.array([g.half_extent_m()[0] * 2 for g in model.fb.geometries[1:]])
+    sizes = np.array([g.half_extent_m()[0] * 2 for g in model.geoms[1:]])
     assert sizes == pytest.approx(model.layout.sizes_m, rel=1e-12)
     model.step(2)
     assert np.isfinite(model.diagnostics()["Fx_fluid_N"])

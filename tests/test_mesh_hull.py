@@ -144,7 +144,7 @@ def test_tier2_on_convex_slabs_of_the_hull_sees_the_same_flow_force(tiny_hull_me
             rows.append((d["Fx_fluid_N"], d["Fz_fluid_N"]))
         fluid[name] = np.array(rows)
         if name == "slabs":
-            assert len(model.fb.geometries[0].pieces_m) == 8
+            assert len(model.geoms[0].pieces_m) == 8
     assert np.abs(fluid["polyhedron"]).max() > 1.0
     assert fluid["slabs"] == pytest.approx(fluid["polyhedron"], rel=1e-4, abs=1e-4)
 
@@ -162,7 +162,7 @@ def test_tier2_takes_a_hull_convex_in_section_and_refuses_one_that_is_not(tmp_pa
         scene = case_scene(CASE, "quick", 2, **mesh)
         if ok:
             model = build_model(scene, backend="cpu")
-            g = model.fb.geometries[0]
+            g = model.geoms[0]
             assert len(g.pieces_m) >= 8 and model.geometry.union_excess(list(g.pieces_m)) <= 0.01
         else:
             with pytest.raises(InputError, match=r"ship.tier: .* cross-sections are not convex\); run it at tier = 1"):

@@ -47,7 +47,7 @@ def tiny_run(tmp_path_factory):
             probe["subs"].append(acc["n"])
         acc["sum"][:] = 0.0
         acc["n"] = 0
-        probe["volume"].append(m.fb.water_volume_m3())
+        probe["volume"].append(m.water_volume_cells() * m.units.dx_m ** 3)
         probe["vx"].append(m.ice_state()["velocities_m_s"][:, 0].copy())
 
     path = run_case(CASE, "quick", 2, out, backend="cpu", overrides=TINY_TIER2_OVERRIDES,
@@ -173,17 +173,17 @@ def test_tier2_watchdog_probe_reads_the_flow_and_names_the_cell_of_a_nan(tiny_ru
     assert p["finite"] == (True, None)
     assert 0.9 * u_ship < p["max_lattice_speed"][0] < min(1.1 * u_ship, watchdog.LATTICE_SPEED_LIMIT)
     assert 0.9 < p["density_min"][0] <= 1.0 <= p["density_max"][0] < 1.1
-    liquid = m.fb.fluid.liquid()
-    covered = m.fb.forest.to_dense(m.fb.coupling.owners()) >= 0
+    liquid = m.fluid.liquid()
+    covered = m.fluid.forest.to_dense(m.coupling.owners()) >= 0
     assert covered.sum() > 1000 and not (liquid & covered).any()
     for q in ("max_lattice_speed", "density_min", "density_max"):
         assert liquid[tuple(p[q][1])] and not covered[tuple(p[q][1])], q
-    assert np.isnan(m.fb.fields()[1][covered]).all()
+    assert np.isnan(m.fluid.macroscopic()[0][covered]).all()
     assert watchdog.Watchdog().inspect(m) is None
     assert watchdog.default_interval(m) == 1
     fresh = build_model(case_scene(CASE, "quick", 2, **TINY_TIER2_OVERRIDES), backend="cpu")
     fresh.step(1)
-    fl = fresh.fb.fluid
+    fl = fresh.fluid
     liquid = fl.liquid()
     cell = [int(v) for v in np.argwhere(liquid)[len(np.argwhere(liquid)) // 2]]
     blocks, f = fl.fluid.rows()

@@ -36,7 +36,7 @@ def test_tier2_pickup_continues_bit_for_bit(tmp_path, monkeypatch, tile_cells):
 
         model = build_model(load_scene(path), backend="cpu")
         model.step(1)
-        assert model.fb.coupling._tile_body is not None and len(model.fb.coupling._tile_body) > model.dem.n_bodies
+        assert model.coupling._tile_body is not None and len(model.coupling._tile_body) > model.dem.n_bodies
     for key in ("Fx_N", "Fz_N", "Fx_fluid_N", "Fz_fluid_N", "x_bow_m", "contacts", "ice_kinetic_energy_J",
                 "water_volume_m3"):
         np.testing.assert_array_equal(ta[key], tb[key], err_msg=key)

@@ -1,13 +1,13 @@
 """The tier-2 ship ladder on refined levels (``ship_tier2_amr`` of ``iceresist validate``): four rungs at 3, 4.5, 6
 and 9 cells per cube on the finest level in one tank of whole level-0 blocks, the same record interval on every rung,
-counted without building (:meth:`RefinedTier2Model.plan`); the cheapest rung run whole (slow)."""
+counted without building (:meth:`Tier2Model.plan`); the cheapest rung run whole (slow)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from iceresist.models.refined_tier2 import RefinedTier2Model
+from iceresist.models.tier2 import Tier2Model
 from iceresist.validate.cases import ship_tier2_amr as L
 from iceresist.validate.ladder import discover_cases
 from iceresist.validate.result import CaseResult
@@ -43,7 +43,7 @@ def test_a_rung_starts_with_the_surface_and_the_bodies_on_the_finest_level(index
     cell counts are regression pins of the measured plans (2-core x86 VM, 2026-11-28; rung 6: 9.03e6, rung 9:
     3.26e7)."""
     p = L.ladder(False)[index]
-    plan = RefinedTier2Model.plan(L.scene(p))
+    plan = Tier2Model.plan(L.scene(p))
     assert plan["cells_per_cube"] == pytest.approx(p["resolution"], rel=1e-12)
     assert sorted(plan["cells_per_level"]) == [0, 1]
     assert sum(plan["cells_per_level"].values()) == pytest.approx(leaves, rel=0.01)

@@ -108,13 +108,13 @@ def ship_amr_worker(steps: int, precision: str) -> dict | None:
     level's sub-steps, the coupling, the surface and the DEM on the finest) in this MPI job (or one process), after
     one untimed step; rank 0's figures, None on the others. No regrid inside the timed steps."""
     from iceresist import parallel
-    from iceresist.models import RefinedTier2Model
+    from iceresist.models import Tier2Model
     from iceresist.ship.cases import amr_overrides
     from iceresist.scene.case_scenes import case_scene
 
     comm = parallel.world()
-    model = RefinedTier2Model(case_scene("A-c68-v1.0", "quick", 2, **amr_overrides("quick")), backend="cpu",
-                              precision=precision, comm=comm)
+    model = Tier2Model(case_scene("A-c68-v1.0", "quick", 2, **amr_overrides("quick")), backend="cpu",
+                       precision=precision, comm=comm)
     return _levels_timed(model, model.lattice_updates_per_step // model.lbm_steps_per_record, comm, steps, precision)
 
 
@@ -181,10 +181,7 @@ def ship_worker(steps: int, precision: str) -> dict | None:
 
     comm = parallel.world()
     model = Tier2Model(case_scene("A-c68-v1.0", "quick", 2), backend="cpu", precision=precision, comm=comm)
-    fb = model.fb
-    fb.step(1, accumulate_contacts=True)
-    return _timed(lambda n: fb.step(n, accumulate_contacts=True), comm, model.decomp, fb.global_forest, steps,
-                  precision)
+    return _levels_timed(model, model.lattice_updates_per_step // model.lbm_steps_per_record, comm, steps, precision)
 
 
 def _launch(ranks: int, threads: int, args, precision: str) -> dict:

@@ -15,7 +15,7 @@ the projected hours to finish it at the measured rate. ``--records 0`` prints th
 ``--precision`` flag is ignored.
 
 ``--amr``: the preset's tank on refined levels (``[tier2.<preset>.amr]`` of ``iceresist/ship/cases.toml``). A first
-row counts its levels without building them (:meth:`~iceresist.models.refined_tier2.RefinedTier2Model.plan`): leaf
+row counts its levels without building them (:meth:`~iceresist.models.tier2.Tier2Model.plan`): leaf
 and ghost cells per level, cells per cube at the finest, against the paper's 160 M start, the arrays' GiB (and
 whether they fit each ``--fit-gib``), the case's cell updates and, at ``--rate-mlups R``, its hours at R MLUPS;
 then ``--records`` builds and times it as above: ``python -m validation.bench ship --preset paper --amr --records 0
@@ -96,10 +96,8 @@ def measure(scene, backend: str, records: int) -> dict:
     """Build the tier-2 model of ``scene``, step one record of warm-up and ``records`` timed ones."""
     from iceresist.models.tier2 import Tier2Model
 
-    from iceresist.models.refined_tier2 import RefinedTier2Model
-
     t0 = time.perf_counter()
-    model = (Tier2Model if scene.refinement is None else RefinedTier2Model)(scene, backend=backend)
+    model = Tier2Model(scene, backend=backend)
     build_s = time.perf_counter() - t0
     model.step(1)
     model.target.synchronize()
@@ -128,13 +126,13 @@ PAPER_START_CELLS = 160e6
 
 
 def amr_plan(scene, fit_gib, rate_mlups: float | None) -> dict:
-    """The refined tank of ``scene`` counted without building it (:meth:`RefinedTier2Model.plan`): leaf and ghost
+    """The refined tank of ``scene`` counted without building it (:meth:`Tier2Model.plan`): leaf and ghost
     cells per level, the finest resolution, the arrays' GiB (whether they fit each of ``fit_gib``), the cell updates
     of the case and, at ``rate_mlups``, its projected hours."""
-    from iceresist.models.refined_tier2 import RefinedTier2Model
+    from iceresist.models.tier2 import Tier2Model
 
     t0 = time.perf_counter()
-    p = RefinedTier2Model.plan(scene)
+    p = Tier2Model.plan(scene)
     cells = sum(p["cells_per_level"].values())
     gib = sum(p["level_bytes"].values()) / GIB
     updates = p["updates_per_step"] * p["level0_steps"]
@@ -202,7 +200,7 @@ def compare_pure(scene, backend: str, records: int, by_label: bool = False) -> l
 
     model = Tier2Model(scene, backend=backend)
     model.step(1)  # warm-up: compiles, and the first record's start transient
-    fluid = model.fb.fluid.fluid
+    fluid = model.fluid.fluid
     fluid.synchronize()
     with profiling(model.target) as prof:
         t0 = time.perf_counter()
@@ -253,7 +251,7 @@ def compare_pure(scene, backend: str, records: int, by_label: bool = False) -> l
 
 def _timed_steps(model, records: int) -> float:
     """Seconds of ``records`` records of the model's coupled steps, the device drained before and after."""
-    fluid = model.fb.fluid.fluid
+    fluid = model.fluid.fluid
     fluid.synchronize()
     t0 = time.perf_counter()
     model.step(records)
@@ -268,17 +266,17 @@ def launch_rows(model, common: dict, coupled_s: float, steps: int = 5) -> list[d
     finite check) against its coupled steps alone."""
     from iceresist.backends.launch import tallying
 
-    fluid = model.fb.fluid.fluid
+    fluid = model.fluid.fluid
     fluid.synchronize()
     with tallying() as tally:
         t0 = time.perf_counter()
         for _ in range(steps):
-            model.fb.step(1, accumulate_contacts=True)
+            model.coupled_step()
         host = (time.perf_counter() - t0) / steps
     fluid.synchronize()
     t0 = time.perf_counter()
     for _ in range(2 * steps):     # replayed (where graphs are on): the host's time per step then
-        model.replay.run(model._coupled_step)
+        model.replay.run(model.coupled_step)
     host_replayed = (time.perf_counter() - t0) / (2 * steps)
     fluid.synchronize()
 

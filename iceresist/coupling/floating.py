@@ -24,8 +24,9 @@ Use::
     model.water_volume_m3()         # sum phi dx^3 outside the bodies (conserved)
     phi, rho, u = model.fields()    # dense fields (lattice units), NaN outside the liquid
 
-The scene-level model (tier 2) builds on this: a kinematic hull, dynamic ice pieces, contact forces from
-``model.dem`` (``ice_force_on``), time series from :meth:`FloatingBodies.record`.
+The scene models build the same composition on their grid, one level or many
+(:class:`~iceresist.models.floating_bodies.FloatingBodiesModel`, :class:`~iceresist.models.tier2.Tier2Model`); this
+class is the tank of one uniform forest for scripts and tests.
 """
 
 from __future__ import annotations

@@ -1,19 +1,16 @@
 """The models: state plus one time step of the components a scene uses, no I/O (docs/ARCHITECTURE.md, "The model contract").
 
-==========================  ======================================================  =============================
-model                       what it holds                                           scene sections
-==========================  ======================================================  =============================
-:class:`FluidModel`         LBM on one level or on refined levels                   no optional section (``[refinement]``)
-:class:`FreeSurfaceModel`   LBM + phase field (eqs. 1-11), on one level or levels   ``[free_surface]`` (``[refinement]``)
-:class:`Tier1Model`         DEM ship + ice + water models                           ``[ship]`` tier 1, ``[ice]``
-:class:`Tier2Model`         free-surface LBM + DEM + coupling (eqs. 1-21)           ``[ship]`` tier 2, ``[ice]``
-:class:`BodiesModel`        LBM + DEM + coupling on the finest level (of one or more) ``[[bodies]]`` (``[refinement]``)
-:class:`FloatingBodiesModel` bodies in water with a free surface, on the finest level  ``[[bodies]]`` + ``[free_surface]`` (``[refinement]``)
-:class:`RefinedTier2Model`  tier 2 with the ship, ice and surface on the finest level    ``[ship]`` tier 2, ``[ice]``, ``[refinement]``
-==========================  ======================================================  =============================
+One model per physics, each on any grid (one level, or the levels of a ``[refinement]``; one process or several):
+
+* :class:`FluidModel`: the LBM (no optional section);
+* :class:`FreeSurfaceModel`: LBM + phase field, eqs. 1-11 (``[free_surface]``);
+* :class:`BodiesModel`: LBM + DEM + coupling, the bodies on the finest level (``[[bodies]]``);
+* :class:`FloatingBodiesModel`: both, bodies in water with a free surface (``[[bodies]]`` + ``[free_surface]``);
+* :class:`Tier1Model`: DEM ship + ice + water models (``[ship]`` tier 1, ``[ice]``; no lattice);
+* :class:`Tier2Model`: the floating bodies with the ship and its ice, eqs. 1-21 (``[ship]`` tier 2, ``[ice]``).
 
 All follow the contract :class:`~iceresist.models.base.Model`; :func:`build_model` builds only what the scene
-asks for: :func:`physics_of` names the physics, :data:`MODELS` gives its model on one grid or on levels.
+asks for: :func:`physics_of` names the physics, :data:`MODELS` gives its model.
 """
 
 from __future__ import annotations
@@ -24,24 +21,16 @@ from iceresist.models.bodies import BodiesModel
 from iceresist.models.floating_bodies import FloatingBodiesModel
 from iceresist.models.fluid import FluidModel
 from iceresist.models.surface import FreeSurfaceModel
-from iceresist.models.refined_tier2 import RefinedTier2Model
 from iceresist.models.tier1 import Tier1Model
 from iceresist.models.tier2 import Tier2Model
 
-__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "BodiesModel", "FloatingBodiesModel", "RefinedTier2Model",
-           "Tier1Model", "Tier2Model", "MODELS", "physics_of", "build_model"]
+__all__ = ["Model", "FluidModel", "FreeSurfaceModel", "BodiesModel", "FloatingBodiesModel", "Tier1Model", "Tier2Model",
+           "MODELS", "physics_of", "build_model"]
 
 
-#: The model of each physics a scene asks for (:func:`physics_of`): on one uniform grid, and on the levels of a
-#: ``[refinement]`` (None: that physics has no lattice to refine).
-MODELS: dict[str, tuple[type, type | None]] = {
-    "fluid": (FluidModel, FluidModel),
-    "free_surface": (FreeSurfaceModel, FreeSurfaceModel),
-    "bodies": (BodiesModel, BodiesModel),
-    "floating_bodies": (FloatingBodiesModel, FloatingBodiesModel),
-    "tier1": (Tier1Model, None),
-    "tier2": (Tier2Model, RefinedTier2Model),
-}
+#: The model of each physics a scene asks for (:func:`physics_of`), on whatever grid the scene gives it.
+MODELS: dict[str, type] = {"fluid": FluidModel, "free_surface": FreeSurfaceModel, "bodies": BodiesModel,
+                           "floating_bodies": FloatingBodiesModel, "tier1": Tier1Model, "tier2": Tier2Model}
 
 
 def _sections(names) -> str:
@@ -85,8 +74,7 @@ def build_model(scene, *, backend: str | None = None, precision: str | None = No
     grid, or the levels of its ``[refinement]``. ``comm``: the MPI communicator of a run on several ranks
     (:mod:`iceresist.parallel`: every physics but tier 1, on a uniform grid or on levels)."""
     physics = physics_of(scene)
-    uniform, levels = MODELS[physics]
-    model = levels if scene.refinement is not None else uniform
+    model = MODELS[physics]
     if comm is None or comm.size == 1:
         return model(scene, backend=backend, precision=precision)
     if physics == "tier1":

@@ -377,8 +377,8 @@ class FreeSurfaceModel(FluidModel):
         if not self.grid.root:
             return None
         if self.uniform:
-            return {**surface, "volume0_cells": np.float64(self.volume0_cells), "iteration": np.int64(self.iteration),
-                    "precision": self.precision}
+            return {**surface, "volume0_cells": np.float64(self.volume0_cells),
+                    "iteration": np.int64(self.level0_steps), "precision": self.precision}
         return {"f": coarse, "surface": surface, "iteration": np.int64(self.level0_steps),
                 "volume0_cells": np.float64(self.volume0_cells), "precision": self.precision,
                 "octree_level": self.octree.level.copy(), "octree_coord": self.octree.coord.copy(),

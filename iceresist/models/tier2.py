@@ -1,50 +1,59 @@
-"""Tier 2: the ship in a brash-ice channel with the coupled LBM-DEM, the paper's method (sections 2-4).
+"""Tier 2: the ship in a brash-ice channel with the coupled LBM-DEM, the paper's method (sections 2-5), on one level
+or on the levels of a ``[refinement]`` (its figure 5: fine blocks about the hull, the ice and the water surface,
+coarse ones in the deep water).
 
-Built on :class:`~iceresist.coupling.floating.FloatingBodies`: water under gravity in a closed tank (free-surface
-LBM with the phase field, eqs. 1-11), the hull as a kinematic body moving at the prescribed speed along +x
-(convex-hull signed distance for the fluid, the same DEM sphere clump as tier 1 for contacts), the ice cubes as
-dynamic bodies (box signed distance + DEM clump) moved by gravity, the fluid force of the momentum exchange
-(eqs. 16-21; buoyancy is the hydrostatic pressure of the LBM) and the DEM contacts, the tank walls as DEM planes.
+:class:`Tier2Model` is :class:`~iceresist.models.floating_bodies.FloatingBodiesModel` (water under gravity in a
+closed tank, free-surface LBM with the phase field, eqs. 1-11; the surface, the gas above it and every body on the
+finest level, the coarser levels all water) with the ship and ice of :class:`~iceresist.models.ship.ShipModel`: the
+hull a kinematic body moving at the prescribed speed along +x (convex-hull signed distance for the fluid, the same
+DEM sphere clump as tier 1 for contacts), the ice cubes dynamic bodies (box signed distance + DEM clump) moved by
+gravity, the fluid force of the momentum exchange (eqs. 16-21; buoyancy is the hydrostatic pressure of the LBM) and
+the DEM contacts, the tank walls DEM planes; the coupling and the DEM at the finest level's time step. On levels the
+band of ``refinement.body_band_m`` is drawn about the hull's box (it translates, never turns) and about each ice
+piece's bounding sphere; with ``refinement.regrid_every_steps`` it follows them as they move. The surface must stay
+on the finest level: ``refinement.surface_band_m`` (or boxes) from below the ice to the top of the tank.
 
-Units (the rule of :meth:`iceresist.scene.schema.Scene.units`):
+Units (the rule of :meth:`iceresist.scene.schema.Scene.units`), on level 0:
 
 * dx = ``domain.dx_m``;
 * dt = mach dx / max(U_ship, sqrt(g h)), ``numerics.mach`` the lattice velocity limit, h the water depth: the
   ship and the shallow-water wave both stay at or below ``mach`` in lattice units. Gravity is then fixed by dt:
-  g_lattice = g dt^2 / dx (what :class:`FloatingBodies` takes; its hydrostatic density change over the depth,
-  3 g_lattice h/dx = 3 (sqrt(g h) dt/dx)^2 <= 3 mach^2, is the same limit seen from the pressure);
+  g_lattice = g dt^2 / dx (its hydrostatic density change over the depth, 3 g_lattice h/dx = 3 (sqrt(g h)
+  dt/dx)^2 <= 3 mach^2, is the same limit seen from the pressure);
 * tau = 1/2 + 3 nu dt / dx^2 from ``fluid.nu_m2_s``. The paper runs the cumulant operator without a turbulence
   model at the water's viscosity (tau - 1/2 ~ 1e-5 here); we do the same when ``fluid.nu_m2_s`` is the water's.
   Coarse presets may raise ``fluid.nu_m2_s`` (an effective viscosity, a stability floor written in the scene,
-  see :mod:`iceresist.scene.case_scenes`); ``tau_floor`` (constructor) is the other way to set a floor on tau.
+  see :mod:`iceresist.scene.case_scenes`).
 
-One model step is one record interval: ``contact.sample_interval_s`` rounded to whole LBM steps. The recorded
-ice force is the mean over the LBM steps of the interval (each the mean over its DEM sub-steps) of the DEM contact
-force of the ice on the hull (paper section 4.2; water resistance excluded); the fluid force on the hull
-(pressure and friction of the LBM, eq. 20) is recorded beside it as ``Fx_fluid_N`` etc.
-
-The set-up both tiers share (hull, ice channel, DEM, frames) is :class:`~iceresist.models.ship.ShipModel`.
+Level l has cells and steps 2^l times smaller (acoustic scaling, the same viscosity). One model step is one record
+interval: ``contact.sample_interval_s`` rounded to whole level-0 steps. The recorded ice force is the mean over the
+interval's DEM sub-steps of the DEM contact force of the ice on the hull (paper section 4.2; water resistance
+excluded); the fluid force on the hull (pressure and friction of the LBM, eq. 20) is recorded beside it as
+``Fx_fluid_N`` etc., the mean over the interval's finest-level steps. On a GPU, one level and one process, each
+coupled step is replayed as a CUDA graph (:mod:`iceresist.backends.graphs`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
-from abc import abstractmethod
 
 import numpy as np
 
 from iceresist.backends.graphs import StepReplay
-from iceresist.coupling.floating import FloatingBodies
 from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
+from iceresist.dem.bodies import matrix_from_quaternion
 from iceresist.errors import InputError
-from iceresist.grid.grid import Grid
+from iceresist.grid.levels import level_views
 from iceresist.models.base import array_bytes
-from iceresist.models.fluid import check_block_shape, resolve_target
+from iceresist.models.floating_bodies import FloatingBodiesModel
+from iceresist.models.fluid import check_block_shape, forest_faces, resolve_target
+from iceresist.models.regions import build_octree
 from iceresist.models.ship import ShipModel, ship_start_x_m, steady_window_m
 from iceresist.ship.meshhull import MeshHull
 from iceresist.ship.tank import start_wave, tank_flow
-from iceresist.units import GRAVITY_M_S2, Units
+from iceresist.units import GRAVITY_M_S2
 
 log = logging.getLogger(__name__)
 
@@ -62,13 +71,17 @@ def start_wave_of_scene(scene, geometry, layout) -> tuple:
     return wave, window_s
 
 
-class Tier2Ship(ShipModel):
-    """What both tier-2 models share (the uniform grid's :class:`Tier2Model` and the refined levels'
-    :class:`~iceresist.models.refined_tier2.RefinedTier2Model`): the scene's checks, the ship, ice and tank, the
-    bodies the coupling moves, and the tank's water motion read from the surface heights."""
+class Tier2Model(FloatingBodiesModel, ShipModel):
+    """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``, on
+    any grid (module docstring). ``backend``, ``precision`` override the scene's ``[numerics]``; ``comm``: an MPI
+    communicator of several ranks (CPU or CUDA; the levels split as :class:`~iceresist.models.fluid.FluidModel`
+    splits them, the DEM replicated on every rank; records, fields and checkpoints the whole tank's)."""
 
     components = ("lbm", "free-surface", "dem", "coupling", "ship", "ice")
     tier = 2
+
+    #: The ship's DEM (its contact law), not the bodies scene's.
+    _make_dem = ShipModel._make_dem
 
     def _set_up_tier2(self, scene) -> np.ndarray:
         """Checks (physical units, gravity, whole blocks), the ship and ice in the scene's tank
@@ -134,10 +147,6 @@ class Tier2Ship(ShipModel):
     #: Length (m) of the bands along the tank over which :meth:`tank_motion` reads the water level.
     level_band_m = 0.32
 
-    @abstractmethod
-    def _surface_height_m(self) -> np.ndarray | None:
-        """Height (m from the bottom) of the free surface over each level-0 column (nx, ny), a floe counted as water
-        (:meth:`FreeSurfaceFluid.surface_height`); None on an MPI rank other than 0."""
 
     def tank_motion(self) -> dict:
         """How the tank's water moves (docs/SHIP.md, "The start wave"): the median height of the surface above
@@ -170,125 +179,179 @@ class Tier2Ship(ShipModel):
         return {"level_fore_wall_m": band(self.domain_m[0] - self.level_band_m),
                 "level_ahead_m": band(self.x_bow_m + 0.05)}
 
-
-class Tier2Model(Tier2Ship):
-    """Coupled LBM-DEM ship + ice + water for a scene with ``[ship]`` (tier 2), ``[ice]`` and ``[free_surface]``.
-
-    ``backend``, ``precision`` override the scene's ``[numerics]``; ``tau_floor`` raises tau to at least this
-    value (module docstring); ``comm``: the MPI communicator of a run on several ranks (the tank split over them,
-    :class:`~iceresist.coupling.floating.FloatingBodies`; records, fields and checkpoints the whole tank's)."""
-
-    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None,
-                 tau_floor: float | None = None, comm=None):
+    def __init__(self, scene, *, backend: str | None = None, precision: str | None = None, comm=None):
         self.backend, self.precision = backend, precision
         gvec = self._set_up_tier2(scene)
-        lu = scene.units()
-        dx = lu.dx_m
-        con = self.contact
-        dem_backend = "cuda" if self.target.is_cuda else "cpu"
-
-        # lattice units: dt from the Mach rule, gravity from dt, tau from the viscosity (or the floor)
-        lbm_dt = lu.dt_s
-        g_lat = GRAVITY_M_S2 * lbm_dt ** 2 / dx
-        tau = max(lu.tau, float(tau_floor)) if tau_floor is not None else lu.tau
-        nu = (tau - 0.5) * dx * dx / (3.0 * lbm_dt)
-
-        dem = self._make_dem(backend=dem_backend, precision="float64", gravity_m_s2=gvec)
-        self._add_tank_walls(dem)
-        self.fb = FloatingBodies(self.shape_cells, depth_m=self.level_m, dx_m=dx, tau=tau, g_lattice=g_lat,
-                                 rho_kg_m3=self.rho_w, operator=scene.fluid.operator, precision=self.precision,
-                                 target=self.target, mobility=scene.free_surface.mobility_lattice,
-                                 width=scene.free_surface.interface_width_cells, dem=dem,
-                                 contact_film=con.fluid_film, comm=comm)
-        self.grid = Grid.of_forest(self.fb.global_forest, comm, self.fb.decomp)
-        self.comm, self.decomp = self.grid.comm, self.grid.decomp
-        self.dem = dem
-        self.hull_body = 0                      # the hull first (:meth:`coupled_bodies`)
-        for geometry, shape, kw in self.coupled_bodies():
-            self.fb.add_body(geometry, shape, **kw)
-        self.fb.start()
-        self.lbm_dt_s = self.fb.dt_s
-        self.lbm_steps_per_record = max(1, int(math.ceil(con.sample_interval_s / self.lbm_dt_s - 1e-9)))
-        self.dt_s = self.lbm_steps_per_record * self.lbm_dt_s
-        #: the lattice's scales: dt is the LBM step (a model step, one record, is ``dt_s``)
-        self.units = Units(dx_m=dx, dt_s=self.lbm_dt_s, rho0_kg_m3=self.rho_w, nu_m2_s=nu, tau=tau)
-        self.g_lattice = g_lat
-        self.cells = int(self.fb.global_forest.cells)
-        self._iteration = 0
-        self.lbm_steps = 0
+        self.decomp = None
+        self.dem = None
+        self._gravity = gvec
+        self._place_bodies()
+        self._records = 0
         self._probes = 0
+        self._subs = 0
         self._force_mean = np.zeros(3)
         self._force_last = np.zeros(3)
         self._fluid_mean = np.zeros(3)
-        self.water_volume0_m3 = self.fb.water_volume_m3()
-        #: on a GPU (one process) the coupled step is replayed as a CUDA graph (:mod:`iceresist.backends.graphs`)
-        self.replay = StepReplay(self.target, enabled=self.decomp is None)
-        log.info("tier 2: %d cells %s, dx %.4g m, dt %.4g s (%d per record), tau %.6g, g_lattice %.3g, "
-                 "ship %.3g cells/step; %s, %d hull spheres", self.cells, self.shape_cells, dx,
-                 self.lbm_dt_s, self.lbm_steps_per_record, tau, g_lat, self.speed_m_s * self.lbm_dt_s / dx,
-                 self.ice_summary(), self.hull.n_spheres)
+        super().__init__(scene, backend=self.backend, precision=self.precision, comm=comm)
+        u = self.units
+        self.lbm_dt_s = u.dt_s
+        self.lbm_steps_per_record = max(1, int(math.ceil(self.contact.sample_interval_s / u.dt_s - 1e-9)))
+        self.dt_s = self.lbm_steps_per_record * u.dt_s
+        self.g_lattice = self.gravity0
+        self.water_volume0_m3 = self.volume0_cells * u.dx_m ** 3
+        #: on a GPU, one level and one process, the coupled step is replayed as a CUDA graph
+        self.replay = StepReplay(self.target, enabled=self.uniform and self.decomp is None)
+        log.info("tier 2 on %d levels: %s leaf cells per level, dx %.4g m at level 0 (%.3g cells per cube at level "
+                 "%d), dt %.4g s (%d per record), tau %.6g; %s, %d hull spheres", self.finest + 1,
+                 [self.cells_per_level[lv] for lv in self.lbm.levels], u.dx_m, self.cells_per_cube, self.finest,
+                 u.dt_s, self.lbm_steps_per_record, u.tau, self.ice_summary(), self.hull.n_spheres)
 
-    # -- protocol ---------------------------------------------------------------------------------------
+    def _place_bodies(self):
+        """The coupled bodies (:meth:`coupled_bodies`), where each starts, and the box the finest level
+        holds about each centre of mass (``_reach_m``, (n, 2, 3): lo, hi offsets, m): the hull's own (it translates),
+        each ice piece's bounding sphere (it turns)."""
+        bodies = self.coupled_bodies()
+        self.hull_body = 0
+        self.names = ["hull"] + [f"ice{i}" for i in range(len(bodies) - 1)]
+        self._reach_m = np.zeros((len(bodies), 2, 3))
+        hull = np.asarray(self.geometry.vertices(), dtype=float) - np.asarray(self.hull.model_com_m, dtype=float)
+        self._reach_m[0] = (hull.min(axis=0), hull.max(axis=0))
+        for i, (geometry, _, _) in enumerate(bodies[1:], start=1):
+            r = float(np.linalg.norm(geometry.half_extent_m()))
+            self._reach_m[i] = (np.full(3, -r), np.full(3, r))
+        self._bodies = bodies
+        self._start_positions = self._centres_of_mass(bodies)
+
+    @classmethod
+    def plan(cls, scene) -> dict:
+        """The levels a scene would start on, without building them (no populations allocated): the ship and ice
+        placed as :meth:`__init__` places them, the octree of the scene's criteria about them
+        (:func:`~iceresist.models.regions.build_octree`) and the ghost blocks of every level. Returns
+        ``cells_per_level`` (leaf cells), ``ghost_cells_per_level``, ``cells_per_cube`` (at the finest level),
+        ``updates_per_step`` (cell updates per level-0 step), ``dt_s`` (level 0's step), ``level0_steps`` (the
+        case's) and ``level_bytes`` (what :meth:`__init__` checks against the memory: every level's populations, the
+        finest level's free surface; the coupling, the DEM and the level-transfer tables come on top)."""
+        self = cls.__new__(cls)
+        self.backend, self.precision = "cpu", None
+        self._set_up_tier2(scene)
+        self.scene, self.dem = scene, None
+        self._place_bodies()
+        octree = build_octree(scene, body_boxes_m=self.body_boxes_m())
+        u = scene.units()
+        views = level_views(octree, forest_faces(scene, u))
+        per = octree.blocks_per_level()
+        finest = int(np.flatnonzero(per)[-1])
+        cells = {lv: int(n) * 512 for lv, n in enumerate(per) if n}
+        return {"cells_per_level": cells,
+                "ghost_cells_per_level": {v.level: int(v.nghosts) * 512 for v in views if v is not None},
+                "cells_per_cube": self.layout.cube_m / (u.dx_m / 2 ** finest),
+                "updates_per_step": int(sum(n * 2 ** lv for lv, n in cells.items())), "dt_s": u.dt_s,
+                "level0_steps": int(math.ceil(scene.run.end_time_s / u.dt_s - 1e-9)),
+                "level_bytes": self._level_bytes(views)}
+
+    @staticmethod
+    def _centres_of_mass(bodies) -> np.ndarray:
+        """Where each body's centre of mass starts (n, 3), m: the model frame's origin at ``position_m`` turned by
+        ``orientation``, as :meth:`DEMSystem.add_body` places it."""
+        out = []
+        for _, shape, kw in bodies:
+            q = kw.get("orientation")
+            turn = np.eye(3) if q is None else matrix_from_quaternion(np.asarray(q, dtype=float))
+            out.append(np.asarray(kw["position_m"], dtype=float) + turn @ np.asarray(shape.model_com_m, dtype=float))
+        return np.array(out)
+
+    def _check_limits(self, scene, u):
+        """None here: a ship scene's limits are tier 2's (the Mach rule of its units, the DEM sub-step)."""
+
+    # -- the bodies (FinestLevelBodies' hooks) ------------------------------------------------------------
+    def _check_bodies(self):
+        """Nothing to check beyond :meth:`_set_up_tier2` (the ship scene's own checks)."""
+        self.box_m = self.domain_m
+        self.dem_backend = "cuda" if self.target.is_cuda else "cpu"
+
+    def _make_bodies(self, gravity_m_s2):
+        """The DEM with the ship's contact law, the tank walls, the hull and the ice pieces, at the finest level's
+        scales; refused naming ``refinement`` where a body does not lie on the finest level's leaves."""
+        L, u = self.finest, self.units
+        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** L, dt_s=u.dt_s / 2 ** L,
+                                                tau=float(self.lbm.tau[L]))
+        self.dem = self._make_dem(backend=self.dem_backend, precision="float64", gravity_m_s2=self._gravity)
+        self._add_tank_walls(self.dem)
+        self.geoms = []
+        for geometry, shape, kw in self._bodies:
+            self.geoms.append(geometry)
+            self.dem.add_body(shape, **kw)
+        self._check_in_finest(self.body_positions_m(), margin_cells=2.0)
+
+    def body_boxes_m(self, positions_m: np.ndarray | None = None) -> np.ndarray:
+        if positions_m is None and self.dem is None:
+            positions_m = self._start_positions
+        return super().body_boxes_m(positions_m)
+
+    def _couple(self):
+        """The finest level's coupled step (:meth:`coupled_step`, replayed as a CUDA graph where
+        :attr:`replay` is on) and its DEM sub-steps counted for the record."""
+        self.replay.run(self.coupled_step)
+        self._subs += self.dem.last_substeps
+
+    def coupled_step(self):
+        """One coupled step of the finest level (boundaries, free-surface LBM step, DEM over the level's dt) with
+        the contact loads summed for the record: the step :mod:`iceresist.validate.launch_budget` counts."""
+        self.coupling.step(1, accumulate_contacts=True)
+
+    # -- protocol ------------------------------------------------------------------------------------------
     @property
     def iteration(self) -> int:
-        return self._iteration
+        return self._records
+
+    @property
+    def lbm_steps(self) -> int:
+        """Level-0 steps taken."""
+        return self.level0_steps
 
     @property
     def lattice_steps_per_step(self) -> int:
         return self.lbm_steps_per_record
 
     @property
+    def lattice_updates_per_step(self) -> int:
+        """Cell updates in one record: level l's leaf cells 2^l times per level-0 step."""
+        return int(sum(n * 2 ** lv for lv, n in self.cells_per_level.items())) * self.lbm_steps_per_record
+
+    @property
     def substeps_per_record(self) -> int:
-        return self.lbm_steps_per_record * max(1, self.dem.substeps_for(self.lbm_dt_s))
+        return self.lbm_steps_per_record * 2 ** self.finest * max(1, self.dem.substeps_for(self.units_finest.dt_s))
+
+    @property
+    def cells_per_cube(self) -> float:
+        """The ice's edge over the finest level's cell."""
+        return self.layout.cube_m / (self.units.dx_m / 2 ** self.finest)
 
     def step(self, n: int = 1):
-        """n record intervals of ``lbm_steps_per_record`` coupled steps; each leaves the mean ice (contact) force
-        and the mean fluid force on the hull over the interval."""
+        """``n`` record intervals of ``lbm_steps_per_record`` level-0 steps (regrids included); each leaves the mean
+        ice (contact) force and the mean fluid force on the hull over the interval."""
         hb = self.hull_body
         for _ in range(int(n)):
             self.dem.reset_contact_sums()
-            self.fb.coupling.reset_fluid_load_sum()
-            subs = 0
-            for _ in range(self.lbm_steps_per_record):
-                self.replay.run(self._coupled_step)
-                subs += self.dem.last_substeps
-            self._iteration += 1
-            self.lbm_steps += self.lbm_steps_per_record
-            # the sums stay on the target over the interval: one read each per record
-            self._force_mean = self.dem.contact_sum_on(hb)[:3] / max(subs, 1)
-            self._fluid_mean = self.fb.coupling.take_fluid_load_sum()[hb, :3] / self.lbm_steps_per_record
+            self.coupling.reset_fluid_load_sum()
+            self._subs = 0
+            super().step(self.lbm_steps_per_record)
+            self._records += 1
+            self._force_mean = self.dem.contact_sum_on(hb)[:3] / max(self._subs, 1)
+            steps = self.lbm_steps_per_record * 2 ** self.finest
+            self._fluid_mean = self.coupling.take_fluid_load_sum()[hb, :3] / steps
         self._force_last = self.dem.ice_force_on(hb)
 
-    def _coupled_step(self):
-        self.fb.step(1, accumulate_contacts=True)
-
-    def fields(self) -> dict:
-        """Dense fields (physical units): rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge
-        c_s^2 (rho - 1) rho_w (dx/dt)^2, zero at the free surface), flags (1 liquid, 0 gas or solid), phi (phase
-        field, 1 water, 0 air). rho, u and pressure are 0 outside the liquid (where flags = 0), so that the NaN
-        check of the field writer sees only real blow-ups."""
-        phi, rho, u = self.fb.fields()
-        if phi is None:         # an MPI rank other than 0
-            return None
-        c = self.units.dx_m / self.units.dt_s
-        liquid = np.isfinite(rho)
-        return {"rho": np.where(liquid, rho * self.rho_w, 0.0),
-                "u": np.where(liquid[..., None], np.moveaxis(u, 0, -1) * c, 0.0),
-                "pressure": np.where(liquid, (rho - 1.0) / 3.0 * self.rho_w * c * c, 0.0),
-                "flags": liquid.astype(np.uint8), "phi": phi}
-
-    def field_units(self, lattice: bool) -> dict:
-        return {"rho": "kg/m^3", "u": "m/s", "pressure": "Pa", "flags": "bits", "phi": "1"}
-
-    def surface_height_m(self) -> np.ndarray:
-        """Height of the free surface (phi = 1/2) in each column (nx, ny), metres from the tank bottom (on several
-        ranks on rank 0, None on the others)."""
-        h = self.fb.fluid.surface_height()
+    def _surface_height_m(self) -> np.ndarray:
+        """The free surface over each level-0 column (m from the bottom), a floe counted as water
+        (:meth:`FreeSurfaceModel.surface_cells`); None on an MPI rank other than 0."""
+        h = self.surface_cells(covered_as_water=True)
         return None if h is None else h * self.units.dx_m
 
     def is_finite(self) -> bool:
+        volume = self.water_volume_cells()          # on several ranks a collective call, the same on every rank
         return bool(np.isfinite(self._force_mean).all() and np.isfinite(self._fluid_mean).all()
-                    and np.isfinite(self.dem.positions).all() and math.isfinite(self.fb.water_volume_m3()))
+                    and self._bodies_finite() and math.isfinite(volume))
 
     #: Records between watchdog checks (:mod:`iceresist.watchdog`): a record is several LBM steps, and a blow-up
     #: grows from one cell to NaN within a few of them.
@@ -301,82 +364,96 @@ class Tier2Model(Tier2Ship):
     full_probe_every = 10
 
     def watchdog_probe(self, full: bool | None = None) -> dict:
-        """What the run watchdog checks, with the cell where it happens (:mod:`iceresist.watchdog`): finite phase
-        field, finite velocity on the liquid cells (a cell a body covers is GHOST, not liquid), the fastest wet
-        cell (lattice speed), reduced on the target (:meth:`FreeSurfaceFluid.probe`), the fastest ice body against
-        10 x max(ship speed, sqrt(g a)) (as tier 1); and on a ``full`` probe (default: every
+        """What the run watchdog checks, with the cell where it happens (:mod:`iceresist.watchdog`), on the finest
+        level's free surface (cells in finest-level indices; reduced on the target, :meth:`FreeSurfaceFluid.probe`):
+        finite phase field, finite velocity on the liquid cells (a cell a body covers is GHOST, not liquid), the
+        fastest wet cell (lattice speed); the fastest ice body against 10 x max(ship speed, sqrt(g a)) (as tier 1);
+        the bodies that left the finest level (count, the first's index); and on a ``full`` probe (default: every
         :attr:`full_probe_every`-th, the first included) finite populations, the lattice density band and the
-        fluid kinetic energy of the wet cells (lattice units; reference: all cells moving at the ship's
-        lattice speed)."""
+        fluid kinetic energy of the wet cells (lattice units; reference: all cells moving at the ship's lattice
+        speed), and the coarser levels' mass finite."""
         if full is None:
             full = self._probes % self.full_probe_every == 0
         self._probes += 1
-        self.fb.coupling.check_link_list()      # CUDA: the links passes since the last probe found no cell left out
-        u_ship = self.speed_m_s * self.units.dt_s / self.units.dx_m
-        probe = self.fb.fluid.probe(full, 0.5 * self.cells * u_ship ** 2)
+        self.coupling.check_link_list()     # CUDA: the links passes since the last probe found no cell left out
+        u_ship = self.speed_m_s * self.units_finest.dt_s / self.units_finest.dx_m
+        n = self.cells_per_level[self.finest]
+        probe = self.fs.surface.probe(full, 0.5 * n * u_ship ** 2)
         if not probe["finite"][0]:
             return probe
+        if full:
+            finite = math.isfinite(self.lbm.mass())         # this rank's leaves: every rank must agree
+            if not self.grid.all(finite):
+                return {"finite": (False, None)}
         ice = self.ice_probe()
         if not ice["finite"][0]:
             return ice
-        return {**probe, **{k: v for k, v in ice.items() if k != "finite"}}
+        gone = self.bodies_outside_finest(self.body_positions_m(), margin_cells=1.0)
+        return {**probe, **{k: v for k, v in ice.items() if k != "finite"},
+                "bodies_outside_finest": (len(gone), gone[0] if gone else None)}
 
     def diagnostics(self) -> dict:
-        """One record: mean ice (contact) force on the hull (N), the mean fluid force on it (N), stem position (m),
-        contacts, ice kinetic energy (J), water volume (m^3, outside the bodies), and the tank's water motion
-        (:meth:`tank_motion`)."""
-        return self.record_columns(self.fb.water_volume_m3())
-
-    def _surface_height_m(self) -> np.ndarray | None:
-        h = self.fb.fluid.surface_height(covered_as_water=True)
-        return None if h is None else h * self.units.dx_m
+        """One record (:meth:`record_columns`: forces on the hull, stem, contacts, ice kinetic energy, water volume
+        outside the bodies, the tank's water motion) with the volume's drift and, in a regridding run, the leaf
+        cells."""
+        v, v0 = self.water_volume_cells(), self.volume0_cells
+        drift = (v - v0) / v0 if v0 > 0 else math.nan     # no water in a traced build (nothing runs)
+        out = {**self.record_columns(float(v * self.units.dx_m ** 3)), "water_volume_drift": float(drift)}
+        if self.regrid_every:
+            out["leaf_cells"] = float(self.cells)
+        return out
 
     def state(self) -> dict:
-        """Everything a bit-for-bit restart needs: the record count and the last forces, the fluid (population
-        rows, h, phi, flags), the coupling (cell owners, previous forces), the DEM with its contact history, and
-        the ice bodies alone under ``positions_m`` etc. (for readers of the checkpoint). On several ranks the whole
-        tank on rank 0 (None on the others), so that a checkpoint restarts on any number of ranks."""
-        flow = self.fb.state()
-        if flow is None:        # an MPI rank other than 0
+        """The levels, the free surface, the coupling and the DEM (:meth:`FloatingBodiesModel.state`: a
+        bit-for-bit restart), the records and the last forces, and the ice bodies alone under ``positions_m`` etc.
+        (for readers of the checkpoint)."""
+        levels = super().state()
+        if levels is None:          # an MPI rank other than 0
             return None
-        return {"iteration": np.int64(self.iteration), "lbm_steps": np.int64(self.lbm_steps),
+        return {**levels, "records": np.int64(self._records),
                 "force_mean_N": self._force_mean.copy(), "force_last_N": self._force_last.copy(),
-                "fluid_force_mean_N": self._fluid_mean.copy(), "precision": self.precision,
-                **flow, "dem": self.dem.state(), **self.ice_state()}
+                "fluid_force_mean_N": self._fluid_mean.copy(), **self.ice_state()}
 
     def load_state(self, state: dict):
-        """Continue from :meth:`state` of a model built from the same scene (same backend precision)."""
-        if "fluid" not in state or "coupling" not in state or "dem" not in state:
-            raise InputError("the checkpoint holds no tier-2 flow state (it was written before tier-2 checkpoints "
-                             "kept the populations and the phase field): run the scene again without --pickup")
-        if str(state.get("precision", self.precision)) != self.precision:
-            raise InputError(f"checkpoint holds {state.get('precision')} populations, this run is {self.precision}: "
-                             f"restart with --precision {state.get('precision')}")
-        self.fb.load_state(state["fluid"], state["coupling"])
-        self.dem.load_state(state["dem"])
-        self._iteration = int(state["iteration"])
-        self.lbm_steps = int(state["lbm_steps"])
+        """Continue from :meth:`state`, or from a one-level checkpoint of the layout before the grid became a
+        parameter (the fluid under ``fluid``, the records under ``iteration``)."""
+        if self.uniform and "fluid" in state and "records" not in state:
+            state = {**state, "records": state["iteration"], "volume0_cells": np.float64(self.volume0_cells)}
+        if "records" not in state or "coupling" not in state or "dem" not in state:
+            raise InputError("the checkpoint holds no tier-2 flow state (populations, phase field, bodies): it "
+                             "belongs to another scene; run the scene again without --pickup")
+        super().load_state(state)
+        self._records = int(state["records"])
         self._force_mean = np.asarray(state["force_mean_N"], dtype=float).copy()
         self._force_last = np.asarray(state["force_last_N"], dtype=float).copy()
         self._fluid_mean = np.asarray(state["fluid_force_mean_N"], dtype=float).copy()
 
     def allocation(self) -> dict:
-        """Bytes held per component: LBM populations and fluid arrays, phase field (h, phi), DEM, coupling."""
-        fl = self.fb.fluid
-        return {"lbm": array_bytes(fl.fluid, fl), "phase_field": array_bytes(fl.phase),
-                "dem": array_bytes(self.dem), "coupling": array_bytes(self.fb.coupling)}
+        """Bytes held per component: on one level the LBM (populations and fluid arrays) and the phase field (h,
+        phi), on levels each level's blocks (populations; the finest with its phase field); the DEM and the
+        coupling."""
+        if self.uniform:
+            fl = self.fluid
+            grid = {"lbm": array_bytes(fl.fluid, fl), "phase_field": array_bytes(fl.phase)}
+        else:
+            grid = {f"level{lv}": int(n) for lv, n in self.level_bytes.items()}
+        return {**grid, "dem": array_bytes(self.dem), "coupling": array_bytes(self.coupling)}
 
     def describe(self) -> dict:
         u = self.units
-        return {**self.describe_ship(), "shape_cells": list(self.shape_cells),
-                "substep_s": self.lbm_dt_s / max(1, self.dem.substeps_for(self.lbm_dt_s)),
-                "substeps_per_record": self.substeps_per_record,
-                "record_interval_s": self.dt_s, "lbm_dt_s": self.lbm_dt_s,
-                "lbm_steps_per_record": self.lbm_steps_per_record,
-                "resolution_m": u.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": self.g_lattice,
+        per = self.octree.blocks_per_level()
+        return {**self.describe_ship(), "shape_cells": list(self.shape_cells), "cells": self.cells,
+                "levels": len(per) - 1, "leaf_blocks_per_level": [int(n) for n in per],
+                "cells_per_level": {str(k): v for k, v in self.cells_per_level.items()},
+                "regrid_every_steps": self.regrid_every, "scheme": self.scheme,
+                "substep_s": self.units_finest.dt_s / max(1, self.dem.substeps_for(self.units_finest.dt_s)),
+                "substeps_per_record": self.substeps_per_record, "record_interval_s": self.dt_s,
+                "lbm_dt_s": self.lbm_dt_s, "lbm_steps_per_record": self.lbm_steps_per_record,
+                "resolution_m": self.units_finest.dx_m, "dx_m": u.dx_m, "tau": u.tau, "g_lattice": self.g_lattice,
                 "nu_m2_s": u.nu_m2_s, "operator": self.scene.fluid.operator,
                 "ship_lattice_speed": self.speed_m_s * u.dt_s / u.dx_m, "tank": self.tank.describe(),
                 "start_wave": {**self.start_wave.describe(), "steady_window_s": list(self.window_s),
                                "window_fraction": self.start_wave.window_fraction(*self.window_s)},
-                "cells_per_cube": self.layout.cube_m / u.dx_m, "allocation_bytes": self.allocation(),
+                "cells_per_cube": self.cells_per_cube, "bodies_level": self.finest,
+                "precision": self.precision, "backend": self.target.name, "allocation_bytes": self.allocation(),
                 **self.grid.describe()}

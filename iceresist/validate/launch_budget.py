@@ -47,7 +47,7 @@ def count(model) -> dict:
                 "implicit": copies.counts["implicit"], "sites": str(copies)}
 
     with tallying() as t, transfers.counting() as c:
-        model.fb.step(1, accumulate_contacts=True)
+        model.coupled_step()
     step = {**part(t, c), "substeps": model.dem.last_substeps, "budget": budget(model.dem.last_substeps)}
     with tallying() as t, transfers.counting() as c:
         model.step(1)

@@ -5,7 +5,7 @@ The set-up is the scene file iceresist/validate/scenes/floating_cube.toml (8 cel
 resolution over it and runs it through the driver. The cube (the paper's ice piece, section 3) is released from rest with its bottom ``release_draft`` of its
 height under the still-water level, in a closed tank three cube widths square and four high, water 2.5 cube
 heights deep. The free-surface LBM (BGK, phase field, eq. 11), the DEM and the coupling of
-:class:`~iceresist.coupling.floating.FloatingBodies` carry it; buoyancy is the hydrostatic pressure of the
+:class:`~iceresist.models.floating_bodies.FloatingBodiesModel` carry it; buoyancy is the hydrostatic pressure of the
 gravity body force, summed by the momentum exchange. The headline quantity is the submerged fraction
 (water level - cube bottom) / height, averaged over the last heave period of the run; its reference is 0.95.
 The heave period and its decay come from the successive extremes of the heave about its mean

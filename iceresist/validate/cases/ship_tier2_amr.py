@@ -1,6 +1,6 @@
 """The ship in brash ice, tier 2 on two refined levels: mean ice resistance against the finest cell size (block AMR).
 
-Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot) through :class:`iceresist.models.refined_tier2.RefinedTier2Model`
+Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot) through :class:`iceresist.models.tier2.Tier2Model` on levels
 with the refinement of the ``quick`` preset's ``[tier2.quick.amr]`` (the surface band and the band about the hull and
 every ice piece on level 1, the deep water on level 0, the band following the bodies): rungs at 3, 4.5, 6 and 9
 cells per 41 mm cube on the finest level (the issue's 3, 4.5 and 6, and 9 where time allows), level 0 twice as
@@ -14,7 +14,7 @@ checks ask for), so the finest level also holds one more level-0 layer under the
 cube.
 
 This is a GPU ladder (``iceresist validate --full --cases ship_tier2_amr --backend cuda``): its rungs hold 1.6e6 to
-3.3e7 leaf cells and take 4.8e9 to 2.8e11 cell updates (:meth:`RefinedTier2Model.plan` counts them without building);
+3.3e7 leaf cells and take 4.8e9 to 2.8e11 cell updates (:meth:`Tier2Model.plan` counts them without building);
 the quick ladder has no rungs on levels (the CI-sized tank of ``ship_tier2`` is narrower than one level-0 block
 at 4.5 cells per cube). As for ``ship_tier2``, there is no external reference: :mod:`iceresist.validate.ladder`
 measures the error against the Richardson extrapolation of the three finest rungs where they converge monotonically,

@@ -240,9 +240,9 @@ def markdown_table(df) -> str:
 
 # -- the measurement behind the operator limits ---------------------------------------------------------
 def _limit_scene(operator: str, case: str, u0: float, tau_excess: float, n: int, steps: int):
-    """The scene of one point of :func:`measure_operator_limits` (lattice units, float32, the limits off): an
-    ``n``^3 lid-driven cavity (lid speed ``u0``) or a periodic box for the Taylor-Green vortex (amplitude ``u0``,
-    set on the model), tau = 1/2 + ``tau_excess``."""
+    """The scene of one point of :func:`measure_operator_limits` (lattice units, float32, the operator limits off,
+    ``numerics.mach`` at the speed): an ``n``^3 lid-driven cavity (lid speed ``u0``) or a periodic box for the
+    Taylor-Green vortex (amplitude ``u0``, set on the model), tau = 1/2 + ``tau_excess``."""
     sides = ("x_min", "x_max", "y_min", "y_max", "z_min", "z_max")
     if case == "cavity":
         faces = {f: "wall" for f in sides}
@@ -252,8 +252,8 @@ def _limit_scene(operator: str, case: str, u0: float, tau_excess: float, n: int,
     name = f"limits-{operator}-{case}"
     return scene_of({"scene": {"name": name, "units": "lattice"}, "domain": {"cells": [n, n, n], "faces": faces},
                      "fluid": {"operator": operator},
-                     "numerics": {"tau": 0.5 + tau_excess, "u_max_m_s": u0, "precision": "float32",
-                                  "backend": "cpu", "check_limits": False},
+                     "numerics": {"tau": 0.5 + tau_excess, "u_max_m_s": u0, "mach": max(u0, 0.1),
+                                  "precision": "float32", "backend": "cpu", "check_limits": False},
                      "run": {"steps": steps}, "output": {"fields": [], "timeseries_every_steps": 100}},
                     f"{name} u {u0:g} tau-1/2 {tau_excess:g}")
 

@@ -120,9 +120,13 @@ def test_the_operator_limits_are_measured_through_the_driver():
     """measure_operator_limits runs each point as a scene through the driver, the run watchdog the judge: a 16^3
     cavity with its lid at 0.1 (lattice units), BGK holds at Re_cell 10 for 1000 steps and is stopped at Re_cell 30
     at step 300 (docs/VALIDATION.md, "Where the collision operators blow up": BGK to Re_cell 15 at u = 0.1); the
-    solver stepped by hand, as the measurement ran before, gave the same rows. Planted: every run counted stable
-    fails."""
+    solver stepped by hand, as the measurement ran before, gave the same rows (all 160 of the default grid). Planted:
+    every run counted stable fails."""
     df = st.measure_operator_limits(operators=("bgk",), speeds=(0.1,), excesses=(3e-2, 1e-2), cases=("cavity",))
     assert df["cell_reynolds"].tolist() == pytest.approx([10.0, 30.0])
     assert df["stable"].tolist() == [True, False]
     assert df["step"].tolist() == [1000, 300]
+    # a lid above numerics' default Mach limit (0.1) runs too: the cumulant at 0.2 holds at Re_cell 20 (planted: the
+    # scene's mach left at its default refuses it)
+    fast = st.measure_operator_limits(operators=("cumulant",), speeds=(0.2,), excesses=(3e-2,), cases=("cavity",))
+    assert fast["stable"].tolist() == [True] and fast["cell_reynolds"].tolist() == pytest.approx([20.0])

@@ -133,14 +133,13 @@ def test_face_kind_is_checked():
 def test_a_grid_on_one_process_gives_each_value_itself():
     """:class:`iceresist.grid.grid.Grid` without ranks: sums, gathers and exchanges are the values themselves, so a
     model asks the grid and never branches on the rank count (the two-rank side: tests/test_mpi.py)."""
-    g = Grid.uniform((16, 8, 8), None, comm=SimpleNamespace(size=1))
+    g = Grid.levels(BlockOctree((2, 1, 1), 0), None, comm=SimpleNamespace(size=1))     # one level: uniform
     assert g.comm is None and g.decomp is None and g.root and g.describe() == {}
-    assert g.forest is g.global_forest and g.forest.nblocks == 2
+    assert g.views is g.global_views and g.views[0].forest.nblocks == 2
     rows = np.arange(6.0).reshape(2, 3)
-    assert g.gather_rows(rows, axis=0) is rows and g.local_rows(rows) is rows
+    assert g.gather(0, rows) is rows and g.gather_leaves(0, rows) is rows and g.level_rows(0, rows) is rows
     assert g.sum(2.5) == 2.5 and g.max(3) == 3.0 and g.all(np.True_) is True and g.bcast("x") == "x"
     assert g.first_given(None) is None
-    g.exchange(rows)
     g.reduce_arrays(rows)
     assert rows.sum() == 15.0
     levels = Grid.levels(BlockOctree((2, 1, 1), 1).refine(lambda lo, hi: (lo[:, 0] < 8).astype(int)), None)

@@ -1,8 +1,7 @@
 """The cells a model steps, on one process or split over MPI ranks (docs/ARCHITECTURE.md, "The grid").
 
-A :class:`Grid` is either one uniform block forest (:meth:`Grid.uniform`) or the levels of a block octree
-(:meth:`Grid.levels`, paper section 2.5), with its split over the ranks behind it: a
-:class:`~iceresist.parallel.decomposition.Decomposition` of the forest, or a
+A :class:`Grid` is the levels of a block octree (:meth:`Grid.levels`, paper section 2.5; a grid without
+``[refinement]`` is the octree of one level) with its split over the ranks behind it: a
 :class:`~iceresist.parallel.levels.LevelDecomposition` of whole level-0 trees; on one process there is none and every
 operation below is the value itself. So a model asks the grid for a sum over the ranks, a whole-domain gather on
 rank 0 or a halo exchange and never branches on how many ranks it runs on (after Oceananigans, where the
@@ -10,18 +9,15 @@ architecture is a property of the grid, and waLBerla, whose block forest owns th
 
 Over the ranks, every rank gets the result: :meth:`Grid.sum`, :meth:`Grid.max`, :meth:`Grid.all`,
 :meth:`Grid.bcast` (rank 0's value), :meth:`Grid.reduce_arrays` (element-wise sum or maximum, in place). Whole
-domain on rank 0 (None on the others): :meth:`Grid.gather_rows` (a uniform forest's per-block rows),
-:meth:`Grid.gather` and :meth:`Grid.gather_leaves` (a level's blocks or own leaves). Back to this rank:
-:meth:`Grid.local_rows`, :meth:`Grid.level_rows`.
+domain on rank 0 (None on the others): :meth:`Grid.gather` and :meth:`Grid.gather_leaves` (a level's blocks or own
+leaves). Back to this rank: :meth:`Grid.level_rows`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from iceresist.grid.forest import BlockForest
 from iceresist.grid.levels import level_views
-from iceresist.parallel.decomposition import Decomposition
 from iceresist.parallel.levels import LevelDecomposition
 
 
@@ -34,33 +30,15 @@ class Grid:
     """The blocks a model steps and their split over the ranks (module docstring).
 
     ``comm``: the MPI communicator of a split over several ranks, None on one process. ``decomp``: the split (None
-    on one process). A uniform grid has ``global_forest`` (the whole domain's blocks) and ``forest`` (this rank's:
-    own blocks, then halo); a grid on levels has ``octree``, ``views`` (this rank's view of each level, None for a
-    level without leaves) and ``global_views`` (every rank's)."""
+    on one process). ``octree``, ``views`` (this rank's view of each level, None for a level without leaves) and
+    ``global_views`` (every rank's)."""
 
-    def __init__(self, comm=None, decomp=None, *, global_forest=None, forest=None, octree=None, global_views=None,
-                 views=None):
+    def __init__(self, comm=None, decomp=None, *, octree=None, global_views=None, views=None):
         self.comm = several(comm)
         self.decomp = decomp
-        self.global_forest, self.forest = global_forest, forest
         self.octree, self.global_views, self.views = octree, global_views, views
 
     # -- construction -----------------------------------------------------------------------------------
-    @classmethod
-    def uniform(cls, shape_cells, faces: dict, *, solid=None, comm=None) -> Grid:
-        """A uniform forest of ``shape_cells`` (:meth:`BlockForest.uniform`: ``faces``, ``solid``), split along the
-        Morton curve where ``comm`` spans several ranks."""
-        return cls.of_forest(BlockForest.uniform(shape_cells, faces, solid=solid), comm)
-
-    @classmethod
-    def of_forest(cls, global_forest, comm=None, decomp=None) -> Grid:
-        """The grid of a uniform forest, split over ``comm`` (or by ``decomp``, a split made elsewhere)."""
-        comm = several(comm)
-        if decomp is None and comm is not None:
-            decomp = Decomposition(global_forest, comm)
-        forest = global_forest if decomp is None else decomp.local
-        return cls(comm, decomp, global_forest=global_forest, forest=forest)
-
     @classmethod
     def levels(cls, octree, faces: dict, comm=None, solid=None) -> Grid:
         """The levels of ``octree`` (:func:`~iceresist.grid.levels.level_views` with ``faces`` and ``solid``), split
@@ -111,21 +89,6 @@ class Grid:
 
         for a in arrays:
             self.comm.Allreduce(MPI.IN_PLACE, a, op=MPI.MAX if op == "max" else MPI.SUM)
-
-    # -- a uniform forest -------------------------------------------------------------------------------
-    def gather_rows(self, values, axis: int = 0):
-        """Per-block ``values`` of this rank's forest (blocks along ``axis``) as the whole domain's, in global block
-        order, on rank 0 (None on the others)."""
-        return values if self.decomp is None else self.decomp.gather_rows(values, axis=axis)
-
-    def local_rows(self, values, axis: int = 0):
-        """This rank's blocks of a per-block array of the whole domain."""
-        return values if self.decomp is None else self.decomp.local_rows(values, axis=axis)
-
-    def exchange(self, arr, target=None, full: bool = False) -> None:
-        """The halo blocks of ``arr`` take their owners' values (nothing to do on one process)."""
-        if self.decomp is not None:
-            self.decomp.exchange(arr, target, full=full)
 
     # -- levels -----------------------------------------------------------------------------------------
     def own_leaves(self, lv: int) -> int:

@@ -48,6 +48,16 @@ from iceresist.units import GRAVITY_M_S2, Units
 log = logging.getLogger(__name__)
 
 
+def free_level_cells(heights, owners) -> float:
+    """The mean of the surface ``heights`` (nx, ny; cells, NaN in a column without a surface) over the columns no
+    body reaches (``owners`` (nx, ny, nz): the body covering each cell, -1 for none, NaN outside the blocks), over
+    every column where the bodies reach all of them; NaN where no column has a surface."""
+    free = (np.nan_to_num(owners, nan=-1) < 0).all(axis=2)
+    sel = heights[free] if free.any() else heights.ravel()
+    sel = sel[np.isfinite(sel)]
+    return float(sel.mean()) if sel.size else math.nan
+
+
 class FloatingBodies:
     """Water of depth ``depth_m`` in a closed tank of ``shape_cells`` (multiples of 8) cells of ``dx_m``, with
     rigid bodies.
@@ -176,10 +186,9 @@ class FloatingBodies:
 
     def water_level_m(self) -> float:
         """Mean height of the free surface (phi = 1/2) over the columns no body reaches, metres (the same on every
-        rank)."""
-        owners = self.dense_owners()
+        rank; :func:`free_level_cells`)."""
         h = self.fluid.surface_height()
-        level = None if h is None else float(h[(owners < 0).all(axis=2)].mean()) * self.dx_m
+        level = None if h is None else free_level_cells(h, self.dense_owners()) * self.dx_m
         return level if self.decomp is None else self.decomp.bcast(level)
 
     def dense_owners(self) -> np.ndarray | None:

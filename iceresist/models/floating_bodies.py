@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from iceresist.coupling import FluidStructureCoupling
+from iceresist.coupling.floating import free_level_cells
 from iceresist.errors import InputError
 from iceresist.models.bodies import FinestLevelBodies, fmt_g
 from iceresist.models.surface import FreeSurfaceModel
@@ -129,16 +130,12 @@ class FloatingBodiesModel(FinestLevelBodies, FreeSurfaceModel):
 
     def water_level_m(self) -> float | None:
         """The mean height of phi = 1/2 over the finest level's columns no body reaches (all of them where the
-        bodies reach every one), m above z = 0; on several ranks on rank 0 (None on the others)."""
+        bodies reach every one; :func:`free_level_cells`), m above z = 0; on several ranks on rank 0 (None on the
+        others)."""
         sf = self.fs.surface
         owners = sf.dense(self.coupling.owners().astype(np.float64))
         h = sf.surface_height()
-        if h is None:
-            return None
-        free = (np.nan_to_num(owners, nan=-1) < 0).all(axis=2)
-        sel = h[free] if free.any() else h.ravel()
-        sel = sel[np.isfinite(sel)]
-        return float(sel.mean()) * self.units_finest.dx_m if sel.size else math.nan
+        return None if h is None else free_level_cells(h, owners) * self.units_finest.dx_m
 
     def _surface_reach(self, bulk: float) -> np.ndarray:
         """The finest leaf cells less liquid than ``bulk`` outside the bodies: a body's cells hold the phi they had

@@ -197,8 +197,6 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
         self.lbm_dt_s = u.dt_s
         self.lbm_steps_per_record = max(1, int(math.ceil(self.contact.sample_interval_s / u.dt_s - 1e-9)))
         self.dt_s = self.lbm_steps_per_record * u.dt_s
-        self.g_lattice = self.gravity0
-        self.water_volume0_m3 = self.volume0_cells * u.dx_m ** 3
         #: on a GPU, one level and one process, the coupled step is replayed as a CUDA graph
         self.replay = StepReplay(self.target, enabled=self.uniform and self.decomp is None)
         log.info("tier 2 on %d levels: %s leaf cells per level, dx %.4g m at level 0 (%.3g cells per cube at level "
@@ -321,6 +319,11 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
     @property
     def substeps_per_record(self) -> int:
         return self.lbm_steps_per_record * 2 ** self.finest * max(1, self.dem.substeps_for(self.units_finest.dt_s))
+
+    @property
+    def g_lattice(self) -> float:
+        """Gravity in level-0 lattice units, g dt^2 / dx."""
+        return self.gravity0
 
     @property
     def cells_per_cube(self) -> float:

@@ -34,18 +34,19 @@ OVERRIDES = {"none": {}, "tiny": TINY, "tiny2": TINY_TIER2}
 # text the presets wrote while they were Python. A result file stores it and the sweep's "same scene" check
 # compares it byte for byte, so a change here turns every stored case into a new scene. The paper rows changed on
 # 2026-11-26 with the paper preset's DEM sub-step (contact.dem_safety 0.2 -> 0.1: 0.2 ran away, docs/SHIP.md) and
-# again with its dashpot (contact.dashpot = "face": A-c88-v1.0 ran away with the sphere-pair dashpot).
+# again with its dashpot (contact.dashpot = "face": A-c88-v1.0 ran away with the sphere-pair dashpot); the quick
+# rows on 2026-12-07 with the same dashpot (A-c68-v1.0 on a 2.78 m channel ran away with the sphere-pair one).
 SCENE_TEXT_SHA256 = {
     ("paper", 1, "none"): "3a02de0a2659907046aa1a9badbc3546",
     ("paper", 1, "tiny"): "767c37b145d8a213a602430bc6ba0441",
     ("paper", 2, "none"): "4dc70d7734fdb930f59c5fcfa3ddca64",
     ("paper", 2, "tiny"): "daf7bf1fd15d98578f4e90e379e6ea49",
     ("paper", 2, "tiny2"): "21c0c4dc9b24bf1bfb07788766c96acc",
-    ("quick", 1, "none"): "7658fcb3cfe5f286cc16ad6bc2bb1b67",
-    ("quick", 1, "tiny"): "00b90d4969364b08f1e158dc149f4a3e",
-    ("quick", 2, "none"): "6b4edc4b4b70f9c622bb294ca1e345a4",
-    ("quick", 2, "tiny"): "78de2d2d2b3f33234f13a24245c7958a",
-    ("quick", 2, "tiny2"): "b8c39b32b2229396ea83e99b270938b5",
+    ("quick", 1, "none"): "9951c0b024e064db8a84e19b22f4166f",
+    ("quick", 1, "tiny"): "56782430eb94e5b63b637006d8ba65ca",
+    ("quick", 2, "none"): "6164a52b2723e04153f90b77ca36b1c0",
+    ("quick", 2, "tiny"): "37d079fb0abe0d30398d7c01fe34120d",
+    ("quick", 2, "tiny2"): "78ccd8a9bc74cfd81be4749cd7050fed",
 }
 
 QUICK_T1_A68 = """\
@@ -96,6 +97,7 @@ spheres_per_edge = 2
 [contact]
 stiffness_N_m = 5000.0
 dem_safety = 0.3
+dashpot = "face"
 sample_interval_s = 0.004
 """
 

@@ -48,7 +48,7 @@ def test_quick_tier2_sweep_trends(tmp_path):
 #: within the two intervals added in quadrature (two independent samples of one mean), and its interval's width to
 #: the 99 % range of the ratio of two independent batch-means widths, sqrt(F(B - 1, B - 1)): a change the intervals
 #: cannot tell from noise passes, a change of the physics beyond them fails. Planted: the tier-1 water drag x4
-#: (iceresist.dem.hydro) gives A 24.4 +- 7.0 N (fails) and stops B with the watchdog (a runaway cube: fails).
+#: (iceresist.dem.hydro) gives A 23.6 +- 6.8 N and B 31.9 +- 7.6 N (both fail).
 QUICK_PINS = {"A-c68-v1.0": (9.395, 1.075), "B-c68-v1.0": (13.467, 2.962)}
 
 

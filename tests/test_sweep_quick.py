@@ -43,8 +43,8 @@ def test_quick_tier2_sweep_trends(tmp_path):
 #: Quick preset, tier 1: mean ice force [N] and the half width of its own 95 % batch-means interval [N] as
 #: measured on a 2-core x86 VM (AMD EPYC, 2026-12-07, the face dashpot; A: 9.395 +- 1.075 N, batch means; B: 13.467 +-
 #: 2.962 N, 5 batches; with the sphere-pair dashpot before: A 10.027 +- 1.512 N, B 13.712 +- 2.781 N). The
-#: run is deterministic on one machine, but another floating-point order (another CPU: an Intel Xeon with AVX-512
-#: gives A 9.737 +- 1.121 N) is another sample of the same chaotic run, so each case is held to its pinned mean
+#: run is deterministic on one machine, but another floating-point order (another CPU, e.g. an Intel Xeon with
+#: AVX-512) is another sample of the same chaotic run, so each case is held to its pinned mean
 #: within the two intervals added in quadrature (two independent samples of one mean), and its interval's width to
 #: the 99 % range of the ratio of two independent batch-means widths, sqrt(F(B - 1, B - 1)): a change the intervals
 #: cannot tell from noise passes, a change of the physics beyond them fails. Planted: the tier-1 water drag x4

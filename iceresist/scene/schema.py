@@ -424,8 +424,8 @@ class Contact(_Section):
         "flat face of n spheres in contact has sqrt(n) times the damping ratio of the restitution (restitution 0.5: "
         "a face impact of 2 x 2 spheres rebounds at 0.22, of 3 x 3 at 0.07). 'face': the masses in the dashpot "
         "divided by the spheres on a body's largest face, so a face impact rebounds with the restitution, and "
-        "clumps held by many sphere pairs stay stable at the sub-step (iceresist.dem.system). The paper preset "
-        "uses 'face'.")
+        "clumps held by many sphere pairs stay stable at the sub-step (iceresist.dem.system). Both ship presets "
+        "use 'face'.")
     fluid_film: bool = Field(True, description="Tier 2: a face in contact with another body or a wall keeps the "
                              "water pressure around it (a film of water; without it a submerged floe is pressed "
                              "onto the hull by the missing pressure).")

@@ -30,13 +30,6 @@ _LOCAL = np.stack(np.meshgrid(np.arange(BLOCK), np.arange(BLOCK), np.arange(BLOC
 """(512, 3): the (x, y, z) of cell c = x + 8 (y + 8 z) of a block."""
 
 
-def _cells(view: LevelView, leaves_only: bool) -> np.ndarray:
-    """Global cell coordinates (n, 3) at the view's level of its blocks' cells, block-major."""
-    nb = view.nleaves if leaves_only else view.forest.nblocks
-    origin = np.asarray(view.forest.origin[:nb], dtype=np.int64)
-    return (origin[:, None, :] * BLOCK + _LOCAL[None, :, :]).reshape(-1, 3)
-
-
 def _flat_index(view: LevelView, xyz: np.ndarray, leaves_only: bool):
     """Flat index block * 512 + cell of global cells ``xyz`` (at the view's level) in the view's forest, -1 where
     no block (or, with ``leaves_only``, no leaf block) holds them."""
@@ -53,11 +46,21 @@ def _flat_index(view: LevelView, xyz: np.ndarray, leaves_only: bool):
     return np.where(blk >= 0, blk * CELLS + c, -1)
 
 
-def _as_cells(a: np.ndarray) -> np.ndarray:
-    """A per-block field ``[block, ..., cell]`` as ``[block * 512 + cell, component]`` (a copy)."""
+def _cell_rows(a: np.ndarray, blk: np.ndarray, cell: np.ndarray) -> np.ndarray:
+    """The values ``(n, components)`` of a per-block field ``a[block, ..., cell]`` at the cells (``blk``, ``cell``),
+    read where they lie (no copy of the whole field)."""
     a = np.asarray(a)
-    return np.moveaxis(a.reshape(a.shape[0], -1, a.shape[-1]), -1, 1).reshape(-1, int(np.prod(a.shape[1:-1],
-                                                                                              dtype=np.int64)))
+    return a.reshape(a.shape[0], -1, a.shape[-1])[blk, :, cell]
+
+
+def _block_at(view: LevelView, origin: np.ndarray) -> np.ndarray:
+    """The view's block (leaf or ghost) at each block coordinate ``origin`` (n, 3) of its level, -1 where none."""
+    bm = view.block_map
+    shape = np.array(bm.shape, dtype=np.int64)
+    inside = ((origin >= 0) & (origin < shape[None, :])).all(axis=1)
+    out = np.full(len(origin), -1, dtype=np.int64)
+    out[inside] = bm[origin[inside, 0], origin[inside, 1], origin[inside, 2]]
+    return out
 
 
 def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: dict) -> None:
@@ -65,37 +68,61 @@ def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: d
     ghosts) from ``old_fields[level]`` (the same layout over the old level's forest; only its leaves are read), as
     the module docstring says. ``old_views`` and ``new_views`` are :func:`iceresist.grid.levels.level_views` of the
     two octrees (None for a level without leaves). Raises RuntimeError if a new cell is not covered exactly once
-    (the two octrees do not cover the same domain)."""
+    (the two octrees do not cover the same domain).
+
+    A new block where the old forest has a leaf of the same level is that leaf, copied whole (most blocks of a
+    regrid: the bodies and the surface move a few cells between two); the cells of the others are gathered from
+    the old leaves one by one, reading only the old blocks that reach them."""
     old_levels = [v.level for v in old_views if v is not None]
     for nv in new_views:
         if nv is None:
             continue
         L = nv.level
         dst = new_fields[L]
-        xyz = _cells(nv, leaves_only=False)
+        nb = nv.forest.nblocks
+        origin = np.asarray(nv.forest.origin[:nb], dtype=np.int64)
+        todo = np.ones(nb, dtype=bool)
+        if L in old_levels:
+            ov = old_views[L]
+            same = _block_at(ov, origin)
+            leaf = (same >= 0) & (same < ov.nleaves)
+            dst[leaf] = np.asarray(old_fields[L])[same[leaf]]
+            todo[leaf] = False
+        sel = np.flatnonzero(todo)
+        if sel.size == 0:
+            continue
+        row = np.full(nb, -1, dtype=np.int64)            # new block -> its place among the blocks gathered here
+        row[sel] = np.arange(sel.size)
+        xyz = (origin[sel][:, None, :] * BLOCK + _LOCAL[None, :, :]).reshape(-1, 3)
         ncomp = int(np.prod(dst.shape[1:-1], dtype=np.int64))
         acc = np.zeros((len(xyz), ncomp), dtype=np.float64)
         weight = np.zeros(len(xyz), dtype=np.float64)
         for m in old_levels:
             ov = old_views[m]
-            src = _as_cells(old_fields[m])
             if m <= L:
                 idx = _flat_index(ov, xyz >> (L - m), leaves_only=True)
-                hit = idx >= 0
-                acc[hit] += src[idx[hit]]
+                hit = np.flatnonzero(idx >= 0)
+                acc[hit] += _cell_rows(old_fields[m], idx[hit] // CELLS, idx[hit] % CELLS)
                 weight[hit] += 1.0
             else:
-                oxyz = _cells(ov, leaves_only=True)
+                # the old leaves of level m inside the blocks gathered here, in the old forest's order
+                oorigin = np.asarray(ov.forest.origin[:ov.nleaves], dtype=np.int64)
+                at = _block_at(nv, oorigin >> (m - L))
+                blocks = np.flatnonzero((at >= 0) & (row[np.maximum(at, 0)] >= 0))
+                if blocks.size == 0:
+                    continue
+                oxyz = (oorigin[blocks][:, None, :] * BLOCK + _LOCAL[None, :, :]).reshape(-1, 3)
                 idx = _flat_index(nv, oxyz >> (m - L), leaves_only=False)
-                hit = idx >= 0
+                place = row[idx // CELLS] * CELLS + idx % CELLS
                 w = 1.0 / 8.0 ** (m - L)
-                np.add.at(acc, idx[hit], w * src[:len(oxyz)][hit])
-                np.add.at(weight, idx[hit], w)
+                cells = np.tile(np.arange(CELLS), blocks.size)
+                np.add.at(acc, place, w * _cell_rows(old_fields[m], np.repeat(blocks, CELLS), cells))
+                np.add.at(weight, place, w)
         if not np.allclose(weight, 1.0, rtol=0.0, atol=1e-12):
             bad = int(np.count_nonzero(np.abs(weight - 1.0) > 1e-12))
             raise RuntimeError(f"regrid: {bad} cells of level {L} are not covered exactly once by the old leaves")
-        out = acc.reshape(dst.shape[0], CELLS, ncomp)
-        dst[...] = np.moveaxis(out, 1, -1).reshape(dst.shape).astype(dst.dtype, copy=False)
+        out = np.moveaxis(acc.reshape(sel.size, CELLS, ncomp), 1, -1).reshape((sel.size, *dst.shape[1:]))
+        dst[sel] = out.astype(dst.dtype, copy=False)
 
 
 def same_blocks(old_view: LevelView, new_view: LevelView) -> tuple[np.ndarray, np.ndarray]:

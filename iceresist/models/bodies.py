@@ -283,6 +283,17 @@ class FinestLevelBodies(BodyShapes):
             raise RuntimeError("regrid: a body is not on the finest level of the new octree")
         return changed
 
+    def _release_levels(self):
+        """Take what the new finest level carries (:meth:`_finest_state`), then drop the coupling with the levels."""
+        self._carried_finest = self._finest_state()
+        self.coupling = None
+        super()._release_levels()
+
+    def _carried_or_finest_state(self) -> dict:
+        """What :meth:`_release_levels` took before a rebuild, else (a pickup onto another octree) the levels' now."""
+        carried = self.__dict__.pop("_carried_finest", None)
+        return self._finest_state() if carried is None else carried
+
     def _finest_state(self) -> dict:
         """What the finest level holds besides its populations: its view and the coupling's state (on several ranks
         the whole level's view and the coupling's state gathered on rank 0, None on the others)."""
@@ -354,10 +365,10 @@ class BodiesModel(FinestLevelBodies, FluidModel):
         bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
         cell flags and the coupling's state (:meth:`_carry_finest`)."""
         scene, u, fl = self.scene, self.units, self.scene.fluid
-        first = getattr(self, "coupling", None) is None
+        first = getattr(self, "dem", None) is None
         if first:
             self._prepare()
-        old = None if first else self._finest_state()
+        old = None if first else self._carried_or_finest_state()
         d = self.decomp
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=self.scheme,

@@ -78,8 +78,8 @@ class FloatingBodiesModel(FinestLevelBodies, FreeSurfaceModel):
         level's free-surface fluid. The first call also builds the DEM and places the bodies in the still water; a
         later one (a regrid, a pickup onto another octree) keeps the DEM and carries the coupling's state
         (:meth:`FinestLevelBodies._carry_finest`)."""
-        first = getattr(self, "coupling", None) is None
-        old = None if first else self._finest_state()
+        first = getattr(self, "dem", None) is None
+        old = None if first else self._carried_or_finest_state()
         super()._build(initialize)
         if first:
             self._check_bodies()

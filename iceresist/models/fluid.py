@@ -243,12 +243,13 @@ class FluidModel(Model):
         tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``grid``: the new split, by default
         :meth:`_split` of ``octree``) the old levels are gathered on rank 0, carried over there and the new ones dealt
         out to the ranks."""
-        old_views = self.lbm.views
-        old = {lv: self._populations(lv) for lv in self.lbm.levels}
+        old_views, levels, iteration = self.lbm.views, self.lbm.levels, self.level0_steps
+        old = {lv: self._populations(lv) for lv in levels}
         finest = self._finest_extra()
         grid = self._split(octree) if grid is None else grid
         old_decomp, decomp = self.decomp, grid.decomp
-        self._adopt(octree, level_bytes, grid)
+        self._release_levels()
+        self._adopt(octree, level_bytes, grid, iteration)
         whole = None
         if old_decomp is None:
             new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
@@ -277,10 +278,16 @@ class FluidModel(Model):
         """Whether the leaves (``level``, ``coord``) are those of the current octree."""
         return np.array_equal(level, self.octree.level) and np.array_equal(coord, self.octree.coord)
 
-    def _adopt(self, octree, level_bytes: dict, grid: Grid):
+    def _release_levels(self):
+        """Before a rebuild builds the new levels: drop the present ones (what the rebuild carries is taken by then)
+        and collect them, so that two sets of levels never live at once (their solvers hang in reference cycles)."""
+        self.lbm = None
+        release_freed_memory()
+
+    def _adopt(self, octree, level_bytes: dict, grid: Grid, iteration: int | None = None):
         """New levels' solvers on ``octree`` (their populations to be filled; ``grid``: its levels and their split
-        over the ranks), the iteration kept."""
-        iteration = self.level0_steps
+        over the ranks), the iteration kept (``iteration``: the level-0 steps, given where the levels are gone)."""
+        iteration = self.level0_steps if iteration is None else iteration
         self.octree = octree
         self.grid, self.decomp = grid, grid.decomp
         self.level_bytes = level_bytes

@@ -119,6 +119,10 @@ class FreeSurfaceModel(FluidModel):
             zs[dry, :] = -1.5 * fs.interface_width_cells
         return zs
 
+    def _release_levels(self):
+        self.fs = None
+        super()._release_levels()
+
     def _finest_extra(self) -> dict:
         """The finest level's free-surface state before a regrid (:meth:`FreeSurfaceFluid.state`)."""
         return self.fs.surface.state()

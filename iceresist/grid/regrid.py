@@ -30,15 +30,20 @@ _LOCAL = np.stack(np.meshgrid(np.arange(BLOCK), np.arange(BLOCK), np.arange(BLOC
 """(512, 3): the (x, y, z) of cell c = x + 8 (y + 8 z) of a block."""
 
 
+def _block_at(view: LevelView, origin: np.ndarray) -> np.ndarray:
+    """The view's block (leaf or ghost) at each block coordinate ``origin`` (n, 3) of its level, -1 where none."""
+    bm = view.block_map
+    shape = np.array(bm.shape, dtype=np.int64)
+    inside = ((origin >= 0) & (origin < shape[None, :])).all(axis=1)
+    out = np.full(len(origin), -1, dtype=np.int64)
+    out[inside] = bm[origin[inside, 0], origin[inside, 1], origin[inside, 2]]
+    return out
+
+
 def _flat_index(view: LevelView, xyz: np.ndarray, leaves_only: bool):
     """Flat index block * 512 + cell of global cells ``xyz`` (at the view's level) in the view's forest, -1 where
     no block (or, with ``leaves_only``, no leaf block) holds them."""
-    bm = view.block_map
-    shape = np.array(bm.shape, dtype=np.int64)
-    b3 = xyz >> 3
-    inside = ((b3 >= 0) & (b3 < shape[None, :])).all(axis=1)
-    blk = np.full(len(xyz), -1, dtype=np.int64)
-    blk[inside] = bm[b3[inside, 0], b3[inside, 1], b3[inside, 2]]
+    blk = _block_at(view, xyz >> 3)
     if leaves_only:
         blk[blk >= view.nleaves] = -1
     local = xyz & 7
@@ -51,16 +56,6 @@ def _cell_rows(a: np.ndarray, blk: np.ndarray, cell: np.ndarray) -> np.ndarray:
     read where they lie (no copy of the whole field)."""
     a = np.asarray(a)
     return a.reshape(a.shape[0], -1, a.shape[-1])[blk, :, cell]
-
-
-def _block_at(view: LevelView, origin: np.ndarray) -> np.ndarray:
-    """The view's block (leaf or ghost) at each block coordinate ``origin`` (n, 3) of its level, -1 where none."""
-    bm = view.block_map
-    shape = np.array(bm.shape, dtype=np.int64)
-    inside = ((origin >= 0) & (origin < shape[None, :])).all(axis=1)
-    out = np.full(len(origin), -1, dtype=np.int64)
-    out[inside] = bm[origin[inside, 0], origin[inside, 1], origin[inside, 2]]
-    return out
 
 
 def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: dict) -> None:
@@ -131,8 +126,7 @@ def same_blocks(old_view: LevelView, new_view: LevelView) -> tuple[np.ndarray, n
     coupling sets) is carried by ``new[b_new] = old[b_old]``."""
     if old_view.level != new_view.level:
         raise ValueError(f"same_blocks compares one level: {old_view.level} and {new_view.level}")
-    origin = np.asarray(new_view.forest.origin, dtype=np.int64)
-    old_idx = old_view.block_map[origin[:, 0], origin[:, 1], origin[:, 2]]
+    old_idx = _block_at(old_view, np.asarray(new_view.forest.origin, dtype=np.int64))
     hit = old_idx >= 0
     return old_idx[hit].astype(np.int64), np.flatnonzero(hit).astype(np.int64)
 

@@ -216,11 +216,9 @@ class FinestLevelBodies(BodyShapes):
     def _make_bodies(self, gravity_m_s2):
         """The DEM (gravity ``gravity_m_s2``) with its walls and the scene's bodies at the finest level's scales
         (``units_finest``), once every body is found on that level's leaves with two cells to spare."""
-        scene, u, L = self.scene, self.units, self.finest
+        scene = self.scene
         self._check_in_finest(np.array([b.position_m for b in scene.bodies], dtype=float), margin_cells=2.0)
-        #: the scales of the finest level: cells and time steps 2^L times smaller, tau by acoustic scaling
-        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** L, dt_s=u.dt_s / 2 ** L,
-                                                tau=float(self.lbm.tau[L]))
+        self._set_finest_units()
         self.dem = self._make_dem(tuple(float(g) for g in gravity_m_s2))
         self._add_walls(self.dem)
         self.geoms = []
@@ -228,6 +226,13 @@ class FinestLevelBodies(BodyShapes):
             self.geoms.append(geom)
             self.dem.add_body(shape, position_m=tuple(float(v) for v in body.position_m), velocity_m_s=velocity,
                               kinematic=kinematic, material=material)
+
+    def _set_finest_units(self):
+        """``units_finest``: the scales of the finest level, cells and time steps 2^L times smaller, tau by acoustic
+        scaling (the bodies and their coupling step there)."""
+        u, L = self.units, self.finest
+        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** L, dt_s=u.dt_s / 2 ** L,
+                                                tau=float(self.lbm.tau[L]))
 
     def body_positions_m(self) -> np.ndarray:
         """The bodies' centres of mass now (n, 3), m."""

@@ -35,7 +35,6 @@ coupled step is replayed as a CUDA graph (:mod:`iceresist.backends.graphs`).
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 
@@ -270,9 +269,7 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
     def _make_bodies(self, gravity_m_s2):
         """The DEM with the ship's contact law, the tank walls, the hull and the ice pieces, at the finest level's
         scales; refused naming ``refinement`` where a body does not lie on the finest level's leaves."""
-        L, u = self.finest, self.units
-        self.units_finest = dataclasses.replace(u, dx_m=u.dx_m / 2 ** L, dt_s=u.dt_s / 2 ** L,
-                                                tau=float(self.lbm.tau[L]))
+        self._set_finest_units()
         self.dem = self._make_dem(backend=self.dem_backend, precision="float64", gravity_m_s2=self._gravity)
         self._add_tank_walls(self.dem)
         self.geoms = []
@@ -313,8 +310,9 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
 
     @property
     def lattice_updates_per_step(self) -> int:
-        """Cell updates in one record: level l's leaf cells 2^l times per level-0 step."""
-        return int(sum(n * 2 ** lv for lv, n in self.cells_per_level.items())) * self.lbm_steps_per_record
+        """Cell updates in one record: those of a level-0 step (:attr:`FluidModel.lattice_updates_per_step`) times
+        its level-0 steps."""
+        return super().lattice_updates_per_step * self.lbm_steps_per_record
 
     @property
     def substeps_per_record(self) -> int:

@@ -22,7 +22,7 @@ from iceresist.errors import InputError
 from iceresist.io.paths import check_output_dir
 from iceresist.limits import check_memory
 from iceresist.models import build_model
-from iceresist.models.fluid import resolve_target
+from iceresist.backends.jit import resolve_target
 from iceresist.post.case import window_summary
 from iceresist.scene.load import load_scene, preset_names
 from iceresist.scene.schema import Scene

@@ -43,7 +43,7 @@ from iceresist.errors import InputError
 from iceresist.io.checkpoint import read_checkpoint
 from iceresist.io.paths import check_output_dir
 from iceresist.models import Tier1Model, Tier2Model
-from iceresist.models.fluid import resolve_target
+from iceresist.backends.jit import resolve_target
 from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, stored_meta as _stored_meta, sweep_table
 from iceresist.scene.case_scenes import CASES, FIDELITIES, case_scene, get_case
 from iceresist.ship.cases import amr_overrides

@@ -79,7 +79,7 @@ def test_a_band_around_the_bodies_refines_where_they_are_and_a_run_restarts_bit_
     """refinement.body_band_m = 4 cells instead of the box: level 1 covers the blocks within 4 cells of the
     sphere's bounding box (x 8-24, y and z 8-24: 2 x 2 x 2 level-0 blocks), level 0 the rest; 10 steps, a
     checkpoint, 10 more equal 20 straight bit for bit."""
-    from iceresist.models.regions import build_octree
+    from iceresist.scene.blocks import build_octree
 
     text = SPHERE.split("[[refinement.boxes]]")[0] + "body_band_m = 4.0\n"
     scene = parse_scene(text, "refined_sphere.toml")

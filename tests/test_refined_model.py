@@ -172,7 +172,7 @@ def test_a_band_along_the_walls_refines_the_boundary_layers():
     """The refined channel 48 mm high (6 level-0 blocks across it) with refinement.wall_band_m = 4 mm instead of
     boxes: the blocks touching the walls at z = 0 and z = 48 mm are on level 1, the four between on level 0; the
     periodic faces take no band. The run steps and keeps its mass."""
-    from iceresist.models.regions import build_octree
+    from iceresist.scene.blocks import build_octree
 
     text = REFINED.replace("size_m = [0.008, 0.008, 0.016]", "size_m = [0.008, 0.008, 0.048]")
     text = text.split("[[refinement.boxes]]")[0] + "wall_band_m = 0.004\n\n[run]" + text.split("[run]")[1]

@@ -268,7 +268,7 @@ def test_a_regrid_keeps_the_finest_blocks_the_surface_reaches():
     cells from z = 8 up, none below. A cell of phi = 0.99 planted in a level-1 block at z = 16-24 marks the level-0
     cells down to z = 4 under it, and the octree refines the level-0 blocks there. Planted: without the surface's
     cells (only the vorticity criterion, here none) the first assertion fails."""
-    from iceresist.models.regions import build_octree
+    from iceresist.scene.blocks import build_octree
 
     model = build_model(parse_scene(_sink_text(), "sink.toml"))
     hot = model.hot_cells()

@@ -12,8 +12,7 @@ from iceresist.errors import InputError
 from iceresist.ship.hull import b063_hull
 from iceresist.scene.case_scenes import TIER2, case_names, case_scene
 from iceresist.ship.tank import blockage_ratio, depth_froude, schijf_limit_froude, start_wave, tank_flow
-from iceresist.models.ship import hull_geometry, ice_layout
-from iceresist.models.tier2 import start_wave_of_scene
+from iceresist.ship.from_scene import hull_geometry, ice_layout, start_wave_of_scene
 
 
 @pytest.mark.parametrize("m", [0.0, 0.05, 0.2, 0.25, 0.4, 0.7, 0.95])

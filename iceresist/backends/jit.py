@@ -34,10 +34,11 @@ import numpy as np
 from iceresist.backends import launch
 from iceresist.backends.conf import (CPU_FASTMATH, CUDA_BLOCK_CELLS, cpu_jit, cuda_api, cuda_kernel, get_threads,
                                      max_threads, prange, set_threads)
+from iceresist.errors import InputError
 
 __all__ = ["CPU_FASTMATH", "CUDA_BLOCK_CELLS", "HostStandIn", "Target", "cpu", "cpu_jit", "cuda", "cuda_api",
            "cuda_available", "cuda_kernel", "get_threads", "is_host_array", "max_threads", "prange", "real_type",
-           "resolve_backend", "set_threads"]
+           "resolve_backend", "resolve_target", "set_threads"]
 
 
 def real_type(precision: str):
@@ -194,3 +195,12 @@ def resolve_backend(name: str) -> Target:
         sim = os.environ.get("NUMBA_ENABLE_CUDASIM", "0") == "1"
         return cuda() if (cuda_available() and not sim) else cpu
     raise ValueError(f"backend must be auto, cpu or cuda, not {name!r}")
+
+
+def resolve_target(backend: str, key: str = "numerics.backend") -> Target:
+    """:func:`resolve_backend` for input: a CUDA request without a GPU, or an unknown name, is an
+    :class:`~iceresist.errors.InputError` naming ``key``."""
+    try:
+        return resolve_backend(backend)
+    except (RuntimeError, ValueError) as exc:
+        raise InputError(f"{key}: {exc}") from None

@@ -70,6 +70,17 @@ class _Body:
     ext_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
+def _turn(orientation) -> np.ndarray:
+    """The rotation matrix of ``orientation`` (w, x, y, z; None: none)."""
+    return np.eye(3) if orientation is None else matrix_from_quaternion(np.asarray(orientation, dtype=float))
+
+
+def centre_of_mass_m(shape: RigidShape, position_m, orientation=None) -> np.ndarray:
+    """Where :meth:`DEMSystem.add_body` puts the centre of mass of ``shape`` (m): the model frame's origin at
+    ``position_m``, turned by ``orientation``."""
+    return np.asarray(position_m, dtype=float) + _turn(orientation) @ np.asarray(shape.model_com_m, dtype=float)
+
+
 class DEMSystem:
     """Rigid ice floes and a ship of clumped spheres with Cundall-Strack contacts (paper section 2.3).
 
@@ -116,10 +127,9 @@ class DEMSystem:
             raise InputError("bodies must be added before the first step of a DEMSystem")
         if material not in MATERIALS:
             raise InputError(f"material must be one of {sorted(MATERIALS)}, got {material!r}")
-        q_user = np.array([1.0, 0, 0, 0]) if orientation is None else np.asarray(orientation, dtype=float)
-        R_user = matrix_from_quaternion(q_user)
+        R_user = _turn(orientation)
         R_body = R_user @ shape.model_to_body
-        com = np.asarray(position_m, dtype=float) + R_user @ shape.model_com_m
+        com = centre_of_mass_m(shape, position_m, orientation)
         self._bodies.append(_Body(shape=shape, position=com, quat=quaternion_from_matrix(R_body),
                                   velocity=np.asarray(velocity_m_s, dtype=float).copy(),
                                   omega=np.asarray(angular_velocity_rad_s, dtype=float).copy(),

@@ -164,14 +164,18 @@ class LBMSolver:
                              f"got shape {u.shape}")
         feq = equilibrium_minus_w(rho_b, *ub).transpose(1, 0, 2)      # (nblocks, 27, 512)
         feq[np.broadcast_to(~fo.fluid[:, None, :], feq.shape)] = 0.0
-        host = np.ascontiguousarray(feq.astype(self.real))
-        if self.target.is_cuda:
-            self._f[0].copy_to_device(host)
-            self._f[1].copy_to_device(host)
-        else:
-            self._f[0][...] = host
-            self._f[1][...] = host
+        self.set_populations(feq)
         self.iteration = 0
+
+    def set_populations(self, f: np.ndarray):
+        """Both population buffers set to ``f`` (host f - w, (nblocks, 27, 512), cast to the storage precision): a
+        regrid's carried populations, a checkpoint's."""
+        host = np.ascontiguousarray(np.asarray(f).astype(self.real, copy=False))
+        for buf in self._f:
+            if hasattr(buf, "copy_to_device"):
+                buf.copy_to_device(host)
+            else:
+                buf[...] = host
 
     def step(self, n: int = 1):
         """Advance ``n`` fused stream-collide steps; the buffers swap after each."""

@@ -40,75 +40,17 @@ from iceresist.coupling import Box, ConvexPolyhedron, FluidStructureCoupling, Sp
 from iceresist.dem import ContactParameters, DEMSystem, box, convex_polyhedron, sphere
 from iceresist.errors import InputError, StabilityError
 from iceresist.grid.regrid import same_blocks
-from iceresist.lbm.refinement import RefinedLBM
 from iceresist.models.base import array_bytes
-from iceresist.models.fluid import FluidModel, forest_faces, padding_solid
-from iceresist.models.regions import body_half_extents_m, body_mesh, half_extent
+from iceresist.models.fluid import FluidModel
 from iceresist.parallel.levels import LevelShare
-from iceresist.scene.schema import Scene
+from iceresist.scene.blocks import body_half_extents_m, body_mesh
+from iceresist.scene.checks import check_bodies
 
 #: Face kinds that are walls for the bodies (DEM contact planes).
 WALL_KINDS = ("wall", "moving_wall", "slip")
 #: Per-body time-series columns, each prefixed ``<name>_``.
 BODY_COLUMNS = ("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s", "Fx_N", "Fy_N", "Fz_N", "Tx_N_m", "Ty_N_m",
                 "Tz_N_m")
-
-
-def fmt_g(v) -> str:
-    """A number in six significant digits, for the messages of the bodies' checks."""
-    return f"{float(v):.6g}"
-
-
-def _overlap(a, b, ma=None, mb=None) -> bool:
-    """Whether bodies ``a`` and ``b`` of the scene share volume at t = 0 (a mesh body counts as its bounding box:
-    the check errs on the side of refusing)."""
-    ca, cb = np.asarray(a.position_m, dtype=float), np.asarray(b.position_m, dtype=float)
-    ha, hb = half_extent(a, ma), half_extent(b, mb)
-    if a.shape == "sphere" and b.shape == "sphere":
-        return float(np.linalg.norm(ca - cb)) < a.radius_m + b.radius_m
-    if a.shape != "sphere" and b.shape != "sphere":
-        return bool((np.abs(ca - cb) < ha + hb).all())
-    s, c, h = (a, cb, hb) if a.shape == "sphere" else (b, ca, ha)
-    centre = np.asarray(s.position_m, dtype=float)
-    nearest = np.clip(centre, c - h, c + h)
-    return float(np.linalg.norm(centre - nearest)) < s.radius_m
-
-
-def check_bodies(scene: Scene, box_m, meshes: dict | None = None) -> None:
-    """Refuse bodies that reach outside the box ``box_m`` (m), overlap at t = 0, or give a velocity to a fixed
-    body: an :class:`InputError` naming the key and a value that works. ``meshes``: body index -> its
-    :func:`body_mesh`."""
-    box_m = np.asarray(box_m, dtype=float)
-    meshes = meshes or {}
-    for i, b in enumerate(scene.bodies):
-        c, h = np.asarray(b.position_m, dtype=float), half_extent(b, meshes.get(i))
-        key = {"sphere": "radius_m", "box": "size_m", "mesh": "mesh_unit"}[b.shape]
-        if b.motion == "fixed" and any(b.velocity_m_s):
-            raise InputError(f"bodies[{i}].velocity_m_s: body {b.name!r} is fixed (at rest): leave velocity_m_s "
-                             f"out, or set motion = \"prescribed\" to move it at {list(b.velocity_m_s)} m/s")
-        for a, axis in enumerate("xyz"):
-            if 2 * h[a] >= box_m[a]:
-                raise InputError(f"bodies[{i}].{key}: body {b.name!r} is {fmt_g(2 * h[a])} m across along {axis}, "
-                                 f"not less than the domain's {fmt_g(box_m[a])} m: make it smaller than that")
-            if c[a] - h[a] < 0.0 or c[a] + h[a] > box_m[a]:
-                fix = c.copy()
-                fix[a] = min(max(c[a], h[a]), box_m[a] - h[a])
-                raise InputError(f"bodies[{i}].position_m: body {b.name!r} reaches {axis} = {fmt_g(c[a] - h[a])} .. "
-                                 f"{fmt_g(c[a] + h[a])} m, outside the domain 0 .. {fmt_g(box_m[a])} m: use e.g. "
-                                 f"position_m = [{', '.join(fmt_g(v) for v in fix)}]")
-    for j, b in enumerate(scene.bodies):
-        for i in range(j):
-            a = scene.bodies[i]
-            if not _overlap(a, b, meshes.get(i), meshes.get(j)):
-                continue
-            ca, ha, hb = (np.asarray(a.position_m, dtype=float), half_extent(a, meshes.get(i)),
-                          half_extent(b, meshes.get(j)))
-            fix = np.asarray(b.position_m, dtype=float).copy()
-            gap = 0.05 * float(min(ha.min(), hb.min()))
-            ahead, behind = ca[0] + ha[0] + hb[0] + gap, ca[0] - ha[0] - hb[0] - gap
-            fix[0] = ahead if ahead + hb[0] <= box_m[0] else behind
-            raise InputError(f"bodies[{j}].position_m: body {b.name!r} overlaps body {a.name!r} at t = 0: move it "
-                             f"clear, e.g. position_m = [{', '.join(fmt_g(v) for v in fix)}]")
 
 
 class BodyShapes:
@@ -366,22 +308,21 @@ class BodiesModel(FinestLevelBodies, FluidModel):
     components = ("fluid", "dem", "coupling")
 
     def _build(self, initialize: bool = True):
-        """The levels' solver, and the coupling on its finest level. The first call also builds the DEM and its
-        bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest level's
-        cell flags and the coupling's state (:meth:`_carry_finest`)."""
-        scene, u, fl = self.scene, self.units, self.scene.fluid
+        """The levels' solver with the coupling on its finest level (:meth:`_on_levels`). The first call also builds
+        the DEM and its bodies; a later one (a regrid, a pickup onto another octree) keeps them and carries the finest
+        level's cell flags and the coupling's state (:meth:`_carry_finest`)."""
         first = getattr(self, "dem", None) is None
         if first:
             self._prepare()
         old = None if first else self._carried_or_finest_state()
-        d = self.decomp
-        self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
-                              operator=fl.operator, precision=self.precision, scheme=self.scheme,
-                              rescale=self.scheme == "interpolate", target=self.target, solid=padding_solid(scene),
-                              views=None if d is None else d.views)
-        if initialize:
-            self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        finest = self.lbm.levels[-1]
+        super()._build(initialize)
+        if old is not None:
+            self._carry_finest(old)
+
+    def _on_levels(self):
+        """The coupling on the finest level, stepping it; on the first build the DEM and the bodies too."""
+        u, fl, finest = self.units, self.scene.fluid, self.lbm.levels[-1]
+        first = getattr(self, "dem", None) is None
         if not first and finest != self.finest:
             raise RuntimeError(f"regrid: the finest level moved from {self.finest} to {finest}")
         self.finest = finest
@@ -389,14 +330,10 @@ class BodiesModel(FinestLevelBodies, FluidModel):
             self._make_bodies(fl.gravity_m_s2)
             volumes = np.array([g.volume_m3() for g in self.geoms])
             self._buoyancy_N = -u.rho0_kg_m3 * volumes[:, None] * np.asarray(fl.gravity_m_s2, float)[None, :]
-        con = scene.contact
+        con = self.scene.contact
         self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
                                                buoyancy=True, contact_film=True if con is None else con.fluid_film)
         self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
-        if d is not None:
-            self._split_steps(d)
-        if old is not None:
-            self._carry_finest(old)
 
     def _split_steps(self, d):
         """On several ranks: a coarser level steps its own leaves and swaps its halo leaves after each step; the
@@ -419,7 +356,7 @@ class BodiesModel(FinestLevelBodies, FluidModel):
     def _prepare(self):
         """Checks and constants of the first build (a scene with a free surface is
         :class:`~iceresist.models.floating_bodies.FloatingBodiesModel`'s)."""
-        scene, u, fl = self.scene, self.units, self.scene.fluid
+        u, fl = self.units, self.scene.fluid
         self._check_bodies()
         # gravity acts on the bodies (DEM, with the buoyancy); the LBM carries the driving force alone
         self.force_lattice = tuple(float(u.force_density_to_lattice(f)) for f in fl.body_force_N_m3)

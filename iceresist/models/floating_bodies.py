@@ -30,29 +30,9 @@ import numpy as np
 from iceresist.coupling import FluidStructureCoupling
 from iceresist.coupling.floating import free_level_cells
 from iceresist.errors import InputError
-from iceresist.models.bodies import FinestLevelBodies, fmt_g
+from iceresist.models.bodies import FinestLevelBodies
 from iceresist.models.surface import FreeSurfaceModel
-
-
-def check_tank(scene, u) -> None:
-    """What a free surface with bodies on one level takes: a closed tank of walls, water over the whole floor,
-    still at the start, gravity at most 0.01 in lattice units."""
-    fl, fs = scene.fluid, scene.free_surface
-    for name, face in scene.domain.faces.items():
-        if face.kind != "wall":
-            raise InputError(f"domain.faces.{name}: a free-surface scene with [[bodies]] is a closed tank: set "
-                             f"{name} = \"wall\" (not {face.kind!r})")
-    if fs.column_length_m is not None:
-        raise InputError("free_surface.column_length_m: a scene with [[bodies]] starts with water over the whole "
-                         "floor: leave column_length_m out")
-    if any(fl.initial_velocity_m_s):
-        raise InputError("fluid.initial_velocity_m_s: a free-surface scene with [[bodies]] starts from still "
-                         "water: leave initial_velocity_m_s out")
-    g = -float(fl.gravity_m_s2[2])
-    g_lattice = float(u.acceleration_to_lattice(g))
-    if g_lattice > 0.01:
-        raise InputError(f"numerics.dt_s: gravity is {g_lattice:.4g} in lattice units (g dt^2 / dx), above "
-                         f"0.01: use a smaller time step, numerics.dt_s <= {fmt_g(math.sqrt(0.01 * u.dx_m / g))} s")
+from iceresist.scene.checks import check_tank
 
 
 class FloatingBodiesModel(FinestLevelBodies, FreeSurfaceModel):

@@ -13,82 +13,22 @@ import math
 
 import numpy as np
 
-from iceresist.backends import jit
+from iceresist.backends.jit import resolve_target
 from iceresist.errors import InputError
 from iceresist.grid import flags as FL
-from iceresist.grid.forest import CELLS, Face
+from iceresist.grid.forest import CELLS
 from iceresist.grid.grid import Grid, several
-from iceresist.grid.octree import BlockOctree
-from iceresist.grid.regrid import carry_over, vorticity_magnitude
+from iceresist.grid.regrid import vorticity_magnitude
 from iceresist.lattice import Q
 from iceresist.lbm.refinement import RefinedLBM
 from iceresist.limits import check_fluid, release_freed_memory
 from iceresist.models.base import Model
 from iceresist.models.probe import fluid_probe
-from iceresist.models.regions import build_octree, check_level_memory, scene_octree
+from iceresist.scene.blocks import (build_octree, check_level_memory, forest_faces, padding_solid, scene_octree,
+                                     check_block_shape)
 from iceresist.scene.schema import Scene
-from iceresist.units import Units
 
 log = logging.getLogger(__name__)
-
-#: Scene face name -> block-forest face name.
-FOREST_FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
-BLOCK = 8
-
-
-def resolve_target(backend: str, key: str = "numerics.backend"):
-    """The compile target of a backend name; a CUDA request without a GPU is an input error naming ``key``."""
-    try:
-        return jit.resolve_backend(backend)
-    except (RuntimeError, ValueError) as exc:
-        raise InputError(f"{key}: {exc}") from None
-
-
-def forest_faces(scene: Scene, units: Units) -> dict:
-    """The scene's faces as block-forest :class:`Face` values in lattice units."""
-    faces = {}
-    for name, face in scene.domain.faces.items():
-        rho = face.density_kg_m3 if face.density_kg_m3 is not None else scene.rho_kg_m3
-        faces[FOREST_FACE[name]] = Face(face.kind, tuple(float(units.velocity_to_lattice(v)) for v in face.velocity_m_s),
-                                        float(units.density_to_lattice(rho)))
-    return faces
-
-
-def check_block_shape(shape_cells) -> None:
-    """The uniform forest needs whole 8x8x8 blocks: name the key and the nearest valid counts."""
-    for axis, n in zip("xyz", shape_cells):
-        if n % BLOCK:
-            lo, hi = max(BLOCK, n // BLOCK * BLOCK), (n // BLOCK + 1) * BLOCK
-            use = f"{lo}" if lo == hi else f"{lo} or {hi}"
-            raise InputError(f"domain: {n} cells along {axis} is not a multiple of {BLOCK} (blocks of 8x8x8 cells): "
-                             f"use {use} cells (change domain.cells, or domain.size_m / domain.dx_m)")
-
-
-def padding_solid(scene: Scene):
-    """``solid(x, y, z)`` of the cells beyond the box that ``domain.pad_to_blocks`` adds (None where there are
-    none): the grid is :meth:`~iceresist.scene.schema.Domain.padded_cells`, the box its first
-    :meth:`~iceresist.scene.schema.Domain.shape_cells`."""
-    n = scene.domain.shape_cells()
-    if tuple(scene.domain.padded_cells()) == tuple(n):
-        return None
-
-    def outside_box(x, y, z):
-        return (x >= n[0]) | (y >= n[1]) | (z >= n[2])
-
-    return outside_box
-
-
-def check_free_surface_forces(scene: Scene) -> None:
-    """A free surface is driven by gravity alone, along -z: name the key otherwise."""
-    fl = scene.fluid
-    gx, gy, gz = fl.gravity_m_s2
-    if gx != 0.0 or gy != 0.0 or not gz < 0.0:
-        raise InputError(f"fluid.gravity_m_s2: the free surface needs gravity along -z, e.g. [0, 0, -9.81], "
-                         f"not {list(fl.gravity_m_s2)}")
-    if any(fl.body_force_N_m3):
-        raise InputError("fluid.body_force_N_m3: a free-surface scene is driven by gravity alone; "
-                         "leave the body force out")
-
 
 class FluidModel(Model):
     """The LBM fluid alone on the scene's grid (paper sections 2.1 and 2.5): the level-0 blocks of ``domain.dx_m``
@@ -96,7 +36,7 @@ class FluidModel(Model):
     :class:`~iceresist.lbm.refinement.RefinedLBM`: one model step is one level-0 step, level l taking 2^l steps in
     it (CPU or CUDA; on CUDA the conservative interface, every level's state and the transfers on the device).
 
-    The octree comes from the scene (:func:`~iceresist.models.regions.scene_octree`); its memory is reported before
+    The octree comes from the scene (:func:`~iceresist.scene.blocks.scene_octree`); its memory is reported before
     it is allocated, and a scene that does not fit the machine is refused. Fields are written on the level-0 grid
     (each level-0 cell the mean of the leaf cells inside it) and, on levels, every level's leaf cells as hexahedra
     for ParaView (``<run>.levels.xdmf``, :mod:`iceresist.io.levels`); diagnostics sum every leaf with its own cell
@@ -177,19 +117,26 @@ class FluidModel(Model):
 
     def _build(self, initialize: bool = True):
         """The levels' solver (``self.lbm``) on ``self.octree``, initialised from the scene (or left for the caller
-        to fill: a regrid, a pickup)."""
+        to fill: a regrid, a pickup), what the model adds on them (:meth:`_on_levels`) and, on several ranks, their
+        split of the steps (:meth:`_split_steps`)."""
         scene, u, fl = self.scene, self.units, self.scene.fluid
-        d = self.decomp
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=self.scheme,
                               rescale=self.scheme == "interpolate", target=self.target, solid=padding_solid(scene),
-                              views=None if d is None else d.views)
-        if d is not None:
-            for lv, s in self.lbm.solvers.items():
-                d.step_own(lv, s, self.target)
+                              views=None if self.decomp is None else self.decomp.views)
         if initialize:
-            u0 = tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s)
-            self.lbm.initialize(1.0, u0)
+            self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
+        self._on_levels()
+        if self.decomp is not None:
+            self._split_steps(self.decomp)
+
+    def _on_levels(self):
+        """What the model sets up on new levels before their steps are split over the ranks (nothing here)."""
+
+    def _split_steps(self, d):
+        """On several ranks: every level steps its own leaves and swaps its halo leaves after each step."""
+        for lv, s in self.lbm.solvers.items():
+            d.step_own(lv, s, self.target)
 
     # -- regridding ---------------------------------------------------------------------------------------
     def hot_cells(self) -> np.ndarray | None:
@@ -204,7 +151,7 @@ class FluidModel(Model):
 
     def body_boxes_m(self) -> np.ndarray | None:
         """The box each body takes now ((n, 2, 3): lo and hi, m), for the band that follows them; None: the
-        scene's ``[[bodies]]`` where they start (:func:`~iceresist.models.regions.static_regions`)."""
+        scene's ``[[bodies]]`` where they start (:func:`~iceresist.scene.blocks.static_regions`)."""
         return None
 
     @property
@@ -214,7 +161,7 @@ class FluidModel(Model):
 
     def regrid(self) -> bool:
         """Build the octree again from the criteria on the current flow and bodies
-        (:func:`~iceresist.models.regions.build_octree`, :meth:`hot_cells`, :meth:`body_boxes_m`); where it changed,
+        (:func:`~iceresist.scene.blocks.build_octree`, :meth:`hot_cells`, :meth:`body_boxes_m`); where it changed,
         carry every level's populations to the new blocks (:func:`iceresist.grid.regrid.carry_over`) and step on
         from there. Returns whether the blocks changed."""
         octree = build_octree(self.scene, self.hot_cells(), self.body_boxes_m())
@@ -243,27 +190,16 @@ class FluidModel(Model):
         tests/test_regrid_bodies.py), then :meth:`_fill`. On several ranks (``grid``: the new split, by default
         :meth:`_split` of ``octree``) the old levels are gathered on rank 0, carried over there and the new ones dealt
         out to the ranks."""
-        old_views, levels, iteration = self.lbm.views, self.lbm.levels, self.level0_steps
+        levels, iteration, old_grid = self.lbm.levels, self.level0_steps, self.grid
         old = {lv: self._populations(lv) for lv in levels}
         finest = self._finest_extra()
         grid = self._split(octree) if grid is None else grid
-        old_decomp, decomp = self.decomp, grid.decomp
         self._release_levels()
         self._adopt(octree, level_bytes, grid, iteration)
-        whole = None
-        if old_decomp is None:
-            new = {lv: np.zeros((self.lbm.views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
-            carry_over(old_views, old, self.lbm.views, new)
-        else:
-            old = {lv: old_decomp.gather(lv, f) for lv, f in old.items()}
-            if self.comm.rank == 0:
-                whole = {lv: np.zeros((decomp.global_views[lv].forest.nblocks, Q, CELLS)) for lv in self.lbm.levels}
-                carry_over(old_decomp.global_views, old, decomp.global_views, whole)
-            new = {lv: decomp.scatter(lv, None if whole is None else whole[lv]) for lv in self.lbm.levels}
-            old_views = old_decomp.global_views
-        self._fill(new, old_views, finest, whole)
-        del whole
-        del old, new, finest, old_views
+        new, whole = old_grid.carry_to(grid, old, Q)
+        del old
+        self._fill(new, old_grid.global_views, finest, whole)
+        del whole, new, finest, old_grid
         release_freed_memory()      # the old levels, which reference cycles hold (iceresist.limits)
 
     def _populations(self, lv: int) -> np.ndarray:
@@ -300,7 +236,7 @@ class FluidModel(Model):
         of ``old_views``; ``finest``: :meth:`_finest_extra`, unused here; on MPI ranks ``new`` is this rank's share,
         ``old_views`` the whole levels before and ``whole`` the whole carried levels on rank 0)."""
         for lv, s in self.lbm.solvers.items():
-            _set_populations(s, new[lv].astype(s.real))
+            s.set_populations(new[lv])
             s.iteration = self.level0_steps * 2 ** lv
 
     # -- protocol -------------------------------------------------------------------------------------
@@ -333,12 +269,9 @@ class FluidModel(Model):
         return self._own(lv, *self.lbm.leaf_fields(lv))
 
     def _own(self, lv: int, rho, u, xyz=None):
-        """rho (nleaves, 512), u (3, nleaves, 512) and the coordinates of level ``lv``'s leaves cut to this rank's
-        own leaves (all of them on one process)."""
-        if self.decomp is None:
-            return rho, u, xyz
-        n = self.grid.own_leaves(lv)
-        return rho[:n], u[:, :n], None if xyz is None else tuple(c[:n] for c in xyz)
+        """rho, u and the coordinates of level ``lv``'s leaves cut to this rank's own (:meth:`Grid.own`)."""
+        rho, u = self.grid.own(lv, rho, u)
+        return rho, u, None if xyz is None else self.grid.own(lv, *xyz)
 
     def _fluid_cells(self, lv: int, rho) -> np.ndarray:
         """Which of the leaf values ``rho`` of :meth:`_leaf` are fluid (the rest NaN: solid)."""
@@ -353,33 +286,12 @@ class FluidModel(Model):
         in a solid cell), and the means of :meth:`_leaf_extra` (a list); on several ranks on every rank, or on rank 0
         alone (None on the others) unless ``everywhere``. On one level the leaves are the level-0 cells: gathered
         and laid out, nothing averaged."""
-        if self.uniform:
-            rho, u, _ = self._leaf(0)
-            g = self.grid
-            parts = ((rho, 0), (u, 1), *((x, 0) for x in self._leaf_extra(0)))
-            values = [g.gather_leaves(0, v, axis=a) for v, a in parts]
-            dense = None if values[0] is None else [g.global_views[0].forest.to_dense(v) for v in values]
-            if everywhere:
-                dense = g.bcast(dense)
-            return None if dense is None else (dense[0], dense[1], dense[2:])
-        shape = tuple(self.shape_cells)
-        acc = None
-        weight = np.zeros(shape)
+        leaves = {}
         for lv in self.lbm.levels:
-            rho, u, (x, y, z) = self._leaf(lv)
-            values = (rho, *u, *self._leaf_extra(lv))
-            if acc is None:
-                acc = np.zeros((len(values), *shape))
-            idx = (x.ravel() >> lv, y.ravel() >> lv, z.ravel() >> lv)
-            w = 1.0 / 8 ** lv
-            np.add.at(weight, idx, w)
-            for k, v in enumerate(values):
-                np.add.at(acc[k], idx, w * np.asarray(v).ravel())
-        self.grid.reduce_arrays(acc, weight)      # every level-0 cell lies in one rank's trees: the others add zeros
-        if not (everywhere or self.grid.root):
-            return None
-        acc /= np.where(weight > 0, weight, np.nan)
-        return acc[0], acc[1:4], list(acc[4:])
+            rho, u, xyz = self._leaf(lv)
+            leaves[lv] = ([rho, *u, *self._leaf_extra(lv)], xyz)
+        acc = self.grid.level0_means(leaves, tuple(self.shape_cells), everywhere)
+        return None if acc is None else (acc[0], acc[1:4], list(acc[4:]))
 
     def fields(self) -> dict[str, np.ndarray]:
         """rho (kg/m^3), u (m/s, [x, y, z, 3]), pressure (Pa, gauge: c_s^2 (rho - rho0)) and flags (uint8) on the
@@ -511,15 +423,7 @@ class FluidModel(Model):
 
     def _octree_of(self, state: dict):
         """The checkpoint's octree on this scene's root blocks, None if its leaves do not tile this domain."""
-        lev = np.asarray(state["octree_level"], dtype=np.int64)
-        coord = np.asarray(state["octree_coord"], dtype=np.int64)
-        t = self.octree
-        if lev.ndim != 1 or coord.shape != (len(lev), 3) or len(lev) == 0 or lev.max() > t.max_level:
-            return None
-        volume = (8.0 ** -lev.astype(float)).sum()
-        if abs(volume - float(np.prod(t.root))) > 1e-9 or (coord >= (t.root[None, :] << lev[:, None])).any():
-            return None
-        return BlockOctree.from_leaves(t.root, t.max_level, t.periodic, lev, coord)
+        return self.grid.octree_of_leaves(state["octree_level"], state["octree_coord"])
 
     def _adopt_checkpoint_octree(self, state: dict):
         """After :meth:`check_checkpoint`: a regridding run picks up on the checkpoint's last grid."""
@@ -547,7 +451,7 @@ class FluidModel(Model):
                 what = "" if self.uniform else f" of level {lv}"
                 raise InputError(f"checkpoint populations{what} have shape {arr.shape}, this scene needs "
                                  f"{(nblocks, Q, CELLS)}: it belongs to another scene or refinement")
-            _set_populations(s, self.grid.level_rows(lv, arr).astype(s.real))
+            s.set_populations(self.grid.level_rows(lv, arr))
             s.iteration = int(state["iteration"]) * 2 ** lv
         self.lbm.iteration = int(state["iteration"])
 
@@ -572,16 +476,3 @@ class FluidModel(Model):
             return {"lbm": int(self.level_bytes[0])}
         return {f"lbm_level{lv}": int(n) for lv, n in self.level_bytes.items()}
 
-
-def _set_populations(solver, f: np.ndarray):
-    """Put host populations ``f[block, q, cell]`` into both buffers of the solver."""
-    setter = getattr(solver, "set_populations", None)
-    if setter is not None:
-        setter(f)
-        return
-    f = np.ascontiguousarray(f)
-    for buf in solver._f:
-        if hasattr(buf, "copy_to_device"):
-            buf.copy_to_device(f)
-        else:
-            buf[...] = f

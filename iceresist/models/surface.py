@@ -23,7 +23,9 @@ from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
 from iceresist.lattice import Q
 from iceresist.limits import check_fluid
-from iceresist.models.fluid import FluidModel, check_block_shape, check_free_surface_forces, forest_faces
+from iceresist.models.fluid import FluidModel
+from iceresist.scene.blocks import check_block_shape, forest_faces
+from iceresist.scene.checks import check_free_surface_forces
 
 
 class FreeSurfaceModel(FluidModel):

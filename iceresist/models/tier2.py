@@ -41,33 +41,21 @@ import math
 import numpy as np
 
 from iceresist.backends.graphs import StepReplay
+from iceresist.backends.jit import resolve_target
 from iceresist.coupling.geometry import Box, ConvexPolyhedron, ConvexUnion
-from iceresist.dem.bodies import matrix_from_quaternion
+from iceresist.dem.system import centre_of_mass_m
 from iceresist.errors import InputError
 from iceresist.grid.levels import level_views
 from iceresist.models.base import array_bytes
 from iceresist.models.floating_bodies import FloatingBodiesModel
-from iceresist.models.fluid import check_block_shape, forest_faces, resolve_target
-from iceresist.models.regions import build_octree
-from iceresist.models.ship import ShipModel, ship_start_x_m, steady_window_m
+from iceresist.models.ship import ShipModel
+from iceresist.scene.blocks import build_octree, check_block_shape, forest_faces
+from iceresist.ship.from_scene import start_wave_of_scene
 from iceresist.ship.meshhull import MeshHull
-from iceresist.ship.tank import start_wave, tank_flow
+from iceresist.ship.tank import tank_flow
 from iceresist.units import GRAVITY_M_S2
 
 log = logging.getLogger(__name__)
-
-
-def start_wave_of_scene(scene, geometry, layout) -> tuple:
-    """(:class:`~iceresist.ship.tank.StartWave`, steady window in s after the start) of a tier-2 ship scene:
-    the long wave of the impulsive start in the scene's tank, and when the window begins and ends."""
-    width_m = scene.shape_cells()[1] * scene.units().dx_m
-    speed = float(scene.ship.speed_m_s)
-    wave = start_wave(geometry.midship_area_m2, width_m, float(scene.free_surface.water_depth_m), speed,
-                      geometry.prismatic_length_m)
-    x0 = ship_start_x_m(scene)
-    window_m = steady_window_m(scene, geometry, layout)
-    window_s = tuple((x - x0) / speed for x in window_m) if speed > 0 else (math.inf, math.inf)
-    return wave, window_s
 
 
 class Tier2Model(FloatingBodiesModel, ShipModel):
@@ -217,13 +205,14 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
             r = float(np.linalg.norm(geometry.half_extent_m()))
             self._reach_m[i] = (np.full(3, -r), np.full(3, r))
         self._bodies = bodies
-        self._start_positions = self._centres_of_mass(bodies)
+        self._start_positions = np.array([centre_of_mass_m(shape, kw["position_m"], kw.get("orientation"))
+                                          for _, shape, kw in bodies])
 
     @classmethod
     def plan(cls, scene) -> dict:
         """The levels a scene would start on, without building them (no populations allocated): the ship and ice
         placed as :meth:`__init__` places them, the octree of the scene's criteria about them
-        (:func:`~iceresist.models.regions.build_octree`) and the ghost blocks of every level. Returns
+        (:func:`~iceresist.scene.blocks.build_octree`) and the ghost blocks of every level. Returns
         ``cells_per_level`` (leaf cells), ``ghost_cells_per_level``, ``cells_per_cube`` (at the finest level),
         ``updates_per_step`` (cell updates per level-0 step), ``dt_s`` (level 0's step), ``level0_steps`` (the
         case's) and ``level_bytes`` (what :meth:`__init__` checks against the memory: every level's populations, the
@@ -245,17 +234,6 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
                 "updates_per_step": int(sum(n * 2 ** lv for lv, n in cells.items())), "dt_s": u.dt_s,
                 "level0_steps": int(math.ceil(scene.run.end_time_s / u.dt_s - 1e-9)),
                 "level_bytes": self._level_bytes(views)}
-
-    @staticmethod
-    def _centres_of_mass(bodies) -> np.ndarray:
-        """Where each body's centre of mass starts (n, 3), m: the model frame's origin at ``position_m`` turned by
-        ``orientation``, as :meth:`DEMSystem.add_body` places it."""
-        out = []
-        for _, shape, kw in bodies:
-            q = kw.get("orientation")
-            turn = np.eye(3) if q is None else matrix_from_quaternion(np.asarray(q, dtype=float))
-            out.append(np.asarray(kw["position_m"], dtype=float) + turn @ np.asarray(shape.model_com_m, dtype=float))
-        return np.array(out)
 
     def _check_limits(self, scene, u):
         """None here: a ship scene's limits are tier 2's (the Mach rule of its units, the DEM sub-step)."""

@@ -1,7 +1,7 @@
 """The ship in brash ice, tier 1 (DEM with water models): mean ice resistance against the hull's sphere spacing.
 
 Case A-c68-v1.0 (Bow A, 68 % brash ice, 1 knot). The hull is a clump of spheres on its faces
-(:func:`iceresist.models.ship.hull_shape`); the rung refines their spacing, the resolution of the hull surface the ice
+(:func:`iceresist.ship.from_scene.hull_shape`); the rung refines their spacing, the resolution of the hull surface the ice
 touches. Quick ladder: the CI-sized channel of :data:`iceresist.sweep.TINY_OVERRIDES` (0.3 m of ice, 0.75 s);
 full ladder: the ``quick`` fidelity of :mod:`iceresist.scene.case_scenes` (1.39 m of ice). The headline quantity is the
 mean ice force in the steady window (:func:`iceresist.post.ice_resistance_from_timeseries`, as in

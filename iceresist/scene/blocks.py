@@ -1,5 +1,7 @@
 """The blocks a scene asks for: its level-0 grid, the regions of its ``[refinement]`` and the octree they give (paper
-section 2.5); a scene without ``[refinement]`` is the octree of one level (:func:`scene_octree`).
+section 2.5); a scene without ``[refinement]`` is the octree of one level (:func:`scene_octree`). Also its faces as
+the block forest takes them (:func:`forest_faces`), the whole blocks it must fill (:func:`check_block_shape`) and the
+padding of ``domain.pad_to_blocks`` (:func:`padding_solid`).
 
 Also the bodies' sizes the finest level must hold (:func:`body_mesh`, :func:`half_extent`) and the memory check of
 the levels (:func:`check_level_memory`).
@@ -12,11 +14,50 @@ import numpy as np
 from fsicr.errors import FsicrInputError
 from fsicr.hullmesh import MeshKeys, read_mesh
 from iceresist.errors import InputError
+from iceresist.grid.forest import BLOCK, Face
 from iceresist.grid.octree import BlockOctree
 from iceresist.grid.regrid import any_in_boxes
 from iceresist.limits import available_memory_bytes as mem_available
 from iceresist.scene.schema import Scene
 from iceresist.ship.meshhull import resolve_mesh_path
+from iceresist.units import Units
+
+#: Scene face name -> block-forest face name.
+FOREST_FACE = {"x_min": "x-", "x_max": "x+", "y_min": "y-", "y_max": "y+", "z_min": "z-", "z_max": "z+"}
+
+
+def forest_faces(scene: Scene, units: Units) -> dict:
+    """The scene's faces as block-forest :class:`Face` values in lattice units."""
+    faces = {}
+    for name, face in scene.domain.faces.items():
+        rho = face.density_kg_m3 if face.density_kg_m3 is not None else scene.rho_kg_m3
+        faces[FOREST_FACE[name]] = Face(face.kind, tuple(float(units.velocity_to_lattice(v)) for v in face.velocity_m_s),
+                                        float(units.density_to_lattice(rho)))
+    return faces
+
+
+def check_block_shape(shape_cells) -> None:
+    """The uniform forest needs whole 8x8x8 blocks: name the key and the nearest valid counts."""
+    for axis, n in zip("xyz", shape_cells):
+        if n % BLOCK:
+            lo, hi = max(BLOCK, n // BLOCK * BLOCK), (n // BLOCK + 1) * BLOCK
+            use = f"{lo}" if lo == hi else f"{lo} or {hi}"
+            raise InputError(f"domain: {n} cells along {axis} is not a multiple of {BLOCK} (blocks of 8x8x8 cells): "
+                             f"use {use} cells (change domain.cells, or domain.size_m / domain.dx_m)")
+
+
+def padding_solid(scene: Scene):
+    """``solid(x, y, z)`` of the cells beyond the box that ``domain.pad_to_blocks`` adds (None where there are
+    none): the grid is :meth:`~iceresist.scene.schema.Domain.padded_cells`, the box its first
+    :meth:`~iceresist.scene.schema.Domain.shape_cells`."""
+    n = scene.domain.shape_cells()
+    if tuple(scene.domain.padded_cells()) == tuple(n):
+        return None
+
+    def outside_box(x, y, z):
+        return (x >= n[0]) | (y >= n[1]) | (z >= n[2])
+
+    return outside_box
 
 def body_mesh(body, index: int, scene_source: str | None = None):
     """A mesh body's checked surface: vertices (n, 3) m about the centre of its bounding box, faces, and the
@@ -39,7 +80,6 @@ def half_extent(body, mesh=None) -> np.ndarray:
     if body.shape == "mesh":
         return np.abs(np.asarray(mesh[0] if isinstance(mesh, tuple) else mesh, dtype=float)).max(axis=0)
     return 0.5 * np.asarray(body.size_m, dtype=float)
-
 
 
 #: Face kinds that are solid walls (their boundary layers are what ``refinement.wall_band_m`` refines).

@@ -17,12 +17,12 @@ import time
 from pathlib import Path
 
 from iceresist import parallel
+from iceresist.backends.jit import resolve_target
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
 from iceresist.io.paths import check_output_dir
 from iceresist.limits import check_memory
 from iceresist.models import build_model
-from iceresist.backends.jit import resolve_target
 from iceresist.post.case import window_summary
 from iceresist.scene.load import load_scene, preset_names
 from iceresist.scene.schema import Scene

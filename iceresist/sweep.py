@@ -37,13 +37,12 @@ from pydantic import ValidationError
 
 from fsicr.hullmesh import MeshKeys
 from iceresist import parallel
-from iceresist.backends.jit import set_threads as set_backend_threads
+from iceresist.backends.jit import resolve_target, set_threads as set_backend_threads
 from iceresist.driver import DEFAULT_CHECKPOINT_WALL_S, Outputs, Stop, run_model
 from iceresist.errors import InputError
 from iceresist.io.checkpoint import read_checkpoint
 from iceresist.io.paths import check_output_dir
 from iceresist.models import Tier1Model, Tier2Model
-from iceresist.backends.jit import resolve_target
 from iceresist.post.sweeptable import TABLE_NAME, case_path, is_finished, stored_meta as _stored_meta, sweep_table
 from iceresist.scene.case_scenes import CASES, FIDELITIES, case_scene, get_case
 from iceresist.ship.cases import amr_overrides

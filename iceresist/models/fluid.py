@@ -24,8 +24,8 @@ from iceresist.lbm.refinement import RefinedLBM
 from iceresist.limits import check_fluid, release_freed_memory
 from iceresist.models.base import Model
 from iceresist.models.probe import fluid_probe
-from iceresist.scene.blocks import (build_octree, check_level_memory, forest_faces, padding_solid, scene_octree,
-                                     check_block_shape)
+from iceresist.scene.blocks import (build_octree, check_block_shape, check_level_memory, forest_faces, padding_solid,
+                                     scene_octree)
 from iceresist.scene.schema import Scene
 
 log = logging.getLogger(__name__)

@@ -14,10 +14,10 @@ import logging
 import sys
 
 from fsicr.cliparser import OneLineParser
+from iceresist.backends.jit import resolve_target
 from iceresist.console import configure_logging
 from iceresist.errors import InputError
 from iceresist.io.paths import check_output_dir
-from iceresist.backends.jit import resolve_target
 from iceresist.post.convergence import markdown_table
 from iceresist.sweep import set_threads
 from iceresist.validate.ladder import run_ladders

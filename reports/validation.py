@@ -1,5 +1,6 @@
 """The validation report of a ``iceresist validate`` folder: ``report.html`` (self-contained) and ``report.pdf``,
-the stability map (``stability.png``) and the settling-sphere figure of docs/notes/settling-sphere.md.
+the stability map (``stability.png``), the heave of the floating sphere against the measurement (from the rungs'
+result files) and the settling-sphere figure of docs/notes/settling-sphere.md.
 
 Reads only the files the validation wrote (``DIR/ladder.csv``, ``DIR/stability.csv``, a settling-velocity
 CSV) and reduces them with :mod:`iceresist.post.convergence`; never runs a simulation. Uses the machinery of
@@ -17,9 +18,11 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from iceresist.errors import InputError
+from iceresist.io.hdf5 import RunFile
 from iceresist.post.convergence import THRESHOLDS, case_summary, cheapest_runs, load_table, with_errors
 from reports.common import html_table, pdf_table_page, png64, pyplot, template_env
 
@@ -114,8 +117,10 @@ def write_validation_report(out_dir, references: dict | None = None,
         cols = dict(RUN_COLUMNS)
         if "error_vs_finest" in rows and rows.error_vs_finest.notna().any():
             cols["error_vs_finest"] = "error vs finest rung"
+        fig = CASE_FIGURES[case](plt, rows) if case in CASE_FIGURES else None
         cases.append({"name": case, "reference": references.get(case, ""),
-                      "table": html_table(rows, cols, na_rep=""), "rows": rows, "columns": cols})
+                      "table": html_table(rows, cols, na_rep=""), "rows": rows, "columns": cols, "fig": fig,
+                      "image": png64(fig) if fig is not None else ""})
     missing_list = [(n, why) for n, why in missing.items() if n not in set(table.case)]
     html = template_env().get_template("validation.html.j2").render(
         out_dir=str(out), generated=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
@@ -134,6 +139,8 @@ def write_validation_report(out_dir, references: dict | None = None,
         pdf.savefig(figs["error_time"])
         for c in cases:
             pdf.savefig(pdf_table_page(plt, c["rows"], c["columns"], f"{c['name']}", na_rep=""))
+            if c["fig"] is not None:
+                pdf.savefig(c["fig"])
         if missing_list:
             pdf.savefig(pdf_table_page(plt, pd.DataFrame(missing_list, columns=["case", "status"]),
                                        {"case": "case", "status": "status"}, "Cases not available"))
@@ -142,6 +149,48 @@ def write_validation_report(out_dir, references: dict | None = None,
     plt.close("all")
     log.info("validation report: %s, %s", html_path, pdf_path)
     return html_path, pdf_path
+
+
+# -- figures of single cases ------------------------------------------------------------------------------------
+def heave_decay_figure(plt, rows: pd.DataFrame):
+    """The floating sphere's heave against time, one line per rung whose result file is at hand (the centre's height
+    over the water's mean level in the last measured period: the floating level), with the measurement
+    (Kramer et al. 2021): the envelope of the release height decaying at the measured rate and the measured first
+    trough at half the measured period. None without a result file."""
+    fig, ax = plt.subplots(figsize=(7.5, 4.0))
+    drawn, h0 = 0, None
+    for _, r in rows.iterrows():
+        path = Path(str(r.get("x_result_file", "")))
+        if not path.is_file():
+            continue
+        with RunFile(path, "r") as rf:
+            ts = rf.timeseries()
+        t, z, level = (np.asarray(ts[k], dtype=float) for k in ("time_s", "sphere_z_m", "water_level_m"))
+        z = z - level[t >= t[-1] - float(r.reference)].mean()
+        h0 = z[0] if h0 is None else h0
+        ax.plot(t, 1e3 * z, lw=1.0, label=str(r.label))
+        drawn += 1
+    if not drawn:
+        plt.close(fig)
+        return None
+    r = rows.iloc[0]
+    t = np.linspace(0.0, ax.get_xlim()[1], 200)
+    env = 1e3 * h0 * np.exp(-float(r.x_sigma_1_s_reference) * t)
+    ax.plot(t, env, "k--", lw=0.8, label="measured decay rate (envelope)")
+    ax.plot(t, -env, "k--", lw=0.8)
+    ax.plot([0.5 * float(r.reference)], [-1e3 * h0 * float(r.x_first_trough_ratio_reference)], "kv", ms=7,
+            label="measured first trough")
+    ax.axhline(0.0, color="0.6", lw=0.6)
+    ax.set_xlabel("time after release [s]")
+    ax.set_ylabel("heave [mm]")
+    ax.set_title("Floating sphere, free heave decay against Kramer et al. (2021)", fontsize=9)
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    return fig
+
+
+#: Case name -> figure of its rungs (``plt``, the case's rows of the ladder table) drawn under its table.
+CASE_FIGURES = {"heave_decay": heave_decay_figure}
 
 
 # -- the stability map (iceresist validate --stability) ----------------------------------------------------

@@ -99,10 +99,11 @@ def build(n: int, *, release_draft: float = 0.8, tau: float = 0.55, g_lattice: f
                              backend=backend))
 
 
-def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshold: float = 0.05) -> dict:
+def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshold: float = 0.05,
+                   about: float | None = None) -> dict:
     """Heave of a released body from the series ``z_m`` (any measure of the heave, e.g. the submerged fraction).
 
-    ``mean``: the mean over the last ``t_window_s``. Extremes: the largest excursion |z - mean| between
+    ``mean``: the mean over the last ``t_window_s``, or ``about`` where given (a known floating position). Extremes: the largest excursion |z - mean| between
     successive crossings of the mean, the release counting as the first; excursions below ``threshold`` of the
     release excursion (noise about the settled state) are dropped and neighbours of one sign merged.
     ``half_ratio``: mean ratio of successive extremes (the decay per half period); ``damping_ratio``
@@ -110,7 +111,7 @@ def heave_analysis(t_s: np.ndarray, z_m: np.ndarray, t_window_s: float, threshol
     mean time between extremes; ``natural_period_s`` = period_s sqrt(1 - zeta^2). NaN where fewer than two
     extremes remain."""
     last = t_s >= t_s[-1] - t_window_s
-    mean = float(z_m[last].mean())
+    mean = float(z_m[last].mean()) if about is None else float(about)
     s = z_m - mean
     bounds = np.concatenate([[0], np.flatnonzero(np.sign(s[:-1]) != np.sign(s[1:])) + 1, [len(s)]])
     ext = []

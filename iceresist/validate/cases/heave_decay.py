@@ -8,7 +8,8 @@ floating position and released from rest. For the smallest drop, H0 = 0.1 D (mea
 the measured first damped period is T1 = 0.7869 s and the first trough lies 24.93 mm below the floating position
 (its ratio to H0, 0.855, is the first half cycle's decay); over the first three periods the decay rate is
 0.831 1/s (damping ratio 0.100). These figures are reduced from the paper's public time series (its supplementary
-material, four repetitions, spread 0.13 % in period); docs/VALIDATION.md cites them.
+material, four repetitions, spread 0.13 % in period; reduced by a third party from those files and not yet
+re-derived here); docs/VALIDATION.md cites them.
 
 The set-up: the sphere in the middle of a square tank of walls ``tank_diameters`` D wide (the basin's far walls
 cannot be afforded: the tank's effect is measured by running two widths), water 0.9 m deep, the cumulant operator

@@ -2,8 +2,8 @@
 docs/SHIP.md), for the models of tiers 1 and 2 (:mod:`iceresist.models.ship`): the hull geometry and its DEM clump, the
 ice layout, the stem's start, the steady window, the start wave and the check that the hull fits the tank.
 
-``scene`` is any object with the scene's sections (:class:`iceresist.scene.schema.Scene`; this package does not import
-the scene's package, which imports it).
+``scene`` is any object with the scene's sections (:class:`iceresist.scene.schema.Scene`; this module imports nothing
+from the scene's package, which imports the ship's).
 """
 
 from __future__ import annotations

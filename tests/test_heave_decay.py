@@ -52,7 +52,7 @@ def test_quick_rung_heaves_near_the_measured_period_and_decay():
     first trough 0.855 of the drop) within what 12 cells per diameter gives (docs/VALIDATION.md, "Heave decay"):
     the period 11 % long today, bound 15 %. Planted: a sphere's mass x 1.5 in the DEM (it then floats deeper and
     its heave never crosses the floating level of the drop) gives no period and fails."""
-    r = hd.run(hd._rung(12, 8, 4.0))
+    r = hd.run(hd.rung(12, 8, 4.0))
     assert r.error < 0.15
     assert r.extra["sigma_1_s"] == pytest.approx(hd.SIGMA_1_S, rel=0.15)
     assert r.extra["first_trough_ratio"] == pytest.approx(0.855, abs=0.05)

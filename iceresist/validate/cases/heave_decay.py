@@ -53,7 +53,8 @@ RADIUS_M = 0.5 * DIAMETER_M
 DENSITY = MASS_KG / (4.0 / 3.0 * math.pi * RADIUS_M ** 3)
 
 
-def _rung(n: int, tank: int, periods: float) -> dict:
+def rung(n: int, tank: int, periods: float) -> dict:
+    """The parameters of one rung: ``n`` cells per diameter, a tank ``tank`` diameters wide, ``periods`` periods."""
     return {"label": f"{n} cells/D, tank {tank} D", "resolution": n, "tank_diameters": tank, "periods": periods}
 
 
@@ -62,8 +63,8 @@ def ladder(quick: bool) -> list[dict]:
     sixteen on the full ladder): the tank's effect measured; the quick ladder 8 and 12 cells/D in the tank of four,
     12 in the tank of eight. Every rung runs four measured periods (three are analysed after the first trough)."""
     if quick:
-        return [_rung(8, 4, 4.0), _rung(12, 4, 4.0), _rung(12, 8, 4.0)]
-    return [_rung(n, t, 4.0) for t in (4, 8) for n in (8, 12, 16, 24)] + [_rung(12, 16, 4.0)]
+        return [rung(8, 4, 4.0), rung(12, 4, 4.0), rung(12, 8, 4.0)]
+    return [rung(n, t, 4.0) for t in (4, 8) for n in (8, 12, 16, 24)] + [rung(12, 16, 4.0)]
 
 
 def submerged_volume_m3(centre_above_level_m: float) -> float:
@@ -147,11 +148,11 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
     sc = scene(n, w, periods=params["periods"], backend=backend, precision=precision)
     model = build_model(sc)
     steps = sc.run.steps
-    rung = run_rung(model, sc, out_dir, NAME, params, steps=steps, sample_every=5)
-    ts = rung.timeseries
+    ran = run_rung(model, sc, out_dir, NAME, params, steps=steps, sample_every=5)
+    ts = ran.timeseries
     res = analyse(ts["time_s"], ts["sphere_z_m"] - DEPTH_M)
     return CaseResult(case=NAME, label=params["label"], resolution=float(n), cells=model.cells, steps=steps,
-                      wall_s=rung.run_time_s, quantity="damped heave period (s)", value=res["period_s"],
+                      wall_s=ran.run_time_s, quantity="damped heave period (s)", value=res["period_s"],
                       reference=PERIOD_S, error=relative_error(res["period_s"], PERIOD_S), backend=backend,
                       precision=precision,
                       extra={"tank_diameters": w, "first_trough_ratio": res["first_trough_ratio"],
@@ -160,4 +161,4 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
                              "first_trough_ratio_reference": FIRST_TROUGH_M / DROP_M,
                              "damping_ratio": res["damping_ratio"], "damping_ratio_reference": DAMPING_RATIO,
                              "volume_drift": float(np.abs(ts["water_volume_drift"]).max()),
-                             "result_file": str(rung.path)})
+                             "result_file": str(ran.path)})

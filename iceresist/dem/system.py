@@ -184,6 +184,19 @@ class DEMSystem:
         self._put("ext", np.concatenate([force_N, torque_N_m], axis=1))
         self._loads_stale = True
 
+    def set_prescribed_velocity(self, body: int, velocity_m_s):
+        """Move the kinematic ``body`` at ``velocity_m_s`` (m/s) from the next sub-step on (a forced oscillation
+        changes it every step; a free body is refused)."""
+        if not self._bodies[body].kinematic:
+            raise InputError(f"set_prescribed_velocity: body {body} is free; only a kinematic body is moved")
+        v = np.asarray(velocity_m_s, dtype=float)
+        if not self._built:
+            self._bodies[body].velocity = v.copy()
+            return
+        self._h["pvel"][body] = v
+        if self.target.is_cuda:
+            self._d["pvel"].copy_to_device(self._h["pvel"])
+
     def device(self, name: str):
         """The target array ``name`` of the system (``pos``, ``quat``, ``vel``, ``omega``, ``ext``, ...; shapes as
         in :meth:`state`), for a coupling that reads the body state and writes the external loads on the target.

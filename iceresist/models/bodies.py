@@ -19,8 +19,8 @@ with a free surface are :class:`~iceresist.models.floating_bodies.FloatingBodies
 
 Motion (``bodies[].motion``): ``free`` bodies move under gravity, the fluid force and the DEM contacts (their
 ``density_kg_m3`` sets mass and inertia); ``fixed`` bodies stay at rest and ``prescribed`` bodies move at
-``velocity_m_s`` (both kinematic: they act on the fluid and on free bodies and are not moved by either). The
-domain's wall faces (``wall``, ``moving_wall``, ``slip``) are DEM contact planes; without a ``[contact]`` section
+``velocity_m_s``, with ``oscillation`` a harmonic motion on top (both kinematic: they act on the fluid and on free
+bodies and are not moved by either). The domain's wall faces (``wall``, ``moving_wall``, ``slip``) are DEM contact planes; without a ``[contact]`` section
 the DEM keeps its own contact law (:class:`~iceresist.dem.ContactParameters`, sub-step 0.05 of the critical step).
 
 Units: a physical scene gives dx (``domain.dx_m``) and dt (``numerics.dt_s`` or the Mach rule of
@@ -275,6 +275,21 @@ class FinestLevelBodies(BodyShapes):
             raise RuntimeError(error)
         self.coupling.load_state(st)
 
+    def _couple(self):
+        """The coupled step of the finest level (:meth:`FluidStructureCoupling.step`), the oscillating bodies'
+        velocities set for it first (:meth:`_drive_oscillations`)."""
+        self._drive_oscillations()
+        self.coupling.step(1)
+
+    def _drive_oscillations(self):
+        """Each prescribed body with ``oscillation`` moves over the coming step at its prescribed velocity at the
+        step's middle (``velocity_m_s`` plus :meth:`~iceresist.scene.schema.Oscillation.velocity_m_s`): its centre
+        follows the prescribed path to second order in the step."""
+        t_s = self.dem.time_s + 0.5 * self.units_finest.dt_s
+        for i, b in enumerate(self.scene.bodies):
+            if b.oscillation is not None:
+                self.dem.set_prescribed_velocity(i, np.add(b.velocity_m_s, b.oscillation.velocity_m_s(t_s)))
+
     def _bodies_finite(self) -> bool:
         return bool(np.isfinite(self.dem.positions).all() and np.isfinite(self.coupling.fluid_force_N).all())
 
@@ -333,7 +348,7 @@ class BodiesModel(FinestLevelBodies, FluidModel):
         con = self.scene.contact
         self.coupling = FluidStructureCoupling(self.lbm.solvers[finest], self.dem, self.geoms, self.units_finest,
                                                buoyancy=True, contact_film=True if con is None else con.fluid_film)
-        self.lbm.set_stepper(finest, lambda: self.coupling.step(1))
+        self.lbm.set_stepper(finest, self._couple)
 
     def _split_steps(self, d):
         """On several ranks: a coarser level steps its own leaves and swaps its halo leaves after each step; the
@@ -348,7 +363,7 @@ class BodiesModel(FinestLevelBodies, FluidModel):
                 d.step_own(lv, level, t)
 
         def step():
-            self.coupling.step(1)
+            self._couple()
             d.exchange(self.finest, finest.state, t)
 
         self.lbm.set_stepper(self.finest, step)

@@ -81,14 +81,10 @@ class FloatingBodiesModel(FinestLevelBodies, FreeSurfaceModel):
 
     def _finest_step(self):
         """One step of the finest level: the ghost blocks refilled from the coarser level, then the coupled step
-        (boundaries, free-surface step, DEM: :meth:`_couple`); on several ranks the halo leaves swapped after it."""
+        (boundaries, free-surface step, DEM: :meth:`FinestLevelBodies._couple`); on several ranks the halo leaves swapped after it."""
         self.fs.refill_ghosts()
         self._couple()
         self._swap_finest()
-
-    def _couple(self):
-        """The coupled step of the finest level (:meth:`FluidStructureCoupling.step`)."""
-        self.coupling.step(1)
 
     def _swap_finest(self):
         """On several ranks: the finest level's halo leaves take their owners' whole state (populations, h, phi,

@@ -29,6 +29,7 @@ SECTIONS = [
     ("[ice] (optional)", S.Ice, "ice"),
     ("[contact] (optional)", S.Contact, "contact"),
     ("[[bodies]] (optional, repeatable)", S.Body, "bodies[]"),
+    ("[bodies.oscillation] (optional, a prescribed body)", S.Oscillation, "bodies[].oscillation"),
     ("[refinement] (optional)", S.Refinement, "refinement"),
     ("[[refinement.boxes]] (repeatable)", S.RefinementBox, "refinement.boxes[]"),
 ]
@@ -209,6 +210,11 @@ paper (interpolated bounce-back, momentum exchange, eqs. 16-21).
   contacts (`density_kg_m3` sets its mass); `"fixed"`: at rest;
   `"prescribed"`: moves at `velocity_m_s`. Fixed and prescribed bodies push
   the fluid and the free bodies and are not moved by either.
+* A prescribed body with `oscillation = { amplitude_m = [0, 0, 0.015],
+  period_s = 0.78 }` heaves (surges, sways) about its path, the amplitude
+  ramped up over `ramp_periods`: a forced-oscillation test, the fluid force
+  in the time series gives added mass and damping (the validation case
+  `heave_added_mass`).
 * Without `[free_surface]` the box's faces are the scene's (inlets, outlets,
   periodic, walls); gravity (`fluid.gravity_m_s2`) acts on the bodies and the
   fluid adds the buoyancy -rho V g to each (the flow carries no hydrostatic

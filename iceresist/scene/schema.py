@@ -433,9 +433,41 @@ class Contact(_Section):
                                                               "each record is the mean over its DEM sub-steps.")
 
 
+class Oscillation(_Section):
+    """``bodies[].oscillation`` (a prescribed body only): a harmonic motion on top of ``velocity_m_s``, the forced
+    oscillation of a seakeeping test (added mass and radiation damping from the force in phase with the
+    acceleration and with the velocity). The body's centre moves by r(t) amplitude_m sin(2 pi t / period_s), the
+    ramp r(t) = (1 - cos(pi t / t_r)) / 2 rising from 0 to 1 over t_r = ramp_periods periods (no jump in
+    velocity at the start), 1 after."""
+
+    amplitude_m: Vec3 = Field(..., description="Amplitude of the centre's displacement along x, y, z (m).")
+    period_s: float = Field(..., gt=0, description="Period of the oscillation (s).")
+    ramp_periods: float = Field(1.0, ge=0, description="Periods over which the amplitude rises from zero (0: the "
+                                                       "full amplitude from the start, a jump in velocity).")
+
+    def velocity_m_s(self, t_s: float) -> tuple[float, float, float]:
+        """The oscillation's velocity (m/s) at time ``t_s``: d/dt [r(t) amplitude sin(omega t)]."""
+        omega = 2.0 * math.pi / self.period_s
+        t_r = self.ramp_periods * self.period_s
+        if t_s < t_r:
+            r = 0.5 * (1.0 - math.cos(math.pi * t_s / t_r))
+            dr = 0.5 * math.pi / t_r * math.sin(math.pi * t_s / t_r)
+        else:
+            r, dr = 1.0, 0.0
+        s = dr * math.sin(omega * t_s) + r * omega * math.cos(omega * t_s)
+        return tuple(a * s for a in self.amplitude_m)
+
+    def displacement_m(self, t_s: float) -> tuple[float, float, float]:
+        """The oscillation's displacement (m) at time ``t_s``: r(t) amplitude sin(omega t)."""
+        t_r = self.ramp_periods * self.period_s
+        r = 0.5 * (1.0 - math.cos(math.pi * t_s / t_r)) if t_s < t_r else 1.0
+        s = r * math.sin(2.0 * math.pi * t_s / self.period_s)
+        return tuple(a * s for a in self.amplitude_m)
+
+
 class Body(_Section):
     """``[[bodies]]``: an extra rigid body (box, sphere or convex mesh), free, fixed or moving at a prescribed
-    velocity."""
+    velocity (with ``oscillation``, a harmonic motion on top of it)."""
 
     name: str = Field(..., pattern=r"^[A-Za-z0-9_.-]+$", description="Body name (time-series column prefix).")
     shape: Literal["box", "sphere", "mesh"] = Field(..., description="`box` (edges size_m), `sphere` (radius_m) or "
@@ -455,6 +487,8 @@ class Body(_Section):
     velocity_m_s: Vec3 = Field((0.0, 0.0, 0.0), description="Velocity at t = 0, or the prescribed velocity (m/s).")
     density_kg_m3: float | None = Field(None, gt=0, description="Density (kg/m^3); needed for `free` bodies.")
     motion: Literal["free", "prescribed", "fixed"] = Field("free", description="How the body moves.")
+    oscillation: Oscillation | None = Field(None, description="A prescribed body: a harmonic motion on top of "
+                                            "velocity_m_s, see `[bodies.oscillation]`.")
 
     @model_validator(mode="after")
     def _shape_keys(self):
@@ -466,6 +500,9 @@ class Body(_Section):
             raise ValueError("mesh_file: a mesh body needs its file, e.g. mesh_file = \"body.stl\"")
         if self.motion == "free" and self.density_kg_m3 is None:
             raise ValueError("density_kg_m3: a free body needs its density")
+        if self.oscillation is not None and self.motion != "prescribed":
+            raise ValueError(f"oscillation: only a prescribed body oscillates: set motion = \"prescribed\" (this "
+                             f"body is {self.motion})")
         return self
 
 

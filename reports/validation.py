@@ -189,8 +189,29 @@ def heave_decay_figure(plt, rows: pd.DataFrame):
     return fig
 
 
+def heave_added_mass_figure(plt, rows: pd.DataFrame):
+    """The half-submerged sphere's heave added mass A and damping B from forced oscillation against cells per
+    diameter, one line per frequency (KR) and tank, with Hulme's (1982) values dashed. None without the columns."""
+    if not {"x_kr", "x_tank_diameters", "x_B", "x_B_reference"} <= set(rows.columns):
+        return None
+    fig, axes = plt.subplots(1, 2, figsize=(8.5, 3.6))
+    for (kr, tank), g in rows.groupby(["x_kr", "x_tank_diameters"]):
+        g = g.sort_values("resolution")
+        for ax, col, ref in ((axes[0], "value", "reference"), (axes[1], "x_B", "x_B_reference")):
+            line, = ax.plot(g.resolution, g[col], "o-", ms=4, label=f"KR {kr:g}, tank {tank:g} D")
+            ax.axhline(float(g[ref].iloc[0]), color=line.get_color(), ls="--", lw=0.8)
+    for ax, name in zip(axes, ("added mass A = a33 / (rho V)", "damping B = b33 / (rho V omega)")):
+        ax.set_xlabel("cells per diameter")
+        ax.set_ylabel(name)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=7)
+    fig.suptitle("Sphere in forced heave against Hulme (1982), dashed", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
 #: Case name -> figure of its rungs (``plt``, the case's rows of the ladder table) drawn under its table.
-CASE_FIGURES = {"heave_decay": heave_decay_figure}
+CASE_FIGURES = {"heave_decay": heave_decay_figure, "heave_added_mass": heave_added_mass_figure}
 
 
 # -- the stability map (iceresist validate --stability) ----------------------------------------------------

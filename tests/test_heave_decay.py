@@ -43,10 +43,10 @@ def test_the_reduction_recovers_a_decaying_oscillation():
                                                     rel=1e-3)
 
 
-# 12 cells per diameter in a tank of eight diameters, four periods: 160 s on a 2-core x86 VM once its kernels are
-# built, and about 10 min building the free surface's cumulant float32 kernels with the coupling, which no CI test
-# builds: CI would grow from 28 to about 41 min (2 test processes), too near its 45; slow until the rung shares them
-@pytest.mark.slow
+# 12 cells per diameter in a tank of eight diameters, four periods: about 2 min on one core of a 2-core x86 VM. Its
+# kernels are tier 2's (the free surface's cumulant float32 kernels with the coupling): after tests/test_tier2.py it
+# compiles two small ones (1 s); the group keeps the two in one test process, so they are compiled once
+@pytest.mark.xdist_group("tier2_kernels")
 def test_quick_rung_heaves_near_the_measured_period_and_decay():
     """The quick ladder's finest rung against the measurement (first damped period 0.7869 s, decay rate 0.831 1/s,
     first trough 0.855 of the drop) within what 12 cells per diameter gives (docs/VALIDATION.md, "Heave decay"):

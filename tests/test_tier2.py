@@ -12,6 +12,8 @@ from iceresist.post.case import analyse_case
 from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES, run_case
 
 CASE = "A-c68-v1.0"
+#: one test process for the tests that build tier 2's kernels (the heave cases' CI rungs share them)
+pytestmark = pytest.mark.xdist_group("tier2_kernels")
 
 
 @pytest.fixture(scope="module")

@@ -27,7 +27,7 @@ log = logging.getLogger(__name__)
 
 #: The reference cases of ``iceresist validate`` in report order (issue: error against run time).
 KNOWN_CASES = ("poiseuille", "taylor_green", "sphere_drag", "sphere_array", "standing_wave", "dam_break", "floating_cube",
-               "heave_decay",
+               "heave_decay", "heave_added_mass",
                "settling_sphere", "ship_tier1", "ship_tier2", "ship_tier2_amr")
 KEY = ("case", "label", "ladder", "backend", "precision")
 

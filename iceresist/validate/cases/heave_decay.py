@@ -59,12 +59,12 @@ def rung(n: int, tank: int, periods: float) -> dict:
 
 
 def ladder(quick: bool) -> list[dict]:
-    """Cells per diameter from coarse to fine in tanks of four and eight diameters (and 12 cells/D in one of
+    """Cells per diameter from coarse to fine in tanks of four and eight diameters (and 12 and 16 cells/D in one of
     sixteen on the full ladder): the tank's effect measured; the quick ladder 8 and 12 cells/D in the tank of four,
     12 in the tank of eight. Every rung runs four measured periods (three are analysed after the first trough)."""
     if quick:
         return [rung(8, 4, 4.0), rung(12, 4, 4.0), rung(12, 8, 4.0)]
-    return [rung(n, t, 4.0) for t in (4, 8) for n in (8, 12, 16, 24)] + [rung(12, 16, 4.0)]
+    return [rung(n, t, 4.0) for t in (4, 8) for n in (8, 12, 16, 24)] + [rung(n, 16, 4.0) for n in (12, 16)]
 
 
 def submerged_volume_m3(centre_above_level_m: float) -> float:
@@ -82,11 +82,12 @@ def release_level_m(tank_width_m: float, floating_level_m: float, drop_m: float)
                   floating_level_m - RADIUS_M, floating_level_m + RADIUS_M, xtol=1e-12)
 
 
-def scene(n: int, tank_diameters: float, *, periods: float = 4.0, drop_m: float = DROP_M, g_lattice: float = 1e-3,
-          precision: str = "float32", backend: str = "cpu"):
-    """The tank with the sphere at ``n`` cells per diameter: ``tank_diameters`` D square (whole blocks), water
-    ``DEPTH_M`` deep at the floating state, a quarter of a diameter of air over the released sphere's top, the time
-    step sqrt(g_lattice dx / g), run ``periods`` measured periods."""
+def tank_data(n: int, tank_diameters: float, *, duration_s: float, drop_m: float = DROP_M,
+              g_lattice: float = 1e-3, precision: str = "float32", backend: str = "cpu") -> dict:
+    """The scene data (:func:`~iceresist.validate.scenes.scene_data` of ``heave_decay.toml``) of the tank with the
+    sphere ``drop_m`` above its floating position, ``n`` cells per diameter: ``tank_diameters`` D square (whole
+    blocks), water ``DEPTH_M`` deep at the floating state, a quarter of a diameter of air over the sphere's top,
+    the time step sqrt(g_lattice dx / g), ``duration_s`` of run."""
     dx = DIAMETER_M / n
     nxy = int(math.ceil(tank_diameters * n / 8) * 8)
     nz = int(math.ceil((DEPTH_M + RADIUS_M + drop_m + 0.25 * DIAMETER_M) / dx / 8) * 8)
@@ -94,16 +95,25 @@ def scene(n: int, tank_diameters: float, *, periods: float = 4.0, drop_m: float 
     level = release_level_m(width, DEPTH_M, drop_m)
     dt = math.sqrt(g_lattice * dx / G)
     data = scene_data(NAME)
-    data["scene"].update(name=f"{NAME}-{n}-{tank_diameters:g}D",
-                         description=f"sphere D 0.3 m dropped {drop_m * 1e3:g} mm, {n} cells/D, tank {tank_diameters:g} D")
     data["domain"].update(cells=[nxy, nxy, nz], dx_m=dx)
     data["fluid"].update(rho_kg_m3=RHO_WATER, gravity_m_s2=[0.0, 0.0, -G])
     data["numerics"].update(dt_s=dt, precision=precision, backend=backend,
                             mach=min(0.3, max(0.2, 1.1 * math.sqrt(g_lattice * level / dx))))
-    data["run"] = {"steps": int(math.ceil(periods * PERIOD_S / dt))}
+    data["run"] = {"steps": int(math.ceil(duration_s / dt))}
     data["free_surface"]["water_depth_m"] = level
     data["bodies"][0].update(radius_m=RADIUS_M, density_kg_m3=DENSITY,
                              position_m=[0.5 * width, 0.5 * width, DEPTH_M + drop_m])
+    return data
+
+
+def scene(n: int, tank_diameters: float, *, periods: float = 4.0, drop_m: float = DROP_M, g_lattice: float = 1e-3,
+          precision: str = "float32", backend: str = "cpu"):
+    """The tank of :func:`tank_data` with the sphere released ``drop_m`` above its floating position, run
+    ``periods`` measured periods."""
+    data = tank_data(n, tank_diameters, duration_s=periods * PERIOD_S, drop_m=drop_m, g_lattice=g_lattice,
+                     precision=precision, backend=backend)
+    data["scene"].update(name=f"{NAME}-{n}-{tank_diameters:g}D",
+                         description=f"sphere D 0.3 m dropped {drop_m * 1e3:g} mm, {n} cells/D, tank {tank_diameters:g} D")
     return scene_of(data, f"{NAME} {n} cells/D, tank {tank_diameters:g} D")
 
 

@@ -40,7 +40,7 @@ def _field(fs, full):
 
 @pytest.mark.parametrize("full", [True, False])
 def test_probe_equals_the_dense_reading(flow, full):
-    """Same extremes (to 1e-12) at cells holding them, same kinetic energy, on a flow whose fields vary."""
+    """Same extremes (to 1e-12) at cells holding them, same kinetic energy and mass, on a flow whose fields vary."""
     got, ref = flow.probe(full, KE_REF), _reference(flow, full)
     assert got["finite"] == ref["finite"] == (True, None)
     assert set(got) == set(ref)
@@ -52,6 +52,7 @@ def test_probe_equals_the_dense_reading(flow, full):
     if full:
         assert ref["density_max"][0] - ref["density_min"][0] > 1e-4  # hydrostatic and piled-up water
         assert got["kinetic_energy"] == pytest.approx(ref["kinetic_energy"], rel=1e-12)
+        assert got["mass"] == pytest.approx(ref["mass"], rel=1e-12)      # the records' mass (FreeSurfaceModel)
         assert got["kinetic_energy_ref"] == KE_REF
 
 
@@ -117,5 +118,5 @@ def test_cuda_probe_equals_cpu(flow):
                                                           fs.phase.phi)]
     cpu = FluidProbe(fs.forest, jit.cpu).rows(*args, True, 0.5 * fs.g)
     gpu = FluidProbe(fs.forest, jit.cuda()).rows(*[cuda.to_device(a) for a in args], True, 0.5 * fs.g)
-    assert cpu.shape == (fs.forest.nblocks, 12) and cpu[:, 0].sum() == fs.liquid().sum()
+    assert cpu.shape == (fs.forest.nblocks, 13) and cpu[:, 0].sum() == fs.liquid().sum()
     np.testing.assert_allclose(gpu, cpu, rtol=1e-13, atol=0)

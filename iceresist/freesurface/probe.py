@@ -1,7 +1,7 @@
 """The watchdog's probe of a free-surface fluid, reduced per block on the target (:mod:`iceresist.watchdog`).
 
 One pass over the cells of each block writes a row of :data:`COLUMNS` into ``out[block]``; the host reduces
-the (nblocks, 12) rows. So a probe copies 96 bytes per block off the target instead of the populations, the
+the (nblocks, 13) rows. So a probe copies 104 bytes per block off the target instead of the populations, the
 velocity and the phase field (about 160 bytes per cell in float64 on the host): at the paper's resolution that
 is tens of GB per probe, and on the 2-core CPU it was a fifth of a quick tier-2 case's wall time.
 
@@ -10,8 +10,10 @@ It reads, as :func:`iceresist.models.probe.fluid_probe` does on dense arrays:
 * phi finite on every cell;
 * on the liquid cells (flag FLUID; a cell a body covers is GHOST): the velocity finite and the fastest cell.
   The ``full`` probe takes rho = 1 + sum_q (f_q - w_q) and u = j / rho + g / 2 (as
-  :meth:`FreeSurfaceFluid.macroscopic`) from the populations, in float64, and adds the density band and the
-  kinetic energy sum 1/2 rho u^2; the cheap one reads the velocity the step stored for the phase field.
+  :meth:`FreeSurfaceFluid.macroscopic`) from the populations, in float64, and adds the density band, the
+  kinetic energy sum 1/2 rho u^2 and the mass sum rho (the records of a free-surface model read these too,
+  :meth:`~iceresist.models.surface.FreeSurfaceModel.diagnostics`); the cheap one reads the velocity the step
+  stored for the phase field.
 
 Cells are visited in the dense array's order within a block (x slowest, z fastest), and the host breaks ties
 between blocks by the dense index, so the cell named for a maximum, minimum or first bad value is the one
@@ -33,7 +35,7 @@ from iceresist.grid.forest import BLOCK
 
 #: Columns of a block's row: counts, values and the in-block cell index (-1: none) of each.
 COLUMNS = ("n_liquid", "n_bad", "bad_cell", "n_bad_phi", "bad_phi_cell", "speed2_max", "speed2_cell",
-           "rho_min", "rho_min_cell", "rho_max", "rho_max_cell", "kinetic_energy")
+           "rho_min", "rho_min_cell", "rho_max", "rho_max_cell", "kinetic_energy", "mass")
 _COL = {name: i for i, name in enumerate(COLUMNS)}
 
 
@@ -60,6 +62,7 @@ def probe_launcher(target) -> BlockLauncher:
         rmax = -big
         rmaxc = -1
         ke = 0.0
+        mass = 0.0
         for x in range(BLOCK):
             for y in range(BLOCK):
                 for z in range(BLOCK):
@@ -108,6 +111,7 @@ def probe_launcher(target) -> BlockLauncher:
                         rmax = rho
                         rmaxc = c
                     ke += 0.5 * rho * sp
+                    mass += rho
         out[b, 0] = n_liq
         out[b, 1] = n_bad
         out[b, 2] = bad_c
@@ -120,6 +124,7 @@ def probe_launcher(target) -> BlockLauncher:
         out[b, 9] = rmax
         out[b, 10] = rmaxc
         out[b, 11] = ke
+        out[b, 12] = mass
 
     return BlockLauncher(target, target.device(probe_block),
                          ("f", "fslot", "flags", "u", "phi", "full", "half_g", "out"), label="probe",
@@ -143,7 +148,7 @@ class FluidProbe:
         self._origin = (forest if decomp is None else decomp.forest).origin * BLOCK
 
     def rows(self, f, fslot, flags, u, phi, full: bool, half_g: float) -> np.ndarray:
-        """The (nblocks, 12) rows of :data:`COLUMNS`, on the host."""
+        """The (nblocks, 13) rows of :data:`COLUMNS`, on the host."""
         self._launch(self.forest.nblocks, f, fslot, flags, u, phi, np.int64(bool(full)), np.float64(half_g),
                      self._out)
         return self.target.to_host(self._out)
@@ -197,5 +202,6 @@ class FluidProbe:
             out["density_min"] = self._pick(rows, _COL["rho_min"], _COL["rho_min_cell"], -1) or (math.inf, [0, 0, 0])
             out["density_max"] = self._pick(rows, _COL["rho_max"], _COL["rho_max_cell"], +1) or (-math.inf, [0, 0, 0])
             out["kinetic_energy"] = float(rows[:, _COL["kinetic_energy"]].sum())
+            out["mass"] = float(rows[:, _COL["mass"]].sum())
             out["kinetic_energy_ref"] = float(kinetic_energy_ref)
         return out

@@ -29,7 +29,8 @@ def fluid_speed_probe(u_lat: np.ndarray, fluid: np.ndarray) -> dict:
 
 
 def fluid_probe(rho_lat: np.ndarray, u_lat: np.ndarray, fluid: np.ndarray, kinetic_energy_ref: float) -> dict:
-    """Watchdog quantities of a lattice density ``[x, y, z]`` and velocity ``[3, x, y, z]`` on the ``fluid`` cells."""
+    """Watchdog quantities of a lattice density ``[x, y, z]`` and velocity ``[3, x, y, z]`` on the ``fluid`` cells:
+    finite, the fastest cell, the density band, the kinetic energy sum 1/2 rho u^2 and the mass sum rho."""
     probe, speed2 = _speed_probe(u_lat, fluid, np.isfinite(rho_lat))
     if speed2 is None:
         return probe
@@ -41,4 +42,5 @@ def fluid_probe(rho_lat: np.ndarray, u_lat: np.ndarray, fluid: np.ndarray, kinet
     return {**probe,
             "density_min": (float(r_lo[i_lo]), [int(v) for v in i_lo]),
             "density_max": (float(r_hi[i_hi]), [int(v) for v in i_hi]),
-            "kinetic_energy": ke, "kinetic_energy_ref": float(kinetic_energy_ref)}
+            "kinetic_energy": ke, "kinetic_energy_ref": float(kinetic_energy_ref),
+            "mass": float(rho_lat[fluid].sum())}

@@ -264,21 +264,29 @@ class FreeSurfaceModel(FluidModel):
                 "phi": phi,
                 "surface": np.broadcast_to(u.length_to_physical(surface)[:, :, None], self.shape_cells).copy()}
 
-    def _uniform_diagnostics(self, dense, vol) -> dict[str, float]:
-        rho_lat, u_lat, liquid = self._liquid(dense)
+    def _dense_phi(self):
+        """Dense phi (nx, ny, nz) of a grid of one level (on several ranks on rank 0; None on the others)."""
+        fs = self.fluid
+        phi = self.grid.gather(0, fs.phase.phi_host().astype(np.float64))
+        return None if phi is None else self.grid.global_views[0].forest.to_dense(phi)
+
+    def _uniform_diagnostics(self, probe: dict, phi, vol) -> dict[str, float]:
+        """The records of one level from the block sums of the full probe (:meth:`FreeSurfaceFluid.probe`: mass,
+        kinetic energy and the fastest cell over the liquid, reduced on the target, no dense field of the flow), the
+        dense ``phi`` (the surface) and the volume ``vol`` (cells). NaN where the probe found a bad value."""
         u = self.units
         cell_m3 = u.dx_m ** 3
-        speed2 = (u_lat ** 2).sum(axis=0)[liquid]
-        rho_kg = u.density_to_physical(rho_lat[liquid])
-        umax_lat = float(np.sqrt(speed2.max())) if speed2.size else 0.0
-        surface = self.column_heights(dense[2])
+        if "mass" in probe:
+            mass, ke, umax_lat = probe["mass"], probe["kinetic_energy"], probe["max_lattice_speed"][0]
+        else:
+            mass = ke = umax_lat = float("nan")
+        surface = self.column_heights(phi)
         return {"water_volume_m3": float(vol * cell_m3),
                 "water_volume_drift": float((vol - self.volume0_cells) / self.volume0_cells),
-                "mass_kg": float(rho_kg.sum() * cell_m3),
-                "kinetic_energy_J": float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum()
-                                          * cell_m3),
+                "mass_kg": float(u.density_to_physical(mass) * cell_m3),
+                "kinetic_energy_J": float(u.density_to_physical(ke) * u.velocity_to_physical(1.0) ** 2 * cell_m3),
                 "max_speed_m_s": float(u.velocity_to_physical(umax_lat)),
-                "max_lattice_speed": umax_lat,
+                "max_lattice_speed": float(umax_lat),
                 "surface_mean_m": float(u.length_to_physical(surface.mean())),
                 "f_rows_in_use": float(self.fluid.fluid.pool.rows_in_use)}
 
@@ -344,8 +352,9 @@ class FreeSurfaceModel(FluidModel):
         in use, a regridding run the leaf cells. On several ranks the same numbers on every rank."""
         if self.uniform:
             vol = self.fs.volume()
-            dense = self._dense_state()
-            return self.grid.bcast(None if dense is None else self._uniform_diagnostics(dense, vol))
+            probe = self.fluid.probe(True)
+            phi = self._dense_phi()
+            return self.grid.bcast(None if phi is None else self._uniform_diagnostics(probe, phi, vol))
         u = self.units
         mass = ke = umax = 0.0
         for lv in self.lbm.levels:

@@ -38,6 +38,7 @@ def test_the_reduction_recovers_a_decaying_oscillation():
     assert r["sigma_1_s"] == pytest.approx(sigma, rel=1e-3)
     assert r["z_eq_m"] == pytest.approx(z_eq, abs=1e-5)
     assert r["damping_ratio"] == pytest.approx(sigma / math.hypot(sigma, omega), rel=1e-3)
+    assert r["cycle_ratio"] == pytest.approx(math.exp(-sigma * 0.79), rel=1e-3)
     phi = math.atan(sigma / omega)
     assert r["first_trough_ratio"] == pytest.approx(math.exp(-sigma * (math.pi - phi) / omega) * math.cos(phi),
                                                     rel=1e-3)

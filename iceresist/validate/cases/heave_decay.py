@@ -126,13 +126,14 @@ def analyse(t_s: np.ndarray, z_m: np.ndarray, drop_m: float = DROP_M, periods: f
     """Period and decay of the heave ``z_m`` (the centre's height above the floating level of the water) against
     time, reduced as the measurement was: from the first trough on, ``periods`` periods fitted by a decaying cosine
     (:func:`decaying_cosine`, least squares) give the damped period ``period_s``, the decay rate ``sigma_1_s``, the
-    damping ratio and the floating position ``z_eq_m`` (the discrete sphere floats a fraction of a cell off the
-    exact one); ``first_trough_ratio`` is the first trough's depth under that position over the release height
-    above it. The extremes (release first) of
+    damping ratio, the amplitude ratio per cycle ``cycle_ratio`` = exp(-sigma T) (measured 0.520) and the floating
+    position ``z_eq_m`` (the discrete sphere floats a fraction of a cell off the exact one); ``first_trough_ratio``
+    is the first trough's depth under that position over the release height above it. The extremes (release first) of
     :func:`~iceresist.validate.cases.floating_cube.heave_analysis` start the fit."""
     ext = heave_analysis(t_s, z_m, t_window_s=0.0, about=0.0)["extremes"]
     nan = float("nan")
-    out = {"period_s": nan, "sigma_1_s": nan, "damping_ratio": nan, "z_eq_m": nan, "first_trough_ratio": nan,
+    out = {"period_s": nan, "sigma_1_s": nan, "damping_ratio": nan, "cycle_ratio": nan, "z_eq_m": nan,
+           "first_trough_ratio": nan,
            "extremes": ext}
     if len(ext) < 3 or ext[1][1] >= 0:
         return out
@@ -146,7 +147,8 @@ def analyse(t_s: np.ndarray, z_m: np.ndarray, drop_m: float = DROP_M, periods: f
     except RuntimeError:
         return out
     out.update(period_s=float(2 * math.pi / omega), sigma_1_s=float(sigma),
-               damping_ratio=float(sigma / math.hypot(sigma, omega)), z_eq_m=float(z_eq),
+               damping_ratio=float(sigma / math.hypot(sigma, omega)),
+               cycle_ratio=float(math.exp(-2 * math.pi * sigma / omega)), z_eq_m=float(z_eq),
                first_trough_ratio=float((z_eq - trough) / (drop_m - z_eq)))
     return out
 
@@ -170,5 +172,7 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
                              "sigma_1_s_reference": SIGMA_1_S,
                              "first_trough_ratio_reference": FIRST_TROUGH_M / DROP_M,
                              "damping_ratio": res["damping_ratio"], "damping_ratio_reference": DAMPING_RATIO,
+                             "cycle_ratio": res["cycle_ratio"],
+                             "cycle_ratio_reference": math.exp(-SIGMA_1_S * PERIOD_S),
                              "volume_drift": float(np.abs(ts["water_volume_drift"]).max()),
                              "result_file": str(ran.path)})

@@ -86,7 +86,8 @@ def test_quick_rung_added_mass_lies_between_hulme_and_one_cell_of_entrained_wate
 def test_full_ladder_added_mass_falls_towards_hulme_as_the_entrained_layer_thins():
     """KR = 1 in a tank of eight diameters: A falls at every rung from 8 to 24 cells per diameter, above Hulme's,
     its excess below one cell of entrained water (6 / n) from 12 cells on (at 8 it is 1.1 cells: 0.82 against
-    0.75); B falls towards Hulme's too."""
+    0.75; at 24 cells 0.609, 0.72 cell); B falls at every rung to within 5 % of Hulme's at 24 cells (0.246 against
+    0.2484)."""
     rows = [am.run(p) for p in am.ladder(quick=False)]
     a_ref, b_ref = am.hulme(1.0)
     values = [r.value for r in rows]
@@ -95,7 +96,8 @@ def test_full_ladder_added_mass_falls_towards_hulme_as_the_entrained_layer_thins
     for r in rows:
         assert a_ref < r.value and (r.resolution < 12 or r.value < a_ref + layer_excess(int(r.resolution)))
     damping = [r.extra["B"] for r in rows]
-    assert all(b_ref < b1 < b0 for b0, b1 in zip(damping, damping[1:]))
+    assert all(b1 < b0 for b0, b1 in zip(damping, damping[1:]))
+    assert damping[-1] == pytest.approx(b_ref, rel=0.05)
 
 
 @pytest.mark.xdist_group("tier2_kernels")

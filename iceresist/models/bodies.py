@@ -20,8 +20,9 @@ with a free surface are :class:`~iceresist.models.floating_bodies.FloatingBodies
 Motion (``bodies[].motion``): ``free`` bodies move under gravity, the fluid force and the DEM contacts (their
 ``density_kg_m3`` sets mass and inertia); ``fixed`` bodies stay at rest and ``prescribed`` bodies move at
 ``velocity_m_s``, with ``oscillation`` a harmonic motion on top (both kinematic: they act on the fluid and on free
-bodies and are not moved by either). The domain's wall faces (``wall``, ``moving_wall``, ``slip``) are DEM contact planes; without a ``[contact]`` section
-the DEM keeps its own contact law (:class:`~iceresist.dem.ContactParameters`, sub-step 0.05 of the critical step).
+bodies and are not moved by either). The domain's wall faces (``wall``, ``moving_wall``, ``slip``) are DEM contact
+planes; without a ``[contact]`` section the DEM keeps its own contact law (:class:`~iceresist.dem.ContactParameters`,
+sub-step 0.05 of the critical step).
 
 Units: a physical scene gives dx (``domain.dx_m``) and dt (``numerics.dt_s`` or the Mach rule of
 docs/SCENES.md, "Rules"); a lattice-unit scene has dx = dt = rho0 = 1, and the bodies' sizes, positions, speeds and

@@ -113,7 +113,8 @@ def scene(n: int, tank_diameters: float, *, periods: float = 4.0, drop_m: float 
     data = tank_data(n, tank_diameters, duration_s=periods * PERIOD_S, drop_m=drop_m, g_lattice=g_lattice,
                      precision=precision, backend=backend)
     data["scene"].update(name=f"{NAME}-{n}-{tank_diameters:g}D",
-                         description=f"sphere D 0.3 m dropped {drop_m * 1e3:g} mm, {n} cells/D, tank {tank_diameters:g} D")
+                         description=f"sphere D 0.3 m dropped {drop_m * 1e3:g} mm, {n} cells/D, "
+                                     f"tank {tank_diameters:g} D")
     return scene_of(data, f"{NAME} {n} cells/D, tank {tank_diameters:g} D")
 
 

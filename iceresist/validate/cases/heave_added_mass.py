@@ -85,20 +85,26 @@ def ladder(quick: bool) -> list[dict]:
     return [rung(n, 8, 1.0) for n in ((8, 12, 16) if quick else (8, 12, 16, 24))]
 
 
+def _held_data(n: int, tank_diameters: float, duration_s: float, motion: str, precision: str, backend: str) -> dict:
+    """The heave-decay tank's data with the sphere on the still level, its motion ``motion`` (no density)."""
+    data = hd.tank_data(n, tank_diameters, duration_s=duration_s, drop_m=0.0, precision=precision, backend=backend)
+    body = data["bodies"][0]
+    body.pop("density_kg_m3", None)
+    body["motion"] = motion
+    return data
+
+
 def scene(n: int, tank_diameters: float, kr: float, *, amplitude: float = AMPLITUDE, precision: str = "float32",
           backend: str = "cpu"):
     """The heave-decay tank (:func:`~iceresist.validate.cases.heave_decay.tank_data`) with the sphere at its
     floating position, prescribed to heave ``amplitude`` R at KR = ``kr`` for :data:`PERIODS` periods."""
     T = period_s(kr)
-    data = hd.tank_data(n, tank_diameters, duration_s=PERIODS * T, drop_m=0.0, precision=precision,
-                        backend=backend)
+    data = _held_data(n, tank_diameters, PERIODS * T, "prescribed", precision, backend)
     data["scene"].update(name=f"{NAME}-{n}-{tank_diameters:g}D-KR{kr:g}",
                          description=f"sphere D 0.3 m heaving {amplitude:g} R at KR {kr:g}, {n} cells/D, "
                                      f"tank {tank_diameters:g} D")
-    body = data["bodies"][0]
-    body.pop("density_kg_m3", None)
-    body.update(motion="prescribed", oscillation={"amplitude_m": [0.0, 0.0, amplitude * RADIUS_M], "period_s": T,
-                                                  "ramp_periods": RAMP_PERIODS})
+    data["bodies"][0]["oscillation"] = {"amplitude_m": [0.0, 0.0, amplitude * RADIUS_M], "period_s": T,
+                                        "ramp_periods": RAMP_PERIODS}
     return scene_of(data, f"{NAME} {n} cells/D, tank {tank_diameters:g} D, KR {kr:g}")
 
 
@@ -106,14 +112,11 @@ def held_scene(n: int, offset_m: float, *, tank_diameters: float = 4.0, steps: i
                precision: str = "float32", backend: str = "cpu"):
     """The sphere held fixed with its centre ``offset_m`` above the still level (which its cells leave as it is):
     the hydrostatic force of the discrete sphere at that offset, ``steps`` steps."""
-    data = hd.tank_data(n, tank_diameters, duration_s=1.0, drop_m=0.0, precision=precision, backend=backend)
+    data = _held_data(n, tank_diameters, 1.0, "fixed", precision, backend)
     data["run"] = {"steps": int(steps)}
     data["scene"].update(name=f"{NAME}-held-{n}", description=f"sphere D 0.3 m held {offset_m * 1e3:g} mm above "
                                                               f"the still level, {n} cells/D")
-    body = data["bodies"][0]
-    body.pop("density_kg_m3", None)
-    body["motion"] = "fixed"
-    body["position_m"][2] = hd.DEPTH_M + offset_m
+    data["bodies"][0]["position_m"][2] = hd.DEPTH_M + offset_m
     return scene_of(data, f"{NAME} held {n} cells/D")
 
 

@@ -76,6 +76,22 @@ def test_refinement_reaches_what_the_criterion_asks():
     assert np.prod(hi - lo, axis=1).sum() == pytest.approx(np.prod(t.root * 8))
 
 
+def test_the_level_map_is_the_raster_of_the_leaves_and_covers_compares_two_octrees(tree):
+    """level_map equals the leaves drawn one by one on the finest block grid; an octree refined about a point
+    covers one refined less far about it (and a finer level's copy refined about a second point too), not the
+    other way round. Planted: the map's repeat skipped on one axis, or covers with <=: fails."""
+    _, level = _raster(tree)
+    assert tree.level_map().shape == level.shape
+    assert np.array_equal(tree.level_map(), level)
+    p = [[3.0, 3.0, 3.0]]
+    wide = BlockOctree((2, 2, 2), 3).refine(_point_refinement(p, levels=(3, 2), radii=(3.0, 6.0)))
+    narrow = BlockOctree((2, 2, 2), 3).refine(_point_refinement(p, levels=(3, 2), radii=(1.0, 3.0)))
+    other = BlockOctree((2, 2, 2), 3).refine(_point_refinement([[12.5, 12.0, 12.0]], levels=(3, 2)))
+    assert wide.covers(narrow) and wide.covers(wide)
+    assert not narrow.covers(wide)
+    assert not wide.covers(other) and not other.covers(wide)
+
+
 def test_morton_order_is_the_depth_first_order(tree):
     """Every block of every level holds a contiguous run of leaves, and runs of siblings follow child order."""
     for m in range(tree.max_level):

@@ -338,6 +338,12 @@ fields_every_steps = 10
 @pytest.mark.parametrize("edit, needle", [
     ("levels = 1\nregrid_every_steps = 10\n", "refinement.vorticity_1_s: regridding needs a criterion that moves"),
     ("levels = 1\nvorticity_1_s = 0.01\n", "refinement.regrid_every_steps: refinement.vorticity_1_s moves"),
+    ("levels = 1\nboxes = [{ lo_m = [0, 0, 0], hi_m = [8, 8, 8], level = 1 }]\nregrid_slack = 0.25\n",
+     "refinement.regrid_slack: puts regrids off, which needs refinement.regrid_every_steps"),
+    ("levels = 1\nvorticity_1_s = 0.01\nregrid_every_steps = 10\nregrid_slack = 0.25\nregrid_lookahead_steps = 50\n",
+     "refinement.regrid_lookahead_steps: draws the bodies' band ahead of them"),
+    ("levels = 1\nvorticity_1_s = 0.01\nregrid_every_steps = 10\nregrid_slack = -1\n",
+     "refinement.regrid_slack"),
 ])
 def test_half_a_regrid_setting_exits_2_with_one_line(tmp_path, main, edit, needle):  # noqa: F811
     p = tmp_path / "v.toml"

@@ -8,6 +8,7 @@ import pytest
 
 from iceresist.models import BodiesModel, build_model
 from iceresist.scene import parse_scene
+from iceresist.scene.blocks import build_octree
 
 from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
 
@@ -15,13 +16,15 @@ from test_run import _one_line_error, main  # noqa: F401  (the CLI fixture)
 N, A, Z0, G = (24, 24, 40), 1.5, 28.2, 0.012
 
 
-def _settle_text(fine: bool = False, steps: int = 400, regrid: int = 10, band: float = 2.0) -> str:
+def _settle_text(fine: bool = False, steps: int = 400, regrid: int = 10, band: float = 2.0, slack: float = 0.0,
+                 z0: float = Z0) -> str:
     """A sphere of 1.5 x the fluid's density settling in a closed box, cumulant float32, tau 0.8 on level 0
     (Re about 0.7 at its terminal speed 0.024). ``fine``: the uniform grid of level 1 (every length twice, the
     time step half, gravity half, tau by acoustic scaling); else level 0 with the band around the sphere on level 1
     (d = 6 cells there), regridding every ``regrid`` steps."""
     k = 2 if fine else 1
-    ref = "" if fine else f"\n[refinement]\nlevels = 1\nbody_band_m = {band}\nregrid_every_steps = {regrid}\n"
+    ref = "" if fine else (f"\n[refinement]\nlevels = 1\nbody_band_m = {band}\nregrid_every_steps = {regrid}\n"
+                           f"regrid_slack = {slack}\n")
     return f"""
 [scene]
 name = "settle"
@@ -46,7 +49,7 @@ steps = {steps * k}
 name = "sphere"
 shape = "sphere"
 radius_m = {A * k}
-position_m = [{N[0] * k / 2}, {N[1] * k / 2}, {Z0 * k}]
+position_m = [{N[0] * k / 2}, {N[1] * k / 2}, {z0 * k}]
 density_kg_m3 = 1.5
 motion = "free"
 """ + ref
@@ -84,6 +87,53 @@ def test_a_settling_sphere_on_regridded_levels_follows_the_uniform_fine_grid():
     assert w[-10:].mean() == pytest.approx(w_ref[-10:].mean(), rel=3e-3)
     assert abs(z[-1] - z_ref[-1]) < 0.05
     assert amr.lattice_updates_per_step / (2 * fine.cells) < 0.15
+
+
+def test_a_regrid_that_only_coarsens_waits_within_its_slack():
+    """refinement.regrid_slack = 0.5: the settling sphere starts 21.6 level-0 cells up, its band (18.1 to 25.1)
+    on two level-0 blocks of the finest level; after about 70 steps its band leaves the upper block (a regrid that
+    only coarsens: it waits), after about 120 it reaches the block below (the levels are rebuilt), so the sphere
+    never leaves the fine blocks (the body check of every regrid and the watchdog's probe after every 10 steps),
+    with one rebuild where regridding whenever the blocks change takes two, and it falls as that run does (within
+    0.02 level-0 cell over 150 steps); after every 10 steps the levels are at least as fine as the criteria ask
+    everywhere. Planted: `covers` compared the other way (the regrid that refines put off) fails."""
+    runs = {}
+    for slack in (0.0, 0.5):
+        m = build_model(parse_scene(_settle_text(steps=150, slack=slack, z0=21.6), "settle.toml"))
+        z = []
+        for _ in range(15):
+            m.step(10)
+            assert m.watchdog_probe()["bodies_outside_finest"][0] == 0
+            wanted = build_octree(m.scene, None, m.body_boxes_m())      # what the criteria ask for now
+            assert (m.octree.level_map() >= wanted.level_map()).all()
+            z.append(m.diagnostics()["sphere_z_m"])
+        runs[slack] = (m.regrid_count, m.regrids_put_off, np.array(z))
+    (eager, none_waited, z0), (lazy, waited, z1) = runs[0.0], runs[0.5]
+    assert none_waited == 0 and waited >= 1
+    assert (lazy, eager) == (1, 2)
+    assert 21.6 - z1[-1] > 2.0
+    assert np.abs(z1 - z0).max() < 0.02
+
+
+def test_a_lookahead_draws_the_band_ahead_of_a_moving_body_and_the_regrids_wait():
+    """A sphere prescribed to sink at 0.08 cells per step from 30 cells up, regridding every 10 steps, over 200
+    steps (16 cells: its band crosses two level-0 block faces below and two above): rebuilt whenever the blocks
+    change, the levels are rebuilt 4 times; with refinement.regrid_slack = 0.5 the coarsening waits (2); with
+    regrid_lookahead_steps = 100 too the rebuild draws the band 8 cells ahead, over the next block face (1). After
+    every 10 steps the levels are at least as fine as the criteria ask where the sphere is. Planted: the band
+    drawn behind the sphere (the velocity's sign flipped) gives 2."""
+    rebuilds = []
+    for slack, ahead in ((0.0, 0), (0.5, 0), (0.5, 100)):
+        text = _settle_text(steps=200, slack=slack, z0=30.0).replace(
+            'density_kg_m3 = 1.5\nmotion = "free"', 'motion = "prescribed"\nvelocity_m_s = [0.0, 0.0, -0.08]')
+        m = build_model(parse_scene(text + (f"regrid_lookahead_steps = {ahead}\n" if ahead else ""), "s.toml"))
+        for _ in range(20):
+            m.step(10)
+            wanted = build_octree(m.scene, None, m.body_boxes_m())
+            assert (m.octree.level_map() >= wanted.level_map()).all()
+        assert m.diagnostics()["sphere_z_m"] == pytest.approx(14.0, abs=1e-3)
+        rebuilds.append(m.regrid_count)
+    assert rebuilds == [4, 2, 1]
 
 
 def test_a_rebuild_onto_the_same_blocks_changes_nothing():

@@ -44,7 +44,7 @@ from iceresist.freesurface.phasefield import PhaseField
 from iceresist.freesurface.pool import DEFAULT_MARGIN, PooledLBM
 from iceresist.freesurface.probe import FluidProbe
 from iceresist.grid import flags as FL
-from iceresist.grid.forest import BLOCK, CELLS
+from iceresist.grid.forest import CELLS
 from iceresist.lbm.stream import TANH_CLIP
 
 log = logging.getLogger(__name__)
@@ -556,14 +556,21 @@ class FreeSurfaceFluid:
         """Dense phi (nx, ny, nz), float64."""
         return self.dense(self.phase.phi_host().astype(np.float64))
 
-    def state(self) -> dict:
+    def state(self, populations: bool = True) -> dict:
         """Everything a bit-for-bit restart of the fluid needs, in storage precision: the population rows and
         their blocks, h, phi, the cell flags (GHOST marks of bodies included) and the iteration. On several ranks
         the whole domain in global block order, every block with its populations, on rank 0 (None on the others),
-        so that a checkpoint restarts on any number of ranks."""
-        blocks, f = self.fluid.rows()
+        so that a checkpoint restarts on any number of ranks. ``populations`` False: the phase field, flags and
+        iteration alone (what a regrid carries besides the populations it takes level by level)."""
         h, phi, flags = self._host(self.phase.h), self._host(self.phase.phi), np.asarray(self._host(self.fluid.flags))
         valid = np.asarray(self._host(self.phase.valid))
+        if not populations:
+            if self.decomp is not None:
+                h, phi, valid, flags = (self.decomp.gather_rows(a) for a in (h, phi, valid, flags))
+                if h is None:
+                    return None
+            return {"h": h, "phi": phi, "h_valid": valid, "flags": flags, "iteration": np.int64(self.iteration)}
+        blocks, f = self.fluid.rows()
         if self.decomp is None:
             return {"f_blocks": blocks.astype(np.int64), "f": f, "f_rows": np.int64(self.fluid.pool.capacity),
                     "h": h, "phi": phi, "h_valid": valid, "flags": flags, "iteration": np.int64(self.iteration)}
@@ -576,8 +583,9 @@ class FreeSurfaceFluid:
         return {"f_blocks": np.arange(n, dtype=np.int64), "f": f, "f_rows": np.int64(n), "h": h, "phi": phi,
                 "h_valid": valid, "flags": flags, "iteration": np.int64(self.iteration)}
 
-    def load_state(self, state: dict):
-        """Continue from :meth:`state` of a fluid built the same way (same forest, h lattice, precision)."""
+    def load_state(self, state: dict, take: bool = False):
+        """Continue from :meth:`state` of a fluid built the same way (same forest, h lattice, precision); ``take``:
+        its populations may become the fluid's buffer (:meth:`PooledLBM.set_rows`; a regrid's carried level)."""
         if "h" not in state or "f_blocks" not in state:
             raise InputError("checkpoint holds no free-surface state: it belongs to another scene")
         # h holds the state of every block in a checkpoint written before the frozen bulk
@@ -592,21 +600,21 @@ class FreeSurfaceFluid:
             nl = len(d.global_ids)
             state = {**state, "f_blocks": np.arange(nl, dtype=np.int64), "f": d.local_rows(whole),
                      "f_rows": np.int64(nl), **{k: d.local_rows(np.asarray(state[k])) for k in ("h", "phi", "h_valid", "flags")}}
-        self.load_rows(state)
+        self.load_rows(state, take)
 
-    def load_rows(self, state: dict):
+    def load_rows(self, state: dict, take: bool = False):
         """:meth:`load_state` of this process's own blocks (on several ranks its share, as the rows are here)."""
         h = np.asarray(state["h"])
         if h.shape != tuple(self.phase.h.shape):
             raise InputError(f"checkpoint phase field has shape {h.shape}, this scene needs "
                              f"{tuple(self.phase.h.shape)}: it belongs to another scene (or another "
                              f"free_surface.h_lattice)")
-        self.fluid.set_rows(np.asarray(state["f_blocks"]), np.asarray(state["f"]).astype(self.real),
-                            int(state["f_rows"]))
-        copy_into(self.phase.h, h.astype(self.real))
-        copy_into(self.phase.phi, np.asarray(state["phi"]).astype(self.real))
-        copy_into(self.phase.valid, np.asarray(state["h_valid"]).astype(np.int8))
-        copy_into(self.fluid.flags, np.asarray(state["flags"]).astype(np.uint8))
+        self.fluid.set_rows(np.asarray(state["f_blocks"]), np.asarray(state["f"]).astype(self.real, copy=False),
+                            int(state["f_rows"]), take=take)
+        copy_into(self.phase.h, h.astype(self.real, copy=False))
+        copy_into(self.phase.phi, np.asarray(state["phi"]).astype(self.real, copy=False))
+        copy_into(self.phase.valid, np.asarray(state["h_valid"]).astype(np.int8, copy=False))
+        copy_into(self.fluid.flags, np.asarray(state["flags"]).astype(np.uint8, copy=False))
         self.iteration = self.fluid.iteration = int(state["iteration"])
 
     def volume(self) -> float:

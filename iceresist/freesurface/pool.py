@@ -347,8 +347,15 @@ class PooledLBM:
 
     def populations(self) -> np.ndarray:
         """Host copy of f - w per block, (nblocks, 27, 512) float64, 0 in blocks without a row."""
+        return self.stored_populations().astype(np.float64)
+
+    def stored_populations(self) -> np.ndarray:
+        """f - w per block on the host in the storage precision, (nblocks, 27, 512), 0 in blocks without a row: in
+        the full box on the CPU the buffer the next step pulls from itself (no copy; what a regrid carries)."""
+        if self.pool.full:
+            return self.target.to_host(self._f[0], copy=False)
         rows = self._host(self._f[0])
-        out = np.zeros((self.forest.nblocks, L.Q, CELLS))
+        out = np.zeros((self.forest.nblocks, L.Q, CELLS), self.real)
         has = self.pool.fslot >= 0
         out[has] = rows[self.pool.fslot[has]]
         return out
@@ -359,9 +366,11 @@ class PooledLBM:
         blocks = np.flatnonzero(self.pool.fslot >= 0)
         return blocks, self._host(self._f[0])[self.pool.fslot[blocks]]
 
-    def set_rows(self, blocks: np.ndarray, f: np.ndarray, capacity: int | None = None):
+    def set_rows(self, blocks: np.ndarray, f: np.ndarray, capacity: int | None = None, take: bool = False):
         """Give ``blocks`` rows (in block order) holding ``f`` (n, 27, 512) in both buffers, in a pool of
-        ``capacity`` rows (default: the present size); the inverse of :meth:`rows`."""
+        ``capacity`` rows (default: the present size); the inverse of :meth:`rows`. ``take``: ``f`` (C-contiguous in
+        the storage precision, a row for every block in order) may become a buffer itself on the CPU (a regrid's
+        carried level, which no one reads after)."""
         blocks = np.asarray(blocks, dtype=np.int64)
         nb = self.forest.nblocks
         if f.shape != (len(blocks), L.Q, CELLS) or (blocks.size and (blocks.min() < 0 or blocks.max() >= nb)):
@@ -375,7 +384,11 @@ class PooledLBM:
             if capacity is not None:
                 self.pool.capacity = int(min(nb, capacity))
             self.pool.assign(blocks)
-        host = np.zeros((self.pool.capacity, L.Q, CELLS), self.real)
-        host[self.pool.fslot[blocks]] = f
-        self._f = [self._to_device(host.copy()) for _ in range(2)]
+        slots = self.pool.fslot[blocks]
+        if take and len(blocks) == self.pool.capacity and np.array_equal(slots, np.arange(len(blocks))):
+            host = np.ascontiguousarray(f, dtype=self.real)
+        else:
+            host = np.zeros((self.pool.capacity, L.Q, CELLS), self.real)
+            host[slots] = f
+        self._f = [self._to_device(host), self._to_device(host.copy())]
         self._upload_map()

@@ -242,7 +242,7 @@ class RefinedFreeSurface:
     def __init__(self, octree: BlockOctree, *, tau0: float, gravity0: float, depth0: float, mobility: float = 0.05,
                  width: float = 3.0, h_lattice: str = "D3Q15", operator: str = "cumulant",
                  precision: str = "float32", target=None, faces: dict | None = None, decomp=None,
-                 f_pool_margin: float | None = None):
+                 f_pool_margin: float | None = None, views: list | None = None):
         self.target = target or jit.cpu
         self.precision = precision
         self.octree = octree
@@ -267,7 +267,8 @@ class RefinedFreeSurface:
         self.decomp = decomp
         self.lbm = RefinedLBM(octree, tau0=tau0, force0=(0.0, 0.0, -self.g0), faces=faces, operator=operator,
                               precision=precision, scheme="conservative", target=self.target,
-                              solver_factory=factory, views=None if decomp is None else decomp.views)
+                              solver_factory=factory, views=views if decomp is None else decomp.views,
+                              partial=decomp is not None)
         self.surface: FreeSurfaceFluid = built["surface"]
         self.levels = self.lbm.levels
         self.views = self.lbm.views
@@ -385,7 +386,7 @@ class RefinedFreeSurface:
         n = fs.forest.nblocks
         fs.load_state({"f_blocks": np.arange(n, dtype=np.int64), "f": self._real_f(f_levels[self.finest]),
                        "f_rows": np.int64(n), "h": h, "phi": phi, "h_valid": valid, "flags": flags,
-                       "iteration": np.int64(surface_state["iteration"])})
+                       "iteration": np.int64(surface_state["iteration"])}, take=True)
 
     def carry_split(self, f_levels: dict, f_whole, surface_whole, old_view):
         """:meth:`carry_from` on MPI ranks: ``f_levels`` this rank's share of the carried levels; on rank 0
@@ -411,17 +412,18 @@ class RefinedFreeSurface:
         iteration = d.bcast(None if surface_whole is None else int(surface_whole["iteration"]))
         self.surface.load_rows({"f_blocks": np.arange(n, dtype=np.int64), "f": self._real_f(f_levels[L]),
                                 "f_rows": np.int64(n), "h": h, "phi": phi, "h_valid": valid, "flags": flags,
-                                "iteration": np.int64(iteration)})
+                                "iteration": np.int64(iteration)}, take=True)
 
     def _carry_coarse(self, f_levels: dict):
         for lv in self.levels[:-1]:
             level = self.lbm.solvers[lv]
             n = level.forest.nblocks
-            level.fluid.set_rows(np.arange(n), np.ascontiguousarray(f_levels[lv]).astype(level.fluid.real), n)
+            level.fluid.set_rows(np.arange(n), self._real_f(f_levels[lv]), n, take=True)
             level.fluid.iteration = self.lbm.iteration * 2 ** lv
 
     def _real_f(self, f):
-        return np.ascontiguousarray(f).astype(jit.real_type(self.precision))
+        """``f`` C-contiguous in the storage precision, not copied where it is (the pool takes it as its buffer)."""
+        return np.ascontiguousarray(f, dtype=jit.real_type(self.precision))
 
     def step(self, n: int = 1):
         """Advance level 0 by ``n`` steps (the finest level by n 2^L)."""

@@ -226,6 +226,21 @@ class BlockOctree:
     def cells_per_level(self) -> np.ndarray:
         return self.blocks_per_level() * BLOCK ** 3
 
+    def level_map(self) -> np.ndarray:
+        """The level of the leaf over each block of the finest level's block grid (shape ``shape_at(max_level)``,
+        int8): a leaf of level l fills its 8^(L - l) finest blocks."""
+        out = np.zeros(tuple(self.root), dtype=np.int8)
+        for lv in range(1, self.max_level + 1):
+            out = out.repeat(2, axis=0).repeat(2, axis=1).repeat(2, axis=2)
+            c = self.coord[self.level == lv]
+            out[c[:, 0], c[:, 1], c[:, 2]] = lv
+        return out
+
+    def covers(self, other: "BlockOctree") -> bool:
+        """Whether this octree is at least as fine as ``other`` (same root and levels) everywhere: every place a leaf
+        of ``other`` holds lies on leaves of its level or finer here."""
+        return bool((self.level_map() >= other.level_map()).all())
+
     def __repr__(self):
         per = ", ".join(f"L{lv}: {n}" for lv, n in enumerate(self.blocks_per_level()))
         return f"BlockOctree(root={tuple(int(n) for n in self.root)}, leaves={self.nleaves} ({per}))"

@@ -111,8 +111,10 @@ def carry_over(old_views: list, old_fields: dict, new_views: list, new_fields: d
                 place = row[idx // CELLS] * CELLS + idx % CELLS
                 w = 1.0 / 8.0 ** (m - L)
                 cells = np.tile(np.arange(CELLS), blocks.size)
-                np.add.at(acc, place, w * _cell_rows(old_fields[m], np.repeat(blocks, CELLS), cells))
-                np.add.at(weight, place, w)
+                vals = _cell_rows(old_fields[m], np.repeat(blocks, CELLS), cells)
+                for k in range(ncomp):      # np.add.at, by bincount (ten times quicker on millions of cells)
+                    acc[:, k] += w * np.bincount(place, weights=vals[:, k], minlength=len(acc))
+                weight += w * np.bincount(place, minlength=len(acc))
         if not np.allclose(weight, 1.0, rtol=0.0, atol=1e-12):
             bad = int(np.count_nonzero(np.abs(weight - 1.0) > 1e-12))
             raise RuntimeError(f"regrid: {bad} cells of level {L} are not covered exactly once by the old leaves")

@@ -276,11 +276,20 @@ def _sub_cell_keys(coarse: LevelView, to, slot) -> np.ndarray:
     return (((cell[:, 0] * n[1] + cell[:, 1]) * n[2] + cell[:, 2]) * 27 + slot) * 8 + child
 
 
+def _in_sorted(keys: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Whether each of ``keys`` is in the sorted array ``table`` (np.isin without hashing ``table`` again at every
+    call: a regrid's tables ask it of millions of sub-cells)."""
+    if table.size == 0:
+        return np.zeros(keys.shape, dtype=bool)
+    i = np.minimum(np.searchsorted(table, keys), table.size - 1)
+    return table[i] == keys
+
+
 def _take_free_packets(fine: LevelView, coarse: LevelView, periodic, fed, slot, pos):
     """Where an interface meets a wall, the coarse packets (slot ``slot``, fine cell ``pos``) that the fine leaves
     pull across it, made free ones. Every coarse leaf's population takes the coarse packets its step would take
     (:func:`_coarse_row`: the plain stream, or the bounce-back that keeps a packet in its cell) except in the
-    sub-cells the finer level feeds (``fed``: :func:`_sub_cell_keys` of the coalesced rows' sub-cells that take a
+    sub-cells the finer level feeds (``fed``, sorted: :func:`_sub_cell_keys` of the coalesced rows' sub-cells that take a
     fine packet); the packets those would have taken, and the ones that stream into the finer level, are the free
     ones. A packet the fine sub-steps (:func:`_arrival`) carry into a fine leaf is free except where a coarse wall
     row takes it whole: along a wall the coarse bounce-back keeps a packet in its cell where two fine sub-steps
@@ -293,7 +302,9 @@ def _take_free_packets(fine: LevelView, coarse: LevelView, periodic, fed, slot, 
     def taken(sl, ps):
         cell, row_slot, to, ok = _coarse_row(coarse, ps, sl, periodic)
         b, _, _ = locate_cells(coarse, cell, periodic)
-        by_row = ok & (b >= 0) & (b < coarse.nleaves) & ~np.isin(_sub_cell_keys(coarse, to, row_slot), fed)
+        by_row = ok & (b >= 0) & (b < coarse.nleaves)
+        at = np.flatnonzero(by_row)
+        by_row[at] = ~_in_sorted(_sub_cell_keys(coarse, to[at], row_slot[at]), fed)
         return by_row, row_slot, to
 
     idx = np.arange(len(slot))
@@ -328,6 +339,7 @@ def explosion_tables(fine: LevelView, coarse: LevelView, periodic, partial: bool
     cell whose source is not held there is left out instead of refused. ``fed``: the coarse sub-cells the finer
     level feeds (:func:`coalescence`); a coarse packet a coarse row takes is then swapped for a free one
     (:func:`_take_free_packets`)."""
+    fed = None if fed is None else np.sort(np.asarray(fed, dtype=np.int64))
     g = np.flatnonzero(fine.ghost_source == FROM_COARSER) + fine.nleaves
     if len(g) == 0:
         return None
@@ -543,16 +555,17 @@ class RefinedLBM:
     next step pulls from), ``step()`` and ``initialize(rho, u)`` (the free surface on levels,
     :mod:`iceresist.freesurface.refined`).
 
-    ``views``: the levels to hold, if not every block of ``octree`` (:func:`~iceresist.grid.levels.level_views`): an
-    MPI rank's region (:class:`~iceresist.parallel.levels.LevelDecomposition`); the level transfers then leave out
-    the cells whose sources lie beyond it. ``solid``: the solid cells of level 0 (:func:`level_views`; ``views``
-    carry their own).
+    ``views``: the levels to hold (:func:`~iceresist.grid.levels.level_views`; default: every block of ``octree``,
+    built here), ``partial``: whether they are an MPI rank's region
+    (:class:`~iceresist.parallel.levels.LevelDecomposition`; default: whether ``views`` are given); the level
+    transfers then leave out the cells whose sources lie beyond it. ``solid``: the solid cells of level 0
+    (:func:`level_views`; ``views`` carry their own).
     """
 
     def __init__(self, octree: BlockOctree, *, tau0: float, force0=(0.0, 0.0, 0.0), faces: dict | None = None,
                  operator: str = "bgk", precision: str = "float64", rescale: bool = False,
                  scheme: str = "conservative", reconstruction: str = "linear", target=None, solver_factory=None,
-                 views: list | None = None, solid=None):
+                 views: list | None = None, solid=None, partial: bool | None = None):
         self.target = target or jit.cpu
         if self.target.is_cuda and scheme != "conservative":
             raise InputError("scheme: the interpolating level interface runs on the CPU only; use the conservative "
@@ -570,10 +583,10 @@ class RefinedLBM:
                              "a packet's non-equilibrium part changes the mass it carries; measured 15 % off in a "
                              "channel); use rescale=False, or scheme='interpolate' with rescale=True")
         self.octree = octree
-        partial = views is not None
+        partial = views is not None if partial is None else bool(partial)
         if partial and scheme != "conservative":
             raise InputError("scheme: a rank's share of the levels runs the conservative level interface only")
-        self.views = views if partial else level_views(octree, faces, solid)
+        self.views = views if views is not None else level_views(octree, faces, solid)
         self.periodic = tuple(bool(p) for p in octree.periodic)
         for v in self.views:
             if v is not None and tuple(v.forest.faces[a + "-"].kind == "periodic" for a in "xyz") != self.periodic:

@@ -212,6 +212,11 @@ class LBMSolver:
         """Host copy of the post-collision populations f - w, (nblocks, 27, 512), float64."""
         return self._host_f().astype(np.float64)
 
+    def stored_populations(self) -> np.ndarray:
+        """The populations f - w on the host in the storage precision, (nblocks, 27, 512): on the CPU the buffer
+        the next step pulls from itself (no copy; what a regrid carries), on CUDA its host copy."""
+        return self._host_f()
+
     def macroscopic_blocks(self):
         """rho (nblocks, 512) and u (3, nblocks, 512), float64, NaN outside fluid."""
         f = self.populations()

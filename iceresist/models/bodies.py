@@ -190,6 +190,17 @@ class FinestLevelBodies(BodyShapes):
             positions_m = self.body_positions_m()
         return np.asarray(positions_m, dtype=float)[:, None, :] + self._reach_m
 
+    def body_boxes_ahead_m(self) -> np.ndarray | None:
+        """Each body's box swept from where it is to where its present velocity takes it in
+        ``refinement.regrid_lookahead_steps`` level-0 steps ((n, 2, 3), m); None without a look-ahead."""
+        steps = self.scene.refinement.regrid_lookahead_steps
+        if not steps or getattr(self, "dem", None) is None:
+            return None
+        now = self.body_positions_m()
+        later = now + self.dem.velocities[:len(now)] * steps * self.units.dt_s
+        return np.stack([np.minimum(now, later) + self._reach_m[:, 0], np.maximum(now, later) + self._reach_m[:, 1]],
+                        axis=1)
+
     def bodies_outside_finest(self, positions_m: np.ndarray, margin_cells: float) -> list[int]:
         """The bodies whose box (:meth:`body_boxes_m` at ``positions_m``), ``margin_cells`` finest cells wider, is
         not wholly on the finest level's leaves (of every rank)."""

@@ -72,6 +72,7 @@ class FluidModel(Model):
         self.precision = precision or scene.numerics.precision
         self.regrid_every = None if self.uniform else scene.refinement.regrid_every_steps
         self.regrid_count = 0
+        self.regrids_put_off = 0        #: regrids that changed blocks but waited (refinement.regrid_slack)
         if self.comm is not None and self.scheme != "conservative":
             raise InputError(f"mpirun -n {self.comm.size}: refinement.scheme: the interpolating level interface runs "
                              "on one process; use scheme = \"conservative\" on several ranks")
@@ -123,7 +124,7 @@ class FluidModel(Model):
         self.lbm = RefinedLBM(self.octree, tau0=u.tau, force0=self.force_lattice, faces=forest_faces(scene, u),
                               operator=fl.operator, precision=self.precision, scheme=self.scheme,
                               rescale=self.scheme == "interpolate", target=self.target, solid=padding_solid(scene),
-                              views=None if self.decomp is None else self.decomp.views)
+                              views=self.grid.views, partial=self.decomp is not None)
         if initialize:
             self.lbm.initialize(1.0, tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
         self._on_levels()
@@ -164,8 +165,14 @@ class FluidModel(Model):
         (:func:`~iceresist.scene.blocks.build_octree`, :meth:`hot_cells`, :meth:`body_boxes_m`); where it changed,
         carry every level's populations to the new blocks (:func:`iceresist.grid.regrid.carry_over`) and step on
         from there. Returns whether the blocks changed."""
-        octree = build_octree(self.scene, self.hot_cells(), self.body_boxes_m())
+        hot = self.hot_cells()
+        need = build_octree(self.scene, hot, self.body_boxes_m())
+        ahead = self.body_boxes_ahead_m()
+        octree = need if ahead is None else build_octree(self.scene, hot, ahead)
         if self._is_current(octree.level, octree.coord):
+            return False
+        if self._put_off(need, octree):
+            self.regrids_put_off += 1
             return False
         grid = self._split(octree)
         level_bytes = self._level_bytes(grid.views)
@@ -183,6 +190,21 @@ class FluidModel(Model):
         log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.level0_steps,
                  [int(n) for n in octree.blocks_per_level()])
         return True
+
+    def body_boxes_ahead_m(self) -> np.ndarray | None:
+        """The boxes the bodies sweep over the next ``refinement.regrid_lookahead_steps`` level-0 steps ((n, 2, 3),
+        m), which a rebuild refines; None: the boxes where they are (:meth:`body_boxes_m`)."""
+        return None
+
+    def _put_off(self, need, octree) -> bool:
+        """Whether a regrid to ``octree`` may wait (``refinement.regrid_slack``): the present leaves cover ``need``
+        (the criteria where the bodies are now) at its levels or finer, and their cell updates per level-0 step
+        exceed those of ``octree`` (what a rebuild now would give) by at most the slack."""
+        slack = self.scene.refinement.regrid_slack
+        if not slack or not self.octree.covers(need):
+            return False
+        steps = 2.0 ** np.arange(octree.max_level + 1)
+        return float(self.octree.blocks_per_level() @ steps) <= (1.0 + slack) * float(octree.blocks_per_level() @ steps)
 
     def _rebuild(self, octree, level_bytes: dict, grid: Grid | None = None):
         """The levels built on ``octree`` and every level's populations carried over from the present ones
@@ -203,8 +225,9 @@ class FluidModel(Model):
         release_freed_memory()      # the old levels, which reference cycles hold (iceresist.limits)
 
     def _populations(self, lv: int) -> np.ndarray:
-        """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""
-        return self.lbm.solvers[lv].populations()
+        """Level ``lv``'s populations f - w (nblocks, 27, 512) on the host in the storage precision (on the CPU the
+        level's own buffer: a regrid carries it without a copy)."""
+        return self.lbm.solvers[lv].stored_populations()
 
     def _finest_extra(self):
         """What a regrid carries besides the populations, taken before the levels are rebuilt (none here)."""
@@ -392,7 +415,7 @@ class FluidModel(Model):
         levels, the block octree (the level and coordinates of every leaf); on several ranks gathered on rank 0
         (None on the others), so a checkpoint restarts on any number of ranks. A uniform grid's populations are
         one array (``f``), as before levels existed."""
-        f = {str(lv): self.grid.gather(lv, s.populations().astype(s.real)) for lv, s in self.lbm.solvers.items()}
+        f = {str(lv): self.grid.gather(lv, np.array(s.stored_populations())) for lv, s in self.lbm.solvers.items()}
         if not self.grid.root:
             return None
         if self.uniform:

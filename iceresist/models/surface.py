@@ -107,7 +107,7 @@ class FreeSurfaceModel(FluidModel):
         return cls(self.octree, tau0=u.tau, gravity0=self.gravity0, depth0=self.depth0, mobility=fs.mobility_lattice,
                    width=fs.interface_width_cells, h_lattice=fs.h_lattice, operator=fl.operator,
                    precision=self.precision, target=self.target, faces=forest_faces(scene, u), decomp=self.decomp,
-                   f_pool_margin=float(fs.f_pool_margin) if pooled else None)
+                   f_pool_margin=float(fs.f_pool_margin) if pooled else None, views=self.grid.views)
 
     def initial_surface_cells(self) -> np.ndarray:
         """Water height z_s(x, y) at t = 0 in level-0 cells, (nx, ny): the depth where there is water, 1.5 interface
@@ -126,8 +126,9 @@ class FreeSurfaceModel(FluidModel):
         super()._release_levels()
 
     def _finest_extra(self) -> dict:
-        """The finest level's free-surface state before a regrid (:meth:`FreeSurfaceFluid.state`)."""
-        return self.fs.surface.state()
+        """The finest level's phase field, flags and iteration before a regrid (:meth:`FreeSurfaceFluid.state`
+        without the populations, which :meth:`_populations` gives)."""
+        return self.fs.surface.state(populations=False)
 
     def _fill(self, new: dict, old_views, finest: dict, whole=None):
         """The carried populations and, with them, the finest level's phase field and flags
@@ -138,8 +139,8 @@ class FreeSurfaceModel(FluidModel):
             self.fs.carry_split(new, whole, finest, old_views[self.finest])
 
     def _populations(self, lv: int) -> np.ndarray:
-        """Level ``lv``'s populations f - w (nblocks, 27, 512), host float64."""
-        return self._pool(lv).populations()
+        """Level ``lv``'s populations f - w (nblocks, 27, 512) on the host in the storage precision."""
+        return self._pool(lv).stored_populations()
 
     # -- regridding ---------------------------------------------------------------------------------------
     def hot_cells(self) -> np.ndarray:

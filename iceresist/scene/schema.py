@@ -557,6 +557,16 @@ class Refinement(_Section):
         "regrid also keeps on the finest level every block the surface has reached (phi below 1 - 1e-4 outside the "
         "bodies) and the blocks within one finest block of it, so a wave or ice pushed down past the band does not "
         "lose its fine blocks when a body's band moves on.")
+    regrid_slack: float = Field(
+        0.0, ge=0, description="With `regrid_every_steps`: a regrid is put off while the present blocks hold, at "
+        "their level or finer, everything the criteria ask for now and cost at most this fraction more cell updates "
+        "per level-0 step than the levels a rebuild would give (the fine blocks a moving body left behind stay fine "
+        "a while; each rebuild costs seconds to minutes of setting up); 0 rebuilds whenever the blocks change.")
+    regrid_lookahead_steps: int = Field(
+        0, ge=0, description="With `regrid_slack` and `body_band_m`: a regrid that rebuilds the levels draws each "
+        "body's band over the path its present velocity takes it in this many level-0 steps, so the fine blocks "
+        "reach ahead of a moving body and the regrids that follow wait until it nears their edge; the slack is then "
+        "measured against the levels such a rebuild would give. 0: the band where the bodies are.")
     scheme: Literal["conservative", "interpolate"] = Field(
         "conservative", description="Level interface: 'conservative' (packets exploded and coalesced, Rohde et "
         "al. 2006: mass to round-off) or 'interpolate' (the paper's trilinear interpolation, its non-equilibrium "
@@ -567,6 +577,11 @@ class Refinement(_Section):
         if self.vorticity_1_s is not None and self.regrid_every_steps is None:
             raise ValueError("regrid_every_steps: refinement.vorticity_1_s moves the fine blocks with the eddies, "
                              "which needs regridding: give refinement.regrid_every_steps (e.g. 50)")
+        if self.regrid_slack and self.regrid_every_steps is None:
+            raise ValueError("regrid_slack: puts regrids off, which needs refinement.regrid_every_steps (e.g. 10)")
+        if self.regrid_lookahead_steps and not (self.regrid_slack and self.body_band_m):
+            raise ValueError("regrid_lookahead_steps: draws the bodies' band ahead of them for the regrids that wait, "
+                             "which needs refinement.body_band_m and refinement.regrid_slack (e.g. 0.25)")
         if self.regrid_every_steps is not None and self.vorticity_1_s is None and self.body_band_m is None:
             raise ValueError("vorticity_1_s: regridding needs a criterion that moves, refinement.vorticity_1_s "
                              "(e.g. 5.0) or, with [[bodies]], refinement.body_band_m (e.g. two cells)")

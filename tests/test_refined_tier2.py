@@ -8,6 +8,7 @@ import h5py
 import numpy as np
 import pytest
 
+from iceresist.grid import flags as FL
 from iceresist.models import Tier2Model, build_model
 from iceresist.post.case import analyse_case
 from iceresist.scene.case_scenes import case_scene
@@ -123,6 +124,28 @@ def test_a_rebuild_frees_the_levels_it_replaces():
     old = weakref.ref(m.lbm)
     m._rebuild(m.octree, m.level_bytes)
     assert old() is None
+
+
+def test_the_full_probe_finds_a_bad_population_on_a_coarser_level():
+    """The watchdog's full probe of a ship on levels checks the coarser levels' populations on the target (a row per
+    block read, not the populations): a NaN put in one population of a level-0 leaf cell makes it report the state
+    not finite; the same leaf clean, and a NaN in a level-0 ghost block (no one's state), do not. Planted: the
+    check over the ghost blocks too (the ghost NaN then reports) or none (the leaf's NaN passes) fails."""
+    m = _deep_ship(True)
+    m.step(1)
+    assert m.watchdog_probe(full=True)["finite"][0]
+    level = m.lbm.solvers[0]
+    f, fluid = level.state, (level.fluid.flags & FL.FLUID) != 0
+    leaves = m.fs.views[0].nleaves
+    assert f.shape[0] > leaves            # ghost blocks follow the leaves
+    ghost = (leaves, int(np.flatnonzero(fluid[leaves])[0]))
+    leaf = (leaves - 1, int(np.flatnonzero(fluid[leaves - 1])[0]))
+    keep = f[ghost[0], 5, ghost[1]]
+    f[ghost[0], 5, ghost[1]] = np.nan     # a ghost block's population: the transfers rewrite it before it is read
+    assert m.watchdog_probe(full=True)["finite"][0]
+    f[ghost[0], 5, ghost[1]] = keep
+    f[leaf[0], 5, leaf[1]] = np.nan
+    assert not m.watchdog_probe(full=True)["finite"][0]
 
 
 def test_a_ship_on_levels_picks_up_bit_for_bit_across_a_regrid():

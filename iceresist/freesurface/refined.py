@@ -35,6 +35,7 @@ from iceresist.freesurface import kernel_key
 from iceresist.freesurface.fluid import FreeSurfaceFluid
 from iceresist.freesurface.hlattice import h_lattice as lookup_h_lattice
 from iceresist.freesurface.pool import PooledLBM
+from iceresist.freesurface.probe import COLUMNS, FluidProbe
 from iceresist.grid.forest import CELLS, LX, LY, LZ
 from iceresist.grid.levels import FROM_COARSER
 from iceresist.grid.octree import BlockOctree
@@ -160,6 +161,7 @@ class _LiquidLevel:
         self.force = tuple(float(v) for v in force)
         self._phi = target.to_device(np.ones((forest.nblocks, CELLS), self.real))
         self._half_width = self.real(half_width)
+        self._probe = None
 
     @property
     def state(self):
@@ -185,6 +187,18 @@ class _LiquidLevel:
         j = np.einsum("qa,bqc->abc", L.C.astype(np.float64), f)
         u = j / rho - 0.5 * np.asarray(self.force)[:, None, None]
         return rho, u
+
+    def leaves_finite(self, nleaves: int) -> bool:
+        """Whether the populations of the first ``nleaves`` blocks (the leaves) give a finite density and velocity
+        on every fluid cell and a finite mass: the probe's full pass (:mod:`iceresist.freesurface.probe`) reduced
+        per block on the target, so nothing but a row per block is read (not the populations)."""
+        if self._probe is None:
+            self._probe = FluidProbe(self.forest, self.fluid.target)
+            # the full pass takes the velocity from the populations: the array it would read otherwise is a stand-in
+            self._no_u = self.fluid.target.to_device(np.zeros((1, 3, CELLS), self.real))
+        rows = self._probe.rows(self.fluid.state, self.fluid.fslot, self.fluid.flags, self._no_u, self._phi, True,
+                                0.0)[:nleaves]
+        return bool(rows[:, COLUMNS.index("n_bad")].sum() == 0 and np.isfinite(rows[:, COLUMNS.index("mass")].sum()))
 
 
 class _SurfaceLevel:
@@ -434,6 +448,11 @@ class RefinedFreeSurface:
         return self.lbm.iteration
 
     # ------------------------------------------------------------------ diagnostics
+    def coarse_levels_finite(self) -> bool:
+        """Whether every coarser level's leaves (this rank's) hold finite populations
+        (:meth:`_LiquidLevel.leaves_finite`: reduced on the target); the finest level's are the surface's probe's."""
+        return all(self.lbm.solvers[lv].leaves_finite(self.views[lv].nleaves) for lv in self.levels[:-1])
+
     def volume(self, per_block: np.ndarray | None = None) -> float:
         """The water volume in level-0 cells: the finest level's leaves' sum of phi over 8^L (per-block sums added in
         the level's global block order: the same float64 sum on any number of ranks), plus every coarser level's

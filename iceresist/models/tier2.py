@@ -350,7 +350,7 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
         the bodies that left the finest level (count, the first's index); and on a ``full`` probe (default: every
         :attr:`full_probe_every`-th, the first included) finite populations, the lattice density band and the
         fluid kinetic energy of the wet cells (lattice units; reference: all cells moving at the ship's lattice
-        speed), and the coarser levels' mass finite."""
+        speed), and the coarser levels' populations finite (reduced on the target too)."""
         if full is None:
             full = self._probes % self.full_probe_every == 0
         self._probes += 1
@@ -361,7 +361,7 @@ class Tier2Model(FloatingBodiesModel, ShipModel):
         if not probe["finite"][0]:
             return probe
         if full:
-            finite = math.isfinite(self.lbm.mass())         # this rank's leaves: every rank must agree
+            finite = self.fs.coarse_levels_finite()         # this rank's leaves: every rank must agree
             if not self.grid.all(finite):
                 return {"finite": (False, None)}
         ice = self.ice_probe()

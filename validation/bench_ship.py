@@ -19,7 +19,10 @@ row counts its levels without building them (:meth:`~iceresist.models.tier2.Tier
 and ghost cells per level, cells per cube at the finest, against the paper's 160 M start, the arrays' GiB (and
 whether they fit each ``--fit-gib``), the case's cell updates and, at ``--rate-mlups R``, its hours at R MLUPS;
 then ``--records`` builds and times it as above: ``python -m validation.bench ship --preset paper --amr --records 0
---fit-gib 70 --rate-mlups 514`` (2 min on a 2-core x86 VM, 5 GB).
+--fit-gib 70 --rate-mlups 514`` (2 min on a 2-core x86 VM, 5 GB). A regridding case adds the regrids that fell in the
+timed records (how many rebuilt the levels, their seconds, how many waited: ``refinement.regrid_slack``) and
+``rebuild_s``, the cost of one regrid that changes the blocks (the levels rebuilt, timed onto the blocks they
+have).
 
 ``--compare-pure`` (what the coupling costs; target: the coupled step at most 3x the pure one): in the same process,
 the coupled LBM step of the case timed part by part (every kernel launch under its label,
@@ -101,6 +104,7 @@ def measure(scene, backend: str, records: int) -> dict:
     build_s = time.perf_counter() - t0
     model.step(1)
     model.target.synchronize()
+    rebuilds = _timed_rebuilds(model) if scene.refinement is not None else None
     t0 = time.perf_counter()
     model.step(records)
     model.target.synchronize()
@@ -117,8 +121,32 @@ def measure(scene, backend: str, records: int) -> dict:
            "finite": bool(model.is_finite())}
     if scene.refinement is not None:   # cells of every level, the finest's resolution; updates per level-0 step
         row.update(cells_per_level=model.cells_per_level, cells_per_cube=model.cells_per_cube,
-                   updates_per_step=model.lattice_updates_per_step // model.lbm_steps_per_record)
+                   updates_per_step=model.lattice_updates_per_step // model.lbm_steps_per_record,
+                   regrids_in_records=len(rebuilds), regrid_s_in_records=sum(rebuilds),
+                   regrids_put_off=model.regrids_put_off)
+        if model.regrid_every:
+            # what every regrid that changes the blocks costs: the levels rebuilt (here onto the blocks they have)
+            model.target.synchronize()
+            t0 = time.perf_counter()
+            model._rebuild(model.octree, model.level_bytes)
+            model.target.synchronize()
+            row["rebuild_s"] = time.perf_counter() - t0
     return row
+
+
+def _timed_rebuilds(model) -> list:
+    """The seconds of each rebuild of the levels ``model`` makes from now on (a list that fills as it runs)."""
+    seconds, rebuild = [], model._rebuild
+
+    def timed(*args, **kw):
+        model.target.synchronize()
+        t0 = time.perf_counter()
+        rebuild(*args, **kw)
+        model.target.synchronize()
+        seconds.append(time.perf_counter() - t0)
+
+    model._rebuild = timed
+    return seconds
 
 
 #: Grid points the paper's AMR starts with (section 3: "about 160 million", 15 % of a uniform mesh).

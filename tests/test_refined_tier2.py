@@ -213,6 +213,7 @@ def test_the_quick_preset_on_levels_is_the_case_with_its_refinement(tmp_path):
 
     s = case_scene(CASE, "quick", 2, amr=True)
     assert s.refinement.levels == 1 and s.refinement.regrid_every_steps == 10
+    assert (s.refinement.regrid_slack, s.refinement.regrid_lookahead_steps) == (0.25, 100)
     assert s.shape_cells() == (384, 104, 72) and s.free_surface.water_depth_m == 0.93
     assert 0.041 / (s.domain.dx_m / 2) > 6.0                     # cells per cube on the finest level
     p = tmp_path / "amr.toml"

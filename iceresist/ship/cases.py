@@ -61,6 +61,13 @@ class _Amr(_Data):
     surface_band_m: float = Field(gt=0)
     body_band_m: float = Field(gt=0)
     regrid_every_steps: int = Field(ge=1)
+    regrid_slack: float = Field(default=0.0, ge=0)
+    regrid_lookahead_steps: int = Field(default=0, ge=0)
+
+
+#: The keys of a preset's ``[tier2.<preset>.amr]`` that are a scene's ``[refinement]``.
+REFINEMENT_KEYS = ("levels", "surface_band_m", "body_band_m", "regrid_every_steps", "regrid_slack",
+                   "regrid_lookahead_steps")
 
 
 class _Tier2(_Data):
@@ -191,7 +198,7 @@ def amr_overrides(fidelity: str) -> dict:
     a = _amr(fidelity)
     domain = {"cells": list(a["cells"]), **({"dx_m": a["dx_m"]} if a.get("dx_m") else {})}
     return {"domain": domain, "free_surface": {"water_depth_m": a["water_depth_m"]},
-            "refinement": {k: a[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}}
+            "refinement": {k: a[k] for k in REFINEMENT_KEYS}}
 
 
 def _amr(fidelity: str) -> dict:
@@ -287,7 +294,7 @@ def scene_data(case, fidelity: str, tier: int = 1, amr: bool = False, *, hull_ke
                     "sample_interval_s": f["sample_interval_s"]},
     }
     if amr:
-        refinement = {k: _amr(fidelity)[k] for k in ("levels", "surface_band_m", "body_band_m", "regrid_every_steps")}
+        refinement = {k: _amr(fidelity)[k] for k in REFINEMENT_KEYS}
         out["refinement"] = refinement
         out["scene"]["description"] += f", on {refinement['levels'] + 1} refined levels"
     return out

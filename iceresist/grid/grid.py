@@ -146,9 +146,9 @@ class Grid:
 
     def carry_to(self, new: Grid, old: dict, nq: int):
         """Every level's per-cell values ``old`` ({level: (this rank's blocks, nq, 512)}) carried onto the blocks of
-        ``new`` (:func:`~iceresist.grid.regrid.carry_over`, in the precision of ``old``). Returns ({level: the new grid's blocks of this
-        rank}, the whole carried levels on rank 0 of several ranks, else None). On several ranks the old levels are
-        gathered on rank 0, carried over there and dealt out to the ranks of ``new``."""
+        ``new`` (:func:`~iceresist.grid.regrid.carry_over`, in the precision of ``old``). Returns ({level: the new
+        grid's blocks of this rank}, the whole carried levels on rank 0 of several ranks, else None). On several ranks
+        the old levels are gathered on rank 0, carried over there and dealt out to the ranks of ``new``."""
         levels = [v.level for v in new.global_views if v is not None]
         dtype = next(iter(old.values())).dtype         # a level may be new: the precision of the old ones
         if self.decomp is None:

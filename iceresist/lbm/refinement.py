@@ -289,8 +289,8 @@ def _take_free_packets(fine: LevelView, coarse: LevelView, periodic, fed, slot, 
     """Where an interface meets a wall, the coarse packets (slot ``slot``, fine cell ``pos``) that the fine leaves
     pull across it, made free ones. Every coarse leaf's population takes the coarse packets its step would take
     (:func:`_coarse_row`: the plain stream, or the bounce-back that keeps a packet in its cell) except in the
-    sub-cells the finer level feeds (``fed``, sorted: :func:`_sub_cell_keys` of the coalesced rows' sub-cells that take a
-    fine packet); the packets those would have taken, and the ones that stream into the finer level, are the free
+    sub-cells the finer level feeds (``fed``, sorted: :func:`_sub_cell_keys` of the coalesced rows' sub-cells that
+    take a fine packet); the packets those would have taken, and the ones that stream into the finer level, are the free
     ones. A packet the fine sub-steps (:func:`_arrival`) carry into a fine leaf is free except where a coarse wall
     row takes it whole: along a wall the coarse bounce-back keeps a packet in its cell where two fine sub-steps
     carry part of it into the next. Such a packet is swapped for the one the fine sub-steps bring to the sub-cell

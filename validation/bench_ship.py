@@ -20,8 +20,9 @@ and ghost cells per level, cells per cube at the finest, against the paper's 160
 whether they fit each ``--fit-gib``), the case's cell updates and, at ``--rate-mlups R``, its hours at R MLUPS;
 then ``--records`` builds and times it as above: ``python -m validation.bench ship --preset paper --amr --records 0
 --fit-gib 70 --rate-mlups 514`` (2 min on a 2-core x86 VM, 5 GB). A regridding case adds the regrids that fell in the
-timed records (how many rebuilt the levels, their seconds, how many waited: ``refinement.regrid_slack``) and
-``rebuild_s``, the cost of one regrid that changes the blocks (the levels rebuilt, timed onto the blocks they
+timed records (how many rebuilt the levels, their seconds, how many waited: ``refinement.regrid_slack``), the
+seconds per record and projected hours of the stepping alone (``s_per_record_stepping``, ``projected_h_stepping``)
+and ``rebuild_s``, the cost of one regrid that changes the blocks (the levels rebuilt, timed onto the blocks they
 have).
 
 ``--compare-pure`` (what the coupling costs; target: the coupled step at most 3x the pure one): in the same process,
@@ -123,7 +124,10 @@ def measure(scene, backend: str, records: int) -> dict:
         row.update(cells_per_level=model.cells_per_level, cells_per_cube=model.cells_per_cube,
                    updates_per_step=model.lattice_updates_per_step // model.lbm_steps_per_record,
                    regrids_in_records=len(rebuilds), regrid_s_in_records=sum(rebuilds),
-                   regrids_put_off=model.regrids_put_off)
+                   regrids_put_off=model.regrids_put_off,
+                   # the stepping alone: the regrids that fell in so few records say little of a whole case's
+                   s_per_record_stepping=(seconds - sum(rebuilds)) / records,
+                   projected_h_stepping=total * (seconds - sum(rebuilds)) / records / 3600.0)
         if model.regrid_every:
             # what every regrid that changes the blocks costs: the levels rebuilt (here onto the blocks they have)
             model.target.synchronize()

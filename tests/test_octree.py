@@ -88,6 +88,7 @@ def test_the_level_map_is_the_raster_of_the_leaves_and_covers_compares_two_octre
     narrow = BlockOctree((2, 2, 2), 3).refine(_point_refinement(p, levels=(3, 2), radii=(1.0, 3.0)))
     other = BlockOctree((2, 2, 2), 3).refine(_point_refinement([[12.5, 12.0, 12.0]], levels=(3, 2)))
     assert wide.covers(narrow) and wide.covers(wide)
+    assert wide.updates_per_step() == sum(512 * 2 ** int(lv) for lv in wide.level) > narrow.updates_per_step()
     assert not narrow.covers(wide)
     assert not wide.covers(other) and not other.covers(wide)
 

@@ -226,6 +226,10 @@ class BlockOctree:
     def cells_per_level(self) -> np.ndarray:
         return self.blocks_per_level() * BLOCK ** 3
 
+    def updates_per_step(self) -> int:
+        """Cell updates of the leaves in one level-0 step: a leaf of level l steps 2^l times."""
+        return int(self.cells_per_level() @ (2 ** np.arange(self.max_level + 1)))
+
     def level_map(self) -> np.ndarray:
         """The level of the leaf over each block of the finest level's block grid (shape ``shape_at(max_level)``,
         int8): a leaf of level l fills its 8^(L - l) finest blocks."""

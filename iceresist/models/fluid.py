@@ -203,8 +203,7 @@ class FluidModel(Model):
         slack = self.scene.refinement.regrid_slack
         if not slack or not self.octree.covers(need):
             return False
-        steps = 2.0 ** np.arange(octree.max_level + 1)
-        return float(self.octree.blocks_per_level() @ steps) <= (1.0 + slack) * float(octree.blocks_per_level() @ steps)
+        return self.octree.updates_per_step() <= (1.0 + slack) * octree.updates_per_step()
 
     def _rebuild(self, octree, level_bytes: dict, grid: Grid | None = None):
         """The levels built on ``octree`` and every level's populations carried over from the present ones

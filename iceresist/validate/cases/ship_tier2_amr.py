@@ -67,8 +67,8 @@ def rung(n: float) -> dict:
             "water_depth_m": WATER_DEPTH_M, "levels": int(ref["levels"]),
             "surface_band_m": max(ref["surface_band_m"], SURFACE_BAND_CELLS * dx0 / 2.0),
             "body_band_m": max(ref["body_band_m"], BODY_BAND_CELLS * dx0 / 2.0),
-            "regrid_every_steps": int(ref["regrid_every_steps"]), "regrid_slack": float(ref["regrid_slack"]),
-            "regrid_lookahead_steps": int(ref["regrid_lookahead_steps"]), "steps_per_record": int(round(steps))}
+            **{k: ref[k] for k in ("regrid_every_steps", "regrid_slack", "regrid_lookahead_steps")},
+            "steps_per_record": int(round(steps))}
 
 
 def ladder(quick: bool) -> list[dict]:
@@ -82,7 +82,7 @@ def overrides(params: dict) -> dict:
     the model gives them exactly)."""
     ov = {"domain": {"cells": list(params["cells"]), "dx_m": float(params["dx_m"])},
           "free_surface": {"water_depth_m": float(params["water_depth_m"])},
-          "refinement": {k: params[k] for k in REFINEMENT_KEYS if k in params}}
+          "refinement": {k: params[k] for k in REFINEMENT_KEYS}}
     dt_s = case_scene(CASE, "quick", 2, **ov).units().dt_s
     ov["contact"] = {"sample_interval_s": int(params["steps_per_record"]) * dt_s * (1.0 - 1e-7)}
     return ov

@@ -42,11 +42,34 @@ def test_finest_fit_is_the_last_grid_under_the_budget():
 @pytest.mark.slow   # 599 s in a cold CI run (a first tier-2 compile in its process); compare-pure below stays
 def test_measure_projects_its_own_rate_on_the_ci_sized_case():
     scene = case_scene(CASE, "quick", 2, **TINY_TIER2_OVERRIDES)
-    row = measure(scene, "cpu", 2)
+    (row,) = measure(scene, "cpu", 2)
     assert row["cells"] == 64 * 16 * 16 and row["finite"]
     assert row["records_total"] == math.ceil(scene.run.end_time_s / (row["steps"] / 2 * scene.units().dt_s) - 1e-9)
     assert row["projected_h"] == pytest.approx(row["records_total"] * row["s_per_record"] / 3600, rel=1e-12)
     assert row["mlups"] == pytest.approx(row["cells"] * row["steps"] / row["seconds"] / 1e6, rel=1e-12)
+
+
+def test_measure_on_levels_gives_the_fine_equivalent_rate_and_the_level_exchange_by_label():
+    """``--amr --by-label`` on the CI-sized ship over coarse deep water (two levels): the fine-equivalent rate is the
+    uniform finest grid's updates (the level-0 cells x 8, two fine steps a level-0 step) over the stepping's
+    seconds, one more record is timed by launcher label, and the level exchange's share is that of the transfers,
+    the block copies and the ghost refill. Planted: the finest level's steps per level-0 step left out of the rate
+    (a factor 2) fails."""
+    from test_refined_tier2 import _deep
+
+    from validation.bench_ship import LEVEL_EXCHANGE
+
+    o = _deep(True)
+    o["ship"]["start_x_m"] = o["ice"]["channel_start_x_m"] = 0.44
+    scene = case_scene(CASE, "quick", 2, **o)
+    row, *labels = measure(scene, "cpu", 1, by_label=True)
+    stepping = row["s_per_record_stepping"]        # one timed record
+    assert row["fine_equivalent_mlups"] == pytest.approx(64 * 16 * 24 * 8 * 2 * row["steps"] / stepping / 1e6,
+                                                         rel=1e-12)
+    shares = {r["name"].removeprefix("label "): r["share"] for r in labels}
+    assert set(LEVEL_EXCHANGE) <= set(shares) and {"f_update", "links"} <= set(shares)
+    assert row["level_exchange_share"] == pytest.approx(sum(shares[k] for k in LEVEL_EXCHANGE), rel=1e-12)
+    assert 0 < row["level_exchange_share"] < sum(shares.values()) <= 1.0
 
 
 def test_bytes_per_cell_count_the_grid_and_the_coupling_and_leave_the_dem_fixed():

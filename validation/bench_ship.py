@@ -23,7 +23,9 @@ then ``--records`` builds and times it as above: ``python -m validation.bench sh
 timed records (how many rebuilt the levels, their seconds, how many waited: ``refinement.regrid_slack``), the
 seconds per record and projected hours of the stepping alone (``s_per_record_stepping``, ``projected_h_stepping``)
 and ``rebuild_s``, the cost of one regrid that changes the blocks (the levels rebuilt, timed onto the blocks they
-have).
+have). Every row on levels has ``fine_equivalent_mlups``, the cell updates of the uniform finest grid over the tank
+in the stepping's time (the rate the paper's mesh would need without AMR); ``--by-label`` adds one more record timed
+launcher by launcher, a row per label and ``level_exchange_share`` (transfers, block copies and the ghost refill).
 
 ``--compare-pure`` (what the coupling costs; target: the coupled step at most 3x the pure one): in the same process,
 the coupled LBM step of the case timed part by part (every kernel launch under its label,
@@ -55,7 +57,8 @@ def add_arguments(parser):
     parser.add_argument("--compare-pure", action="store_true",
                         help="time the coupled step part by part beside the pure fused LBM step on as many cells")
     parser.add_argument("--by-label", action="store_true",
-                        help="with --compare-pure: one row per launcher label, not the parts of docs/PERFORMANCE.md")
+                        help="with --compare-pure: one row per launcher label, not the parts of docs/PERFORMANCE.md; "
+                             "with --amr: one more record timed by launcher label (and the level exchange's share)")
     parser.add_argument("--amr", action="store_true",
                         help="the preset's tank on refined levels (its [tier2.<preset>.amr]): its cells per level "
                              "counted without building it, then (--records) the measured rate and the projected "
@@ -96,8 +99,17 @@ def finest_fit(per_cell: float, fixed: int, budget_bytes: float, cells_of) -> in
     return n
 
 
-def measure(scene, backend: str, records: int) -> dict:
-    """Build the tier-2 model of ``scene``, step one record of warm-up and ``records`` timed ones."""
+#: The launcher labels of the exchange between levels: the transfers at the interfaces, the copies of blocks between
+#: a level's buffers and the refill of the finest level's ghost blocks for the phase field.
+LEVEL_EXCHANGE = ("level_transfer", "copy_blocks", "ghost_phase")
+
+
+def measure(scene, backend: str, records: int, by_label: bool = False) -> list[dict]:
+    """Build the tier-2 model of ``scene``, step one record of warm-up and ``records`` timed ones: one row. On
+    levels also the fine-equivalent rate (the cell updates of the uniform finest grid over the tank in the same
+    time) and, with ``by_label``, one more record timed launcher by launcher
+    (:func:`iceresist.backends.launch.profiling`): a row per label and the level exchange's share
+    (:data:`LEVEL_EXCHANGE`) in the first row."""
     from iceresist.models.tier2 import Tier2Model
 
     t0 = time.perf_counter()
@@ -121,13 +133,17 @@ def measure(scene, backend: str, records: int) -> dict:
            "allocated_GiB": model.allocated_bytes() / GIB, "build_s": build_s,
            "finite": bool(model.is_finite())}
     if scene.refinement is not None:   # cells of every level, the finest's resolution; updates per level-0 step
+        stepping = seconds - sum(rebuilds)
+        finest = max(model.cells_per_level)
+        fine_cells = math.prod(model.shape_cells) * 8 ** finest
         row.update(cells_per_level=model.cells_per_level, cells_per_cube=model.cells_per_cube,
                    updates_per_step=model.lattice_updates_per_step // model.lbm_steps_per_record,
                    regrids_in_records=len(rebuilds), regrid_s_in_records=sum(rebuilds),
                    regrids_put_off=model.regrids_put_off,
                    # the stepping alone: the regrids that fell in so few records say little of a whole case's
-                   s_per_record_stepping=(seconds - sum(rebuilds)) / records,
-                   projected_h_stepping=total * (seconds - sum(rebuilds)) / records / 3600.0)
+                   s_per_record_stepping=stepping / records,
+                   projected_h_stepping=total * stepping / records / 3600.0,
+                   fine_equivalent_mlups=fine_cells * lbm * 2 ** finest / stepping / 1e6)
         if model.regrid_every:
             # what every regrid that changes the blocks costs: the levels rebuilt (here onto the blocks they have)
             model.target.synchronize()
@@ -135,7 +151,24 @@ def measure(scene, backend: str, records: int) -> dict:
             model._rebuild(model.octree, model.level_bytes)
             model.target.synchronize()
             row["rebuild_s"] = time.perf_counter() - t0
-    return row
+    if not by_label:
+        return [row]
+    from iceresist.backends.launch import profiling
+
+    n0 = len(rebuilds or ())     # rebuild_s's rebuild is in the list already
+    with profiling(model.target) as prof:
+        t0 = time.perf_counter()
+        model.step(1)
+        model.target.synchronize()
+        profiled = time.perf_counter() - t0
+    if rebuilds is not None and len(rebuilds) > n0:
+        profiled -= sum(rebuilds[n0:])          # a regrid in the profiled record: its launches are not the step's
+    rows = [{"name": f"label {label}", "backend": row["backend"], "s_per_record": sec,
+             "share": sec / profiled, "launches_per_step": n / model.lbm_steps_per_record}
+            for label, (sec, n) in sorted(prof.items(), key=lambda kv: -kv[1][0])]
+    row["profiled_s_per_record"] = profiled
+    row["level_exchange_share"] = sum(prof[k][0] for k in LEVEL_EXCHANGE if k in prof) / profiled
+    return [row] + rows
 
 
 def _timed_rebuilds(model) -> list:
@@ -370,11 +403,11 @@ def run(args):
                              "and --compare-pure")
         scene = case_scene(args.case, args.preset, 2, amr=True)
         rows = [amr_plan(scene, args.fit_gib or [], args.rate_mlups)]
-        return rows + ([measure(scene, args.backend, args.records)] if args.records else [])
+        return rows + (measure(scene, args.backend, args.records, by_label=args.by_label) if args.records else [])
     for n in acrosses if args.records else []:
         scene = scaled_scene(args.case, args.preset, n)
         if args.compare_pure:
             rows.extend(compare_pure(scene, args.backend, args.records, by_label=args.by_label))
         else:
-            rows.append(measure(scene, args.backend, args.records))
+            rows.extend(measure(scene, args.backend, args.records))
     return rows

@@ -53,3 +53,21 @@ def test_dem_benchmark_takes_the_documented_precision_flag(capsys):
     assert bench.main(["dem", "--n", "4", "--steps", "1", "--precision", "float64", "--json"]) in (0, None)
     rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert [r["precision"] for r in rows] == ["float64"]
+
+
+def test_an_interrupted_benchmark_keeps_the_rows_it_measured(monkeypatch, capsys):
+    """A benchmark cut off at a deadline (SIGINT, as validation/gpu_campaign.sh sends it) after its first row: that
+    row printed as it came, one line that says so, exit status 130, no traceback. Planted: the interrupt left
+    uncaught (a traceback, the row lost) fails."""
+    import types
+
+    def run(args):
+        yield {"name": "plan", "cells": 8}
+        raise KeyboardInterrupt
+
+    fake = types.SimpleNamespace(add_arguments=lambda parser: None, run=run)
+    monkeypatch.setattr(bench, "_module", lambda name: fake)
+    assert bench.main(["fake", "--json"]) == 130
+    out, err = capsys.readouterr()
+    assert [json.loads(line) for line in out.splitlines()] == [{"name": "plan", "cells": 8}]
+    assert err.strip() == "validation.bench fake: interrupted after 1 row"

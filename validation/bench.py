@@ -2,8 +2,9 @@
 [--steps S] [--json]`` (docs/PERFORMANCE.md).
 
 NAME selects the module ``validation.bench_NAME``, which provides ``add_arguments(parser)`` and
-``run(args) -> list[dict]``. With ``--json`` every measurement is printed as one JSON object per
-line; otherwise as a table.
+``run(args) -> list[dict]`` (or an iterator of rows, each printed as it comes with ``--json``). With ``--json`` every
+measurement is printed as one JSON object per line; otherwise as a table. Interrupted (Ctrl-C, SIGINT at a
+deadline), the rows measured so far are printed and one line says so; exit status 130.
 """
 
 from __future__ import annotations
@@ -64,17 +65,22 @@ def main(argv=None):
     args.precision = args.precision or ["float32", "float64"]
     from iceresist.errors import InputError
 
+    rows, status = [], None
     try:
-        rows = mod.run(args)
+        for r in mod.run(args):     # a list, or a generator whose rows are printed as they come (with --json)
+            rows.append(r)
+            if args.json:
+                print(json.dumps(r), flush=True)
     except InputError as exc:       # bad input: one line, exit status 2 (as the iceresist command)
         print(f"validation.bench {name}: error: {exc}", file=sys.stderr)
         return 2
-    if args.json:
-        for r in rows:
-            print(json.dumps(r))
-    else:
+    except KeyboardInterrupt:       # cut off (a deadline): the rows measured so far stand, one line says so
+        print(f"validation.bench {name}: interrupted after {len(rows)} row{'' if len(rows) == 1 else 's'}",
+              file=sys.stderr)
+        status = 130
+    if not args.json and rows:
         print(format_table(rows))
-    return getattr(args, "exit_status", 0)
+    return status if status is not None else getattr(args, "exit_status", 0)
 
 
 if __name__ == "__main__":

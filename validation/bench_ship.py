@@ -401,9 +401,7 @@ def run(args):
         if args.across or args.compare_pure:
             raise InputError("--amr: times the preset's refined tank as the preset gives it; leave out --across "
                              "and --compare-pure")
-        scene = case_scene(args.case, args.preset, 2, amr=True)
-        rows = [amr_plan(scene, args.fit_gib or [], args.rate_mlups)]
-        return rows + (measure(scene, args.backend, args.records, by_label=args.by_label) if args.records else [])
+        return _amr_rows(case_scene(args.case, args.preset, 2, amr=True), args)
     for n in acrosses if args.records else []:
         scene = scaled_scene(args.case, args.preset, n)
         if args.compare_pure:
@@ -411,3 +409,11 @@ def run(args):
         else:
             rows.extend(measure(scene, args.backend, args.records))
     return rows
+
+
+def _amr_rows(scene, args):
+    """The rows of ``--amr`` as they come: the plan (printed before the build, which on the paper's levels takes
+    minutes), then the measured ones."""
+    yield amr_plan(scene, args.fit_gib or [], args.rate_mlups)
+    if args.records:
+        yield from measure(scene, args.backend, args.records, by_label=args.by_label)

@@ -11,6 +11,8 @@
 #   amr    the block-refined LBM on two and three levels, per level, beside the uniform finest grid
 #   lbm    the fused LBM at 256^3 against the device's copy bandwidth
 #   rest   the other tests of the CI selection
+#   campaign  tier 2 on refined levels in one 9-minute visit: the ladder, the quick case's rate, the quick sweep and the
+#          paper's levels, each phase to a deadline (validation/gpu_campaign.sh; not in the default list)
 # PYTHON picks the interpreter (default python3), PYTEST_WORKERS the pytest-xdist workers (default 8 where
 # pytest-xdist is installed), SECTION_TIMEOUT the seconds each section may run (default: no limit).
 #
@@ -62,6 +64,8 @@ for section in $SECTIONS; do
     rest) $LIMIT "$PYTHON" -m pytest -q $XDIST -p no:cacheprovider -m "not slow and not mpi" \
             -k "not (cuda or gpu or transfer)" -rfE > "$OUT/pytest_rest.log" 2>&1
           echo "exit $?"; tail -4 "$OUT/pytest_rest.log" ;;
-    *)    echo "unknown section '$section': use cuda, mpi, ship, graphs, case, amr, lbm or rest"; exit 2 ;;
+    campaign) PYTHON="$PYTHON" bash "$(dirname "$0")/gpu_campaign.sh" "$OUT"
+          echo "exit $?" ;;
+    *)    echo "unknown section '$section': use cuda, mpi, ship, graphs, case, amr, lbm, rest or campaign"; exit 2 ;;
   esac
 done

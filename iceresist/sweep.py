@@ -76,6 +76,20 @@ TINY_TIER2_OVERRIDES = {
     "run": {"end_time_s": 0.06},
 }
 
+#: The smallest ship on refined levels: a 0.24 m hull and one cube in a 32 x 8 x 16-cell tank of 41/3 mm cells, the
+#: surface, the hull and the cube on level 1 (48 leaf blocks): few enough blocks for the CUDA simulator and the GPU
+#: build check (tier 2 on levels on the device).
+TINY_TIER2_AMR_OVERRIDES = {
+    **{k: dict(v) for k, v in TINY_TIER2_OVERRIDES.items()},
+    "domain": {"cells": [32, 8, 16], "dx_m": 0.041 / 3},
+    "free_surface": {"water_depth_m": 0.16},
+    "ship": {**TINY_TIER2_OVERRIDES["ship"], "length_m": 0.24, "beam_m": 0.04, "draught_m": 0.02,
+             "parallel_length_m": 0.1, "start_x_m": 0.21, "steady_window_m": [0.215, 0.22]},
+    "ice": {**TINY_TIER2_OVERRIDES["ice"], "count": 1, "channel_length_m": 0.05, "channel_start_x_m": 0.21},
+    "contact": {"sample_interval_s": 0.00466},
+    "refinement": {"levels": 1, "surface_band_m": 0.04, "body_band_m": 0.02, "regrid_every_steps": 4},
+}
+
 
 def checkpoint_path(out_dir, case: str) -> Path:
     return Path(out_dir) / "cases" / f"{case}.checkpoint.h5"

@@ -47,6 +47,10 @@ needs_toolkit = pytest.mark.skipif(_real_device() and not _toolkit_here(),
                                 reason="no `gpu` extra here, but a real GPU: the CUDA tests compile every kernel")
 
 
+#: The tests of one build share it: kept in one test process (each process would build it again, 150 s each).
+pytestmark = pytest.mark.xdist_group("gpu_build")
+
+
 @pytest.fixture(scope="module")
 def builds():
     """One run of ``python -m validation.bench gpu_build --json`` (about 1.5 min on a 2-core x86 VM)."""
@@ -65,7 +69,7 @@ def test_every_kernel_is_traced(builds):
     assert EXPECTED <= names, sorted(EXPECTED - names)
     scenes = {s for r in rows for s in r["scenes"].split(",")}
     assert {"tier1", "tier2-float32", "tier2-float64", "lbm-float32", "lbm-float64", "refined_channel",
-            "refined_surface-float32"} <= scenes
+            "refined_surface-float32", "refined_tier2-float32"} <= scenes
 
 
 @needs_toolkit
@@ -143,3 +147,46 @@ def test_a_tier2_record_reads_its_mean_loads_and_copies_nothing_else():
     assert out["lbm_steps"] >= 2 * out["records"]
     assert set(out["counts"]) <= {"download"}, out["sites"]
     assert out["counts"].get("download", 0) <= 3 * out["records"], out["sites"]
+
+
+#: The same over two records of the smallest ship on two levels, each record with its diagnostics and a regrid check
+#: (``refinement.regrid_every_steps`` 4 of its 6 level-0 steps); prints also the bytes of one float32 field of the
+#: finest level.
+REFINED_RECORD_TRANSFERS = """
+import json
+from iceresist.backends import transfers
+from iceresist.backends.buildcheck import tracing
+from iceresist.validate.gpu_build import check_scenes
+from iceresist.models import build_model
+
+records = 2
+with tracing():
+    model = build_model(check_scenes()["refined_tier2-float32"], backend="cuda")
+    model.step(1)
+    model.diagnostics()
+    checks, regrid = [], model.regrid
+    model.regrid = lambda: checks.append(1) or regrid()
+    with transfers.counting() as tally:
+        for _ in range(records):
+            model.step(1)
+            model.diagnostics()
+print(json.dumps({"records": records, "checks": len(checks), "counts": dict(tally.counts),
+                  "largest": dict(tally.largest), "field_bytes": int(model.fs.surface.phase.phi.nbytes),
+                  "sites": str(tally)}))
+"""
+
+
+def test_a_record_on_levels_reads_no_whole_field():
+    """Two records of tier 2 on two levels (the smallest ship) on the cuda target, traced in a process of its own,
+    each with its diagnostics and a regrid check: no upload and no host array handed to a kernel; what is read is
+    per body or per block (the mean loads, the probe's rows, the surface map, the blocks the surface reaches), never
+    a field of the finest level's cells. Planted: the regrid reading phi of every leaf cell again (the host's test
+    of the reach) fails."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
+    res = subprocess.run([sys.executable, "-c", REFINED_RECORD_TRANSFERS], capture_output=True, text=True, env=env,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr[-3000:]
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    assert out["checks"] >= out["records"]
+    assert set(out["counts"]) <= {"download"}, out["sites"]
+    assert out["largest"]["download"] < out["field_bytes"] // 4, out["sites"]

@@ -498,6 +498,12 @@ class FluidStructureCoupling:
         self.iteration = int(state["iteration"])
 
     # ------------------------------------------------------------------ diagnostics
+    @property
+    def owner_array(self):
+        """The launch row covering each cell (nblocks, 512), -1 for none, where it lives (on the target): what a
+        reduction on the target reads; :meth:`owners` gives the bodies on the host."""
+        return self._d["owner"]
+
     def owners(self) -> np.ndarray:
         """The body covering each cell (nblocks, 512), -1 for none (host copy)."""
         owner = self._host(self._d["owner"]).copy()

@@ -113,11 +113,11 @@ class FloatingBodiesModel(FinestLevelBodies, FreeSurfaceModel):
         h = sf.surface_height()
         return None if h is None else free_level_cells(h, owners) * self.units_finest.dx_m
 
-    def _surface_reach(self, bulk: float) -> np.ndarray:
-        """The finest leaf cells less liquid than ``bulk`` outside the bodies: a body's cells hold the phi they had
-        when it covered them, which says nothing of the surface (a sphere sunk from under the surface carries
-        phi = 0.98 down with it)."""
-        return super()._surface_reach(bulk) & ~self._covered()
+    def _surface_reach(self, bulk: float, owner=None) -> np.ndarray:
+        """The finest leaf blocks with a cell less liquid than ``bulk`` outside the bodies: a body's cells hold the
+        phi they had when it covered them, which says nothing of the surface (a sphere sunk from under the surface
+        carries phi = 0.98 down with it)."""
+        return super()._surface_reach(bulk, self.coupling.owner_array)
 
     def _covered(self) -> np.ndarray:
         """The finest level's leaf cells a body covers (nleaves, 512; this rank's own leaves on several ranks)."""

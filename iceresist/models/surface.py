@@ -18,6 +18,7 @@ import numpy as np
 
 from iceresist.errors import InputError
 from iceresist.freesurface.hlattice import h_lattice
+from iceresist.freesurface.reach import SurfaceReach
 from iceresist.freesurface.refined import PHI_BULK_TOL, RefinedFreeSurface
 from iceresist.grid import flags as FL
 from iceresist.grid.forest import CELLS
@@ -155,7 +156,7 @@ class FreeSurfaceModel(FluidModel):
         shape = tuple(int(n) for n in self.shape_cells)
         mark = np.zeros(shape, dtype=np.uint8)
         L_ = self.finest
-        reached = np.flatnonzero(self._surface_reach(1.0 - PHI_BULK_TOL).any(axis=1))
+        reached = np.flatnonzero(self._surface_reach(1.0 - PHI_BULK_TOL))
         if reached.size:
             edge = max(8 >> L_, 1)                  # a finest block, in level-0 cells
             origin = self.lbm.views[L_].forest.origin[reached] * 8
@@ -167,9 +168,15 @@ class FreeSurfaceModel(FluidModel):
         mark = mark.astype(bool)
         return mark if hot is None else hot | mark
 
-    def _surface_reach(self, bulk: float) -> np.ndarray:
-        """The finest level's leaf cells (this rank's own on several ranks) less liquid than ``bulk``."""
-        return self._phi_leaves() < bulk
+    def _surface_reach(self, bulk: float, owner=None) -> np.ndarray:
+        """Whether each of the finest level's leaf blocks (this rank's own on several ranks) holds a cell less
+        liquid than ``bulk`` (not covered by a body where ``owner``, the coupling's owners on the target, is given):
+        reduced on the target, one byte a block read (:mod:`iceresist.freesurface.reach`)."""
+        phi = self.fs.surface.phase.phi
+        reach = getattr(self, "_reach", None)
+        if reach is None or reach.nblocks != phi.shape[0]:    # built again after a regrid
+            self._reach = reach = SurfaceReach(self.target, phi.shape[0], self.fs.surface.real)
+        return reach.blocks(self.grid.own_leaves(self.finest), phi, bulk, owner)
 
     # -- values per leaf ---------------------------------------------------------------------------------
     def _phi_leaves(self) -> np.ndarray:

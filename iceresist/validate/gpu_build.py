@@ -3,8 +3,8 @@
 The CUDA simulator runs kernels as Python, so it passes code that the GPU compiler refuses (a float64 ``xor``
 once stopped the DEM at its first sub-step on a real GPU). This check compiles what a real device would run:
 
-1. **Trace.** A CI-sized scene of each tier, the built-in dam break, the refined channel, the free surface on two
-   levels and the plain LBM step are built and stepped on the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand
+1. **Trace.** A CI-sized scene of each tier, tier 2 on two levels, the built-in dam break, the refined channel, the
+   free surface on two levels and the plain LBM step are built and stepped on the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand
    in for device arrays and every launch is recorded instead of run.
 2. **Compile.** Each kernel, with the argument types of its launches, by
    :func:`iceresist.backends.buildcheck.compile_kernel`: PTX for sm_90 by NVVM, a cubin by ptxas.
@@ -36,18 +36,20 @@ from iceresist.parallel.decomposition import SolverHalo
 from iceresist.parallel.staging import DevicePlan
 from iceresist.scene.case_scenes import case_scene
 from iceresist.scene.load import load_scene
-from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_OVERRIDES
+from iceresist.sweep import TINY_OVERRIDES, TINY_TIER2_AMR_OVERRIDES, TINY_TIER2_OVERRIDES
 
 def check_scenes():
     """``{label: scene}``: the CI-sized tier-1 and tier-2 cases, tier 2 in both precisions, the built-in dam
     break (a free surface whose population pool follows the water: its wet and fill kernels) and the built-in
-    refined channel (two levels: the level transfer kernel)."""
+    refined channel (two levels: the level transfer kernel) and the smallest ship on two levels (tier 2 on levels:
+    the coupling on the finest level, the ghost refill, the probe of the coarse level)."""
     t2 = {k: dict(v) for k, v in TINY_TIER2_OVERRIDES.items()}
     t2_64 = {**t2, "numerics": {**t2["numerics"], "precision": "float64"}}
     return {"tier1": case_scene("A-c68-v1.0", "quick", 1, **TINY_OVERRIDES),
             "tier2-float32": case_scene("A-c68-v1.0", "quick", 2, **t2),
             "tier2-float64": case_scene("A-c68-v1.0", "quick", 2, **t2_64),
-            "dam_break": load_scene("dam_break"), "refined_channel": load_scene("refined_channel")}
+            "dam_break": load_scene("dam_break"), "refined_channel": load_scene("refined_channel"),
+            "refined_tier2-float32": case_scene("A-c68-v1.0", "quick", 2, **TINY_TIER2_AMR_OVERRIDES)}
 
 
 def fluid_launches(precision: str):
@@ -117,7 +119,7 @@ def trace(steps: int = 2) -> dict:
             model.diagnostics()
             model.watchdog_probe()
 
-    jobs = [(label, lambda s=scene, r=label.startswith("tier"): run(s, r))
+    jobs = [(label, lambda s=scene, r="tier" in label: run(s, r))
             for label, scene in check_scenes().items()]
     jobs += [(f"lbm-{p}", lambda p=p: fluid_launches(p)) for p in ("float32", "float64")]
     jobs += [("refined_surface-float32", lambda: refined_surface_launches("float32"))]

@@ -188,16 +188,21 @@ class _LiquidLevel:
         u = j / rho - 0.5 * np.asarray(self.force)[:, None, None]
         return rho, u
 
-    def leaves_finite(self, nleaves: int) -> bool:
-        """Whether the populations of the first ``nleaves`` blocks (the leaves) give a finite density and velocity
-        on every fluid cell and a finite mass: the probe's full pass (:mod:`iceresist.freesurface.probe`) reduced
-        per block on the target, so nothing but a row per block is read (not the populations)."""
+    def leaf_rows(self, nleaves: int) -> np.ndarray:
+        """The probe's full rows (:data:`~iceresist.freesurface.probe.COLUMNS`) of the first ``nleaves`` blocks (the
+        leaves), reduced per block on the target (:mod:`iceresist.freesurface.probe`): a row per block is read, not
+        the populations. The velocity is the liquid's, its half-force shift removed (as :meth:`macroscopic_blocks`)."""
         if self._probe is None:
             self._probe = FluidProbe(self.forest, self.fluid.target)
             # the full pass takes the velocity from the populations: the array it would read otherwise is a stand-in
             self._no_u = self.fluid.target.to_device(np.zeros((1, 3, CELLS), self.real))
-        rows = self._probe.rows(self.fluid.state, self.fluid.fslot, self.fluid.flags, self._no_u, self._phi, True,
-                                0.0)[:nleaves]
+        return self._probe.rows(self.fluid.state, self.fluid.fslot, self.fluid.flags, self._no_u, self._phi, True,
+                                -0.5 * self.force[2])[:nleaves]
+
+    def leaves_finite(self, nleaves: int) -> bool:
+        """Whether the populations of the first ``nleaves`` blocks (the leaves) give a finite density and velocity
+        on every fluid cell and a finite mass (:meth:`leaf_rows`)."""
+        rows = self.leaf_rows(nleaves)
         return bool(rows[:, COLUMNS.index("n_bad")].sum() == 0 and np.isfinite(rows[:, COLUMNS.index("mass")].sum()))
 
 
@@ -448,6 +453,21 @@ class RefinedFreeSurface:
         return self.lbm.iteration
 
     # ------------------------------------------------------------------ diagnostics
+    def leaf_rows(self, lv: int, n: int) -> np.ndarray:
+        """The probe's full rows (:data:`~iceresist.freesurface.probe.COLUMNS`: the liquid cells' count, mass,
+        kinetic energy, fastest cell, lattice units) of level ``lv``'s first ``n`` blocks (its leaves, this rank's
+        own on several ranks), reduced per block on the target: what a record reads of a level. The finest level's
+        liquid is its FLUID cells (phi >= 1/2 by the last reflag, not a body's), a coarser level's every fluid cell."""
+        if lv != self.finest:
+            return self.lbm.solvers[lv].leaf_rows(n)
+        fs = self.surface
+        if getattr(self, "_finest_probe", None) is None or self._finest_probe.forest is not fs.forest:
+            self._finest_probe = FluidProbe(fs.forest, self.target)
+            # the full pass takes the velocity from the populations: the array it would read otherwise is a stand-in
+            self._no_u = self.target.to_device(np.zeros((1, 3, CELLS), jit.real_type(self.precision)))
+        return self._finest_probe.rows(fs.fluid.state, fs.fluid.fslot, fs.fluid.flags, self._no_u, fs.phase.phi,
+                                       True, 0.5 * fs.g)[:n]
+
     def coarse_levels_finite(self) -> bool:
         """Whether every coarser level's leaves (this rank's) hold finite populations
         (:meth:`_LiquidLevel.leaves_finite`: reduced on the target); the finest level's are the surface's probe's."""

@@ -18,6 +18,7 @@ import numpy as np
 
 from iceresist.errors import InputError
 from iceresist.freesurface.hlattice import h_lattice
+from iceresist.freesurface.probe import COLUMNS as PROBE_COLUMNS
 from iceresist.freesurface.reach import SurfaceReach
 from iceresist.freesurface.refined import PHI_BULK_TOL, RefinedFreeSurface
 from iceresist.grid import flags as FL
@@ -27,6 +28,9 @@ from iceresist.limits import check_fluid
 from iceresist.models.fluid import FluidModel
 from iceresist.scene.blocks import check_block_shape, forest_faces
 from iceresist.scene.checks import check_free_surface_forces
+
+#: Column of each quantity in a row of the probe (:mod:`iceresist.freesurface.probe`).
+_ROW = {name: i for i, name in enumerate(PROBE_COLUMNS)}
 
 
 class FreeSurfaceModel(FluidModel):
@@ -99,7 +103,7 @@ class FreeSurfaceModel(FluidModel):
         self.finest = self.fs.finest
         self.fs.initialize(surface=self.initial_surface_cells() if self.uniform else None,
                            u=tuple(float(u.velocity_to_lattice(v)) for v in fl.initial_velocity_m_s))
-        self.volume0_cells = self.fs.volume()
+        self.volume0_cells = self.water_volume_cells()
 
     def _levels(self, cls):
         scene, u, fl, fs = self.scene, self.units, self.scene.fluid, self.scene.free_surface
@@ -336,10 +340,28 @@ class FreeSurfaceModel(FluidModel):
                 entry["fields"] = {k: v for k, v in entry["fields"].items() if k in names}
         return out
 
+    def water_volume_cells(self) -> float:
+        """The water volume in level-0 cells (:meth:`RefinedFreeSurface.volume`); on levels the finest level's
+        from the phase field's per-block sums on the target (:meth:`PhaseField.volume_per_block`, as one level's),
+        not phi of every cell."""
+        if self.uniform:
+            return self.fs.volume()
+        return self.fs.volume(self.fs.surface.phase.volume_per_block())
+
     def is_finite(self) -> bool:
-        """Whether the water volume and every level's population rows are finite on every rank."""
-        rows = (self._pool(lv).rows()[1] for lv in self.lbm.levels)
-        return self.grid.all(math.isfinite(self.fs.volume()) and all(bool(np.isfinite(f).all()) for f in rows))
+        """Whether the water volume and every level's state are finite on every rank: on one level its population
+        rows; on levels the probe's rows of every level's leaves (:meth:`RefinedFreeSurface.leaf_rows`: a bad
+        density, velocity or phi on a liquid cell, a mass that is not finite), reduced on the target."""
+        volume = self.water_volume_cells()      # on several ranks a collective call, taken by every rank
+        if self.uniform:
+            rows = (self._pool(lv).rows()[1] for lv in self.lbm.levels)
+            return self.grid.all(math.isfinite(volume) and all(bool(np.isfinite(f).all()) for f in rows))
+        ok = math.isfinite(volume)
+        for lv in self.lbm.levels:
+            r = self.fs.leaf_rows(lv, self.grid.own_leaves(lv))
+            ok = ok and not (r[:, _ROW["n_bad"]].sum() or r[:, _ROW["n_bad_phi"]].sum())
+            ok = ok and math.isfinite(float(r[:, _ROW["mass"]].sum()))
+        return self.grid.all(ok)
 
     def _pool(self, lv: int):
         """Level ``lv``'s population rows (:class:`~iceresist.freesurface.pool.PopulationPool`'s owner)."""
@@ -357,26 +379,31 @@ class FreeSurfaceModel(FluidModel):
         """Water volume (m^3, sum phi dx^3: :meth:`RefinedFreeSurface.volume`, the quantity eqs. 4-10 conserve) and
         its drift, liquid mass (kg) and kinetic energy (J) over every level's liquid leaves with their own cell
         volumes, the largest speed (m/s and lattice), the mean surface height (m); one level adds the population rows
-        in use, a regridding run the leaf cells. On several ranks the same numbers on every rank."""
+        in use, a regridding run the leaf cells. On several ranks the same numbers on every rank. Reduced per block
+        on the target (the probe's rows, :meth:`RefinedFreeSurface.leaf_rows`; the liquid of the finest level its
+        FLUID cells), so a record reads rows and the surface map, not fields of cells."""
         if self.uniform:
             vol = self.fs.volume()
             probe = self.fluid.probe(True)
             phi = self._dense_phi()
             return self.grid.bcast(None if phi is None else self._uniform_diagnostics(probe, phi, vol))
         u = self.units
-        mass = ke = umax = 0.0
-        for lv in self.lbm.levels:
-            rho, vel, _ = self._own(lv, *self.lbm.leaf_fields(lv))
-            liquid = self._leaf_extra(lv)[0] >= 0.5
+        mass = ke = speed2 = 0.0
+        for lv in self.lbm.levels:   # the probe's rows of each level's leaves, reduced on the target
+            rows = self.fs.leaf_rows(lv, self.grid.own_leaves(lv))
             vol = (u.dx_m / 2 ** lv) ** 3
-            speed2 = (vel ** 2).sum(axis=0)[liquid]
-            rho_kg = u.density_to_physical(rho[liquid])
-            mass += float(rho_kg.sum() * vol)
-            ke += float(0.5 * (rho_kg * u.velocity_to_physical(1.0) ** 2 * speed2).sum() * vol)
-            if speed2.size:
-                umax = max(umax, float(np.sqrt(speed2.max())))
-        mass, ke, umax = self.grid.sum(mass), self.grid.sum(ke), self.grid.max(umax)
-        v = self.fs.volume()
+            if rows[:, _ROW["n_bad"]].sum() or rows[:, _ROW["n_bad_phi"]].sum():
+                mass = ke = speed2 = float("nan")       # as on one level: NaN where the probe found a bad value
+            mass += float(rows[:, _ROW["mass"]].sum()) * vol
+            ke += float(rows[:, _ROW["kinetic_energy"]].sum()) * vol
+            liquid = rows[:, _ROW["n_liquid"]] > 0
+            if liquid.any():
+                speed2 = max(speed2, float(rows[liquid, _ROW["speed2_max"]].max()))
+        umax = math.sqrt(speed2) if speed2 == speed2 else speed2
+        mass = float(u.density_to_physical(self.grid.sum(mass)))
+        ke = float(u.density_to_physical(self.grid.sum(ke)) * u.velocity_to_physical(1.0) ** 2)
+        umax = self.grid.max(umax)
+        v = self.water_volume_cells()
         surface = self.surface_cells()
         surface_mean = self.grid.bcast(None if surface is None else float(np.nanmean(surface)))
         out = {"water_volume_m3": float(v * u.dx_m ** 3),

@@ -202,19 +202,20 @@ class BlockForest:
         self.nbr_key = np.ascontiguousarray(nbr[:, Q_OF_KEY])
         self.link_bc = np.ascontiguousarray(link_bc[:, Q_OF_KEY])
 
-    def pull_source(self, q: int):
+    def pull_source(self, q: int, blocks=None):
         """For every (block, cell): the block and cell that direction q pulls from (x - c_q).
 
         Returns ``(nb, sc, bc)`` int arrays (nblocks, 512): the source block (-1 where the
         link leaves the domain or reaches an unallocated block), the source cell, and the
-        boundary-table row used where ``nb`` is -1.
+        boundary-table row used where ``nb`` is -1. ``blocks``: those blocks' rows only (len(blocks), 512).
         """
         cx, cy, cz = (int(v) for v in C[q])
         sx, sy, sz = LX - cx, LY - cy, LZ - cz
         key = 13 + (sx >> 3) + 3 * (sy >> 3) + 9 * (sz >> 3)
         sc = (sx & 7) + 8 * ((sy & 7) + 8 * (sz & 7))
-        nb = self.nbr_key[:, key]
-        bc = self.link_bc[:, key]
+        nbr, link = (self.nbr_key, self.link_bc) if blocks is None else (self.nbr_key[blocks], self.link_bc[blocks])
+        nb = nbr[:, key]
+        bc = link[:, key]
         return nb, np.broadcast_to(sc, nb.shape), bc
 
     def _build_flags(self, fluid):
@@ -231,8 +232,7 @@ class BlockForest:
             near_wall = np.zeros(own.shape, dtype=bool)
             near_outlet = np.zeros(own.shape, dtype=bool)
             for q in range(1, Q):
-                nb, sc, bc = self.pull_source(q)
-                nb, sc, bc = nb[rest], sc[rest], bc[rest]
+                nb, sc, bc = self.pull_source(q, rest)
                 inside = nb >= 0
                 src_fluid = np.zeros(own.shape, dtype=bool)
                 src_fluid[inside] = fluid[nb[inside], sc[inside]]

@@ -15,7 +15,7 @@
 # 9.0e6 and 3.3e7 leaf cells and take 4.8e9, 2.1e10, 5.1e10 and 2.8e11 cell updates; the quick case 8.5e6 cells
 # (4.7e10 updates); the paper's levels 1.5e8 cells (59 GB of populations on the finest level, 1.9e13 updates).
 # The host builds a level's tables at about 1 s per 1e6 leaf cells (a rebuild at a regrid about 1.4 s), counts the
-# paper's levels in 124 s; at the 625 MLUPS of the uniform coupled step on an H100 the first three rungs take about
+# paper's levels in 64 s; at the 625 MLUPS of the uniform coupled step on an H100 the first three rungs take about
 # 2 min of stepping and the fourth 7 min, so the ladder ends within its deadline at the third rung unless the step on
 # levels is faster; a quick case needs 80 s at 600 MLUPS; the paper's build (counting, tables, 59 GB on the device)
 # is what phase 4 waits for. Everything a record of the visit needs lands in OUT/campaign/ (ladder.csv, the rungs'

@@ -4,8 +4,9 @@ The CUDA simulator runs kernels as Python, so it passes code that the GPU compil
 once stopped the DEM at its first sub-step on a real GPU). This check compiles what a real device would run:
 
 1. **Trace.** A CI-sized scene of each tier, tier 2 on two levels, the built-in dam break, the refined channel, the
-   free surface on two levels and the plain LBM step are built and stepped on the ``cuda`` target within :func:`iceresist.backends.buildcheck.tracing`: host arrays stand
-   in for device arrays and every launch is recorded instead of run.
+   free surface on two levels and the plain LBM step are built and stepped on the ``cuda`` target within
+   :func:`iceresist.backends.buildcheck.tracing`: host arrays stand in for device arrays and every launch is
+   recorded instead of run.
 2. **Compile.** Each kernel, with the argument types of its launches, by
    :func:`iceresist.backends.buildcheck.compile_kernel`: PTX for sm_90 by NVVM, a cubin by ptxas.
 3. **Judge.** A kernel builds when both steps succeed; it launches when registers x threads per block fit the

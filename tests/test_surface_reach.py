@@ -1,9 +1,7 @@
 """The blocks the free surface reaches, reduced on the target (:mod:`iceresist.freesurface.reach`), against NumPy."""
 
 import numpy as np
-import pytest
 
-from iceresist.backends import jit
 from iceresist.freesurface.reach import SurfaceReach
 
 BULK = 1.0 - 1e-4
@@ -24,14 +22,10 @@ def _fields(seed: int = 3):
     return phi, owner
 
 
-@pytest.mark.parametrize("backend", ["cpu", "cuda"])
-def test_the_reached_blocks_are_numpys_any_over_their_cells(backend):
+def test_the_reached_blocks_are_numpys_any_over_their_cells(target):
     """Per block: some cell below the bulk (and, with the owners, not covered): the NumPy reference, with and
     without the owners, over all blocks or the first few (an MPI rank's own). Planted: the owner test dropped
     (block 2 then reached) fails."""
-    if backend == "cuda" and not jit.cuda_available():
-        pytest.skip("no CUDA GPU and the simulator is off")
-    target = jit.cpu if backend == "cpu" else jit.cuda()
     phi, owner = _fields()
     reach = SurfaceReach(target, 6, np.float32)
     d_phi, d_owner = target.to_device(phi), target.to_device(owner)

@@ -89,16 +89,20 @@ def test_a_settling_sphere_on_regridded_levels_follows_the_uniform_fine_grid():
     assert amr.lattice_updates_per_step / (2 * fine.cells) < 0.15
 
 
-def test_a_regrid_that_only_coarsens_waits_within_its_slack():
+def test_a_regrid_that_only_coarsens_waits_within_its_slack(caplog):
     """refinement.regrid_slack = 0.5: the settling sphere starts 21.6 level-0 cells up, its band (18.1 to 25.1)
     on two level-0 blocks of the finest level; after about 70 steps its band leaves the upper block (a regrid that
     only coarsens: it waits), after about 120 it reaches the block below (the levels are rebuilt), so the sphere
     never leaves the fine blocks (the body check of every regrid and the watchdog's probe after every 10 steps),
     with one rebuild where regridding whenever the blocks change takes two, and it falls as that run does (within
     0.02 level-0 cell over 150 steps); after every 10 steps the levels are at least as fine as the criteria ask
-    everywhere. Planted: `covers` compared the other way (the regrid that refines put off) fails."""
-    runs = {}
+    everywhere. Each rebuild's log line says why: the eager run's first (it only coarsens) the cost of the present
+    leaves, the lazy run's the sphere's band beyond the finest leaves, where the sphere is. Planted: `covers`
+    compared the other way (the regrid that refines put off) fails."""
+    caplog.set_level("INFO", logger="iceresist.models")
+    runs, why = {}, {}
     for slack in (0.0, 0.5):
+        caplog.clear()
         m = build_model(parse_scene(_settle_text(steps=150, slack=slack, z0=21.6), "settle.toml"))
         z = []
         for _ in range(15):
@@ -108,11 +112,15 @@ def test_a_regrid_that_only_coarsens_waits_within_its_slack():
             assert (m.octree.level_map() >= wanted.level_map()).all()
             z.append(m.diagnostics()["sphere_z_m"])
         runs[slack] = (m.regrid_count, m.regrids_put_off, np.array(z))
+        why[slack] = [r.getMessage() for r in caplog.records if r.getMessage().startswith("regrid ")]
     (eager, none_waited, z0), (lazy, waited, z1) = runs[0.0], runs[0.5]
     assert none_waited == 0 and waited >= 1
     assert (lazy, eager) == (1, 2)
     assert 21.6 - z1[-1] > 2.0
     assert np.abs(z1 - z0).max() < 0.02
+    assert len(why[0.0]) == 2 and "(the leaves cost 1." in why[0.0][0]
+    assert len(why[0.5]) == 1 and "(1 bodies' band beyond the finest leaves, 'sphere' at (12.000, 12.000, " in \
+        why[0.5][0]
 
 
 def test_a_lookahead_draws_the_band_ahead_of_a_moving_body_and_the_regrids_wait():

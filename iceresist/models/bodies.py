@@ -242,6 +242,20 @@ class FinestLevelBodies(BodyShapes):
             raise RuntimeError("regrid: a body is not on the finest level of the new octree")
         return changed
 
+    def _rebuild_reason(self, need, octree) -> str:
+        """As :meth:`FluidModel._rebuild_reason`, naming the bodies whose band (``refinement.body_band_m`` about
+        their box) reaches beyond the finest level's leaves, the first with its centre (m)."""
+        band = self.scene.refinement.body_band_m
+        if band is None or self.octree.covers(need):
+            return super()._rebuild_reason(need, octree)
+        pos = self.body_positions_m()
+        out = self.bodies_outside_finest(pos, margin_cells=band / (self.units.dx_m / 2 ** self.finest))
+        if not out:
+            return super()._rebuild_reason(need, octree)
+        x, y, z = pos[out[0]]
+        return (f"{len(out)} bodies' band beyond the finest leaves, {self.names[out[0]]!r} at "
+                f"({x:.3f}, {y:.3f}, {z:.3f}) m")
+
     def _release_levels(self):
         """Take what the new finest level carries (:meth:`_finest_state`), then drop the coupling with the levels."""
         self._carried_finest = self._finest_state()

@@ -174,6 +174,7 @@ class FluidModel(Model):
         if self._put_off(need, octree):
             self.regrids_put_off += 1
             return False
+        reason = self._rebuild_reason(need, octree)
         grid = self._split(octree)
         level_bytes = self._level_bytes(grid.views)
         refused = None
@@ -187,8 +188,8 @@ class FluidModel(Model):
             return False
         self._rebuild(octree, level_bytes, grid)
         self.regrid_count += 1
-        log.info("regrid %d at step %d: leaf blocks per level %s", self.regrid_count, self.level0_steps,
-                 [int(n) for n in octree.blocks_per_level()])
+        log.info("regrid %d at step %d (%s): leaf blocks per level %s", self.regrid_count, self.level0_steps,
+                 reason, [int(n) for n in octree.blocks_per_level()])
         return True
 
     def body_boxes_ahead_m(self) -> np.ndarray | None:
@@ -204,6 +205,14 @@ class FluidModel(Model):
         if not slack or not self.octree.covers(need):
             return False
         return self.octree.updates_per_step() <= (1.0 + slack) * octree.updates_per_step()
+
+    def _rebuild_reason(self, need, octree) -> str:
+        """Why a regrid rebuilds the levels, for its log line: what the present leaves miss of ``need`` (the
+        criteria now), or what they cost against ``octree`` (a rebuild now)."""
+        if not self.octree.covers(need):
+            return "the criteria reach coarser leaves"
+        ratio = self.octree.updates_per_step() / max(octree.updates_per_step(), 1)
+        return f"the leaves cost {ratio:.2f} x a rebuild's"
 
     def _rebuild(self, octree, level_bytes: dict, grid: Grid | None = None):
         """The levels built on ``octree`` and every level's populations carried over from the present ones

@@ -194,17 +194,24 @@ def sweep_scene(spec: MatrixCase, fidelity: str, tier: int, amr: bool = False, o
 
 def run_case(case: str, fidelity: str, tier: int, out_dir, *, backend: str = "auto", progress: bool = False,
              overrides: dict | None = None, callbacks: dict | None = None, checkpoint_schedule=None,
-             amr: bool = False, plan: dict | None = None, meta: dict | None = None) -> Path:
+             amr: bool = False, plan: dict | None = None, meta: dict | None = None,
+             reuse_finished: bool = False) -> Path:
     """Run one case to ``DIR/cases/<case>.h5`` through the driver (:func:`iceresist.driver.run_model`), via a
     partial file renamed at the end, continuing a killed run of it from its checkpoint. ``checkpoint_schedule``:
     when to checkpoint (default every ``CHECKPOINT_WALL_S`` of wall time); ``plan``: the sweep's cases by name
-    (default the paper's on B-063); ``meta``: more for the case file's meta (the hull's power inputs)."""
+    (default the paper's on B-063); ``meta``: more for the case file's meta (the hull's power inputs);
+    ``reuse_finished``: a finished case file there is returned as it is, without running (refused in one line
+    where it finished with another scene: :func:`check_same_scene`)."""
     if tier not in (1, 2):
         raise InputError(f"--tier: must be 1 or 2 (got {tier})")
     t_build = time.perf_counter()
     spec = case_spec(case, plan)
     scene = sweep_scene(spec, fidelity, tier, amr, overrides)
     final = case_path(out_dir, case)
+    if reuse_finished and is_finished(final):
+        check_same_scene(final, scene.source_text)
+        log.info("case %s: finished in %s, read back", case, final)
+        return final
     partial = final.with_name(f"{case}.partial.h5")
     chk = checkpoint_path(out_dir, case)
     final.parent.mkdir(parents=True, exist_ok=True)

@@ -63,3 +63,37 @@ def test_cheapest_rung_runs():
     assert math.isnan(r.reference) and r.wall_s > 0
     assert math.isfinite(r.extra["mean_fluid_Fx_N"]) and r.extra["mean_fluid_Fx_N"] < 0  # the water resists
     assert r.extra["compile_s"] >= 0 and r.extra["total_s"] >= r.wall_s
+
+
+def test_a_rung_of_several_ice_seeds_pools_their_windows_and_reads_finished_runs_back(tmp_path, caplog):
+    """The cheapest quick rung from two random ice arrangements (seeds 0 and 1, ``run_rung(seeds=...)``, as the
+    ladder on levels runs each rung): a run per seed in its own folder, the arrangements differ, the rung's value
+    and interval are the pooled batch means of the two windows (:func:`iceresist.post.case.analyse_ensemble`), the
+    records and steps of both counted; run again, the finished runs are read back (not run: their files unchanged)
+    and give the same result."""
+    from iceresist.io.hdf5 import RunFile
+    from iceresist.post.case import analyse_ensemble
+
+    p = ship_tier2.ladder(True)[0]
+    ov = ship_tier2.overrides(p)
+    ov["ice"] = {**ov.get("ice", {}), "arrangement": "random"}
+    r = ship_tier2.run_rung("ship_tier2", p, ov, backend="cpu", precision="float32", out_dir=tmp_path, seeds=(0, 1))
+    folder = tmp_path / "runs" / "ship_tier2"
+    paths = sorted(folder.glob("*/seed-*/cases/A-c68-v1.0.h5"))
+    assert [q.parent.parent.name for q in paths] == ["seed-0", "seed-1"]
+    starts = []
+    for q in paths:
+        with RunFile(q, "r") as rf:
+            starts.append(np.asarray(rf.h5["bodies/initial_positions_m"]))
+    assert starts[0].shape == starts[1].shape and np.abs(starts[0] - starts[1]).max() > 1e-4
+    ens = analyse_ensemble(paths)
+    assert r.value == ens["mean_force_N"] and r.extra["ci95_N"] == ens["ci95_N"] > 0
+    assert r.extra["seeds"] == 2 and r.extra["run_means_N"].split() == [f"{v:.4g}" for v in ens["run_means_N"]]
+    assert r.steps == 2 * 13 * 4 and r.extra["records"] == 2 * 13
+    stamps = [q.stat().st_mtime_ns for q in paths]
+    caplog.set_level("INFO", logger="iceresist.sweep")
+    again = ship_tier2.run_rung("ship_tier2", p, ov, backend="cpu", precision="float32", out_dir=tmp_path,
+                                seeds=(0, 1))
+    assert [q.stat().st_mtime_ns for q in paths] == stamps
+    assert sum("read back" in rec.getMessage() for rec in caplog.records) == 2
+    assert again.value == r.value and again.extra["ci95_N"] == r.extra["ci95_N"]

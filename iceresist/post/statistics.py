@@ -163,6 +163,68 @@ def choose_n_batches(n_samples: int, tau_int: float, label: str = "window") -> i
 
 
 @dataclass(frozen=True)
+class PooledMean:
+    """Mean of one stationary quantity over independent records, from their pooled batch means.
+
+    Attributes:
+        mean: the mean over the batches' samples (each batch weighted by its length).
+        stderr: its standard error from the spread of the batch means (weighted, N - 1 dof).
+        ci_half_width: half width of the Student-t interval, N - 1 dof.
+        n_batches: batches N of all records.
+        record_means: each record's mean over its batches' samples.
+        batches: batches per record.
+    """
+
+    mean: float
+    stderr: float
+    ci_half_width: float
+    n_batches: int
+    record_means: tuple
+    batches: tuple
+
+    @property
+    def too_few_batches(self) -> bool:
+        """Fewer than MIN_BATCHES batches: the interval's own spread is poorly known."""
+        return self.n_batches < MIN_BATCHES
+
+
+def pooled_batch_means(records, tau_int_samples, confidence: float = 0.95) -> PooledMean:
+    """Mean and Student-t interval of independent records of one stationary quantity (runs of one case from
+    independent starts, e.g. ice arrangements of other seeds): each record cut into as many batches of at least
+    MIN_BATCH_LENGTH_TAU of its ``tau_int_samples`` as it holds (one batch where it holds fewer; its oldest
+    samples dropped, as :func:`batch_means` does), the batch means of all records pooled. Batches of two records
+    are independent (the runs share no state); those of one record, five correlation times long, nearly so. With
+    batch j of length b_j and mean m_j: mean = sum b_j m_j / B, B = sum b_j; stderr^2 = sum b_j (m_j - mean)^2 /
+    ((N - 1) B) (each m_j's variance taken as s^2 / b_j); interval mean +- t_{(1+confidence)/2, N-1} stderr."""
+    _check_confidence(confidence)
+    records = [np.asarray(r, dtype=float) for r in records]
+    taus = [float(t) for t in np.atleast_1d(tau_int_samples)]
+    if len(records) != len(taus) or not records:
+        raise InputError(f"pooled_batch_means: {len(records)} records and {len(taus)} tau_int values; give one "
+                         "tau_int per record")
+    means, lengths, per_record, record_means = [], [], [], []
+    for x, tau in zip(records, taus):
+        n = len(x)
+        if n < 1:
+            raise InputError("pooled_batch_means: a record holds no sample")
+        k = max(1, int(n // math.ceil(MIN_BATCH_LENGTH_TAU * max(tau, 1.0))))
+        b = n // k
+        used = x[n - k * b:].reshape(k, b)
+        means.extend(used.mean(axis=1))
+        lengths.extend([b] * k)
+        per_record.append(k)
+        record_means.append(float(used.mean()))
+    m, w = np.asarray(means), np.asarray(lengths, dtype=float)
+    nb = len(m)
+    if nb < 2:
+        raise InputError("pooled_batch_means: one batch in all; give more records or longer ones")
+    mean = float((w * m).sum() / w.sum())
+    stderr = float(np.sqrt((w * (m - mean) ** 2).sum() / ((nb - 1) * w.sum())))
+    half = float(stats.t.ppf(0.5 + 0.5 * confidence, nb - 1)) * stderr
+    return PooledMean(mean, stderr, half, nb, tuple(record_means), tuple(per_record))
+
+
+@dataclass(frozen=True)
 class SteadyMean:
     """Mean of a force over a steady window with its batch-means uncertainty.
 

@@ -33,7 +33,8 @@ import time
 import numpy as np
 
 from iceresist.io.hdf5 import RunFile
-from iceresist.post.case import analyse_case
+from iceresist.post.case import analyse_case, analyse_ensemble
+from iceresist.post.scaling import force_to_full_scale
 from iceresist.scene.case_scenes import case_scene
 from iceresist.sweep import TINY_TIER2_OVERRIDES, run_case
 from iceresist.validate.result import CaseResult
@@ -116,16 +117,63 @@ def run(params: dict, *, backend: str = "cpu", precision: str = "float32", out_d
                     compile_s=compile_s)
 
 
-def run_rung(name: str, params: dict, ov: dict, *, backend: str, precision: str, out_dir, **extra) -> CaseResult:
+def run_rung(name: str, params: dict, ov: dict, *, backend: str, precision: str, out_dir, seeds=None,
+             **extra) -> CaseResult:
     """Case A-c68-v1.0 at the quick fidelity, tier 2, with the scene overrides ``ov`` (the LBM in ``precision``),
     through :func:`iceresist.sweep.run_case` into ``OUT/runs/NAME/LABEL/`` (a scratch folder without ``out_dir``),
-    as a :class:`CaseResult` (:func:`case_result`, ``extra`` added)."""
+    as a :class:`CaseResult` (:func:`case_result`, ``extra`` added). ``seeds``: one run per ice seed in turn, into
+    ``LABEL/seed-N/``, the result over all of them (:func:`ensemble_result`). A run finished there before (the
+    same scene) is read back, not run again."""
     ov.setdefault("numerics", {})["precision"] = precision
     with rung_folder(out_dir, name, params["label"]) as tmp:
         t0 = time.perf_counter()
-        path = run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov)
-        return case_result(name, params, path, backend=backend, precision=precision,
-                           total_s=time.perf_counter() - t0, **extra)
+        if seeds is None:
+            path = run_case(CASE, "quick", 2, tmp, backend=backend, overrides=ov, reuse_finished=True)
+            return case_result(name, params, path, backend=backend, precision=precision,
+                               total_s=time.perf_counter() - t0, **extra)
+        paths = []
+        for seed in seeds:
+            ov_seed = copy.deepcopy(ov)
+            ov_seed.setdefault("ice", {})["seed"] = int(seed)
+            paths.append(run_case(CASE, "quick", 2, tmp / f"seed-{int(seed)}", backend=backend, overrides=ov_seed,
+                                  reuse_finished=True))
+        return ensemble_result(name, params, paths, backend=backend, precision=precision,
+                               total_s=time.perf_counter() - t0, **extra)
+
+
+def ensemble_result(name: str, params: dict, paths, *, backend: str, precision: str, total_s: float,
+                    **extra) -> CaseResult:
+    """The :class:`CaseResult` of one rung run from several ice arrangements (finished files ``paths``,
+    :func:`iceresist.post.case.analyse_ensemble`): the mean ice force over all their steady windows and the
+    interval of their pooled batch means; the records, steps and wall time of all runs; each run's mean and
+    interval in ``extra``."""
+    ens = analyse_ensemble(paths)
+    rows = ens["runs"]
+    first = rows[0]
+    with RunFile(paths[0], "r") as rf:
+        model = rf.meta_object("model")
+    fluid = []
+    for path in paths:
+        with RunFile(path, "r") as rf:
+            fluid.extend(rf.h5["timeseries/Fx_fluid_N"][1:])   # row 0 is the state before the first step
+    per_record = int(model["lbm_steps_per_record"])
+    return CaseResult(case=name, label=params["label"], resolution=float(params["resolution"]),
+                      cells=int(first["cells"]), steps=sum(int(r["steps"]) for r in rows) * per_record,
+                      wall_s=sum(float(r["wall_time_s"]) for r in rows),
+                      quantity="mean ice (contact) force on the hull in the steady window (N, model scale)",
+                      value=float(ens["mean_force_N"]), reference=float("nan"), error=float("nan"),
+                      backend=backend, precision=precision,
+                      extra={"dem_precision": "float64", "ci95_N": float(ens["ci95_N"]),
+                             "ci_method": ens["ci_method"], "n_batches": int(ens["n_batches"]),
+                             "seeds": len(paths),
+                             # each run's mean and its own interval (a table cell each: space-separated)
+                             "run_means_N": " ".join(f"{v:.4g}" for v in ens["run_means_N"]),
+                             "run_ci95_N": " ".join(f"{float(r['ci95_N']):.4g}" for r in rows),
+                             "records": sum(int(r["steps"]) for r in rows), "lbm_steps_per_record": per_record,
+                             "total_s": total_s, "dx_m": float(first["resolution_m"]),
+                             "R_sim_kN": float(force_to_full_scale(ens["mean_force_N"], first["scale"])) / 1e3,
+                             "tau_int_s": float(ens["tau_int_s"]),
+                             "mean_fluid_Fx_N": float(np.mean(fluid)) if fluid else float("nan"), **extra})
 
 
 def case_result(name: str, params: dict, path, *, backend: str, precision: str, total_s: float,

@@ -68,7 +68,10 @@ def rung(n: float) -> dict:
         raise ValueError(f"{n:g} cells per cube: the tank of {TANK_CUBES} cubes is not whole level-0 blocks")
     lid_blocks = math.ceil((WATER_DEPTH_M + ref["surface_band_m"]) / block_m - 1e-9)
     steps = STEPS_PER_RECORD_COARSEST * n / CELLS_PER_CUBE[0]
-    return {"label": f"{n:g} cells/cube on level 1 ({int(round(nx))}x{int(round(ny))}x{8 * lid_blocks} level 0)",
+    # the seeds in the label: a ladder.csv row (which a ladder run again skips) or rung folder of a single
+    # arrangement is not taken for a rung of several
+    return {"label": f"{n:g} cells/cube on level 1 ({int(round(nx))}x{int(round(ny))}x{8 * lid_blocks} level 0), "
+                     f"{len(SEEDS)} ice seeds",
             "resolution": n, "cells": [int(round(nx)), int(round(ny)), 8 * lid_blocks], "dx_m": dx0,
             "water_depth_m": WATER_DEPTH_M, "levels": int(ref["levels"]),
             "surface_band_m": max(ref["surface_band_m"], SURFACE_BAND_CELLS * dx0 / 2.0),

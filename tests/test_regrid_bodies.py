@@ -212,3 +212,22 @@ def test_a_body_that_outruns_its_band_stops_the_run(tmp_path, main):  # noqa: F8
     with pytest.raises(StabilityError, match="refinement.body_band_m: body 'sphere' left the finest level between "
                        r"two regrids \(step 200\); .* \(refinement.regrid_every_steps = 100\)"):
         m.step(200)
+
+
+def test_a_rebuild_for_a_moving_criterion_names_the_blocks_it_marks_off_the_finest_level():
+    """The settling sphere's levels at the start (its band on level 1, the bottom corner's level-0 block coarse)
+    and a moving criterion (the surface's reach, vorticity) marking one cell of that block: the regrid's reason
+    names one level-0 block off the finest level about its centre, (4, 4, 4) level-0 cells (lattice units: m);
+    marking a cell the sphere's fine blocks hold instead asks for nothing (the cost is the reason). Planted: the
+    blocks' finest test inverted (coarse taken for finest) names none and fails."""
+    m = build_model(parse_scene(_settle_text(), "settle.toml"))
+    hot = np.zeros(N, dtype=bool)
+    hot[2, 3, 1] = True
+    need = build_octree(m.scene, hot, m.body_boxes_m())
+    why = m._rebuild_reason(need, need, hot)
+    assert why == "the surface or flow criteria mark 1 level-0 blocks off the finest level, the first about " \
+                  "(4.000, 4.000, 4.000) m"
+    hot[:] = False
+    hot[12, 12, 28] = True                          # the sphere's centre: on its fine blocks
+    need = build_octree(m.scene, hot, m.body_boxes_m())
+    assert m._rebuild_reason(need, need, hot) == "the leaves cost 1.00 x a rebuild's"

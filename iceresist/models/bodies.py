@@ -242,16 +242,16 @@ class FinestLevelBodies(BodyShapes):
             raise RuntimeError("regrid: a body is not on the finest level of the new octree")
         return changed
 
-    def _rebuild_reason(self, need, octree) -> str:
-        """As :meth:`FluidModel._rebuild_reason`, naming the bodies whose band (``refinement.body_band_m`` about
-        their box) reaches beyond the finest level's leaves, the first with its centre (m)."""
+    def _rebuild_reason(self, need, octree, hot=None) -> str:
+        """As :meth:`FluidModel._rebuild_reason`, first naming the bodies whose band (``refinement.body_band_m``
+        about their box) reaches beyond the finest level's leaves, the first with its centre (m)."""
         band = self.scene.refinement.body_band_m
         if band is None or self.octree.covers(need):
-            return super()._rebuild_reason(need, octree)
+            return super()._rebuild_reason(need, octree, hot)
         pos = self.body_positions_m()
         out = self.bodies_outside_finest(pos, margin_cells=band / (self.units.dx_m / 2 ** self.finest))
         if not out:
-            return super()._rebuild_reason(need, octree)
+            return super()._rebuild_reason(need, octree, hot)
         x, y, z = pos[out[0]]
         return (f"{len(out)} bodies' band beyond the finest leaves, {self.names[out[0]]!r} at "
                 f"({x:.3f}, {y:.3f}, {z:.3f}) m")

@@ -174,7 +174,7 @@ class FluidModel(Model):
         if self._put_off(need, octree):
             self.regrids_put_off += 1
             return False
-        reason = self._rebuild_reason(need, octree)
+        reason = self._rebuild_reason(need, octree, hot)
         grid = self._split(octree)
         level_bytes = self._level_bytes(grid.views)
         refused = None
@@ -206,13 +206,25 @@ class FluidModel(Model):
             return False
         return self.octree.updates_per_step() <= (1.0 + slack) * octree.updates_per_step()
 
-    def _rebuild_reason(self, need, octree) -> str:
+    def _rebuild_reason(self, need, octree, hot=None) -> str:
         """Why a regrid rebuilds the levels, for its log line: what the present leaves miss of ``need`` (the
-        criteria now), or what they cost against ``octree`` (a rebuild now)."""
-        if not self.octree.covers(need):
-            return "the criteria reach coarser leaves"
-        ratio = self.octree.updates_per_step() / max(octree.updates_per_step(), 1)
-        return f"the leaves cost {ratio:.2f} x a rebuild's"
+        criteria now; ``hot``: the level-0 cells a moving criterion marks for the finest level, :meth:`hot_cells`),
+        or what they cost against ``octree`` (a rebuild now)."""
+        if self.octree.covers(need):
+            ratio = self.octree.updates_per_step() / max(octree.updates_per_step(), 1)
+            return f"the leaves cost {ratio:.2f} x a rebuild's"
+        if hot is not None:
+            top = self.octree.max_level
+            f = 2 ** top
+            nb = [int(n) // 8 for n in hot.shape]
+            marked = hot.reshape(nb[0], 8, nb[1], 8, nb[2], 8).any(axis=(1, 3, 5))
+            finest = (self.octree.level_map().reshape(nb[0], f, nb[1], f, nb[2], f) == top).all(axis=(1, 3, 5))
+            missed = np.argwhere(marked & ~finest)
+            if len(missed):
+                x, y, z = (missed[0] * 8 + 4) * self.units.dx_m
+                return (f"the surface or flow criteria mark {len(missed)} level-0 blocks off the finest level, the "
+                        f"first about ({x:.3f}, {y:.3f}, {z:.3f}) m")
+        return "the criteria reach coarser leaves"
 
     def _rebuild(self, octree, level_bytes: dict, grid: Grid | None = None):
         """The levels built on ``octree`` and every level's populations carried over from the present ones

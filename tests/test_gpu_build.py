@@ -51,9 +51,11 @@ needs_toolkit = pytest.mark.skipif(_real_device() and not _toolkit_here(),
 pytestmark = pytest.mark.xdist_group("gpu_build")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def builds():
-    """One run of ``python -m validation.bench gpu_build --json`` (about 1.5 min on a 2-core x86 VM)."""
+    """One run of ``python -m validation.bench gpu_build --json`` (about 3 min on a 2-core x86 VM), once per test
+    process: a module's fixture is built again wherever the process runs another module's tests between this
+    module's (pytest-xdist's groups keep the tests in one process, not in one run of them)."""
     env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "0"}
     res = subprocess.run([sys.executable, "-m", "validation.bench", "gpu_build", "--json"], capture_output=True,
                          text=True, env=env, timeout=1200)

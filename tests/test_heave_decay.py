@@ -44,10 +44,9 @@ def test_the_reduction_recovers_a_decaying_oscillation():
                                                     rel=1e-3)
 
 
-# 12 cells per diameter in a tank of eight diameters, four periods: about 2 min on one core of a 2-core x86 VM. Its
-# kernels are tier 2's (the free surface's cumulant float32 kernels with the coupling): after tests/test_tier2.py it
-# compiles two small ones (1 s); the group keeps the two in one test process, so they are compiled once
-@pytest.mark.xdist_group("tier2_kernels")
+# 12 cells per diameter in a tank of eight diameters, four periods: about 6 min in a test process of CI's two on a
+# 2-core x86 VM, so slow (CI holds the fit of the decay above and the floating cube of tests/test_floating.py)
+@pytest.mark.slow
 def test_quick_rung_heaves_near_the_measured_period_and_decay():
     """The quick ladder's finest rung against the measurement (first damped period 0.7869 s, decay rate 0.831 1/s,
     first trough 0.855 of the drop) within what 12 cells per diameter gives (docs/VALIDATION.md, "Heave decay"):

@@ -47,9 +47,10 @@ STEPS_PER_RECORD_COARSEST = 2
 #: The band about the bodies in finest cells at least (the start asks for two cells to spare).
 BODY_BAND_CELLS = 2.5
 #: The ice arrangements of every rung: the channel's cubes moved by random offsets of up to half the gap, one run per
-#: seed, the rung's mean and interval over all of them (the pooled batch means of their steady windows). One run's
-#: window is about 15 correlation times of the force (0.8 m of travel, tau_int about 0.1 s), two batches of five;
-#: five runs give the ten that an interval needs (:mod:`iceresist.post.statistics`).
+#: seed, the rung's mean and interval over all of them (the pooled batch means of their steady windows, so the
+#: interval holds the spread between arrangements). On the regular arrangement the force's correlation time was
+#: 0.10 s, a window (0.8 m of travel) about 15 of them and its interval from 5 batches; on a random one 0.015 s
+#: (3 cells per cube, seed 0).
 ICE_ARRANGEMENT = "random"
 SEEDS = (0, 1, 2, 3, 4)
 #: The band about the surface in finest cells at least (the start asks for the surface 8 finest cells or more from the

@@ -246,10 +246,9 @@ class FinestLevelBodies(BodyShapes):
         """As :meth:`FluidModel._rebuild_reason`, first naming the bodies whose band (``refinement.body_band_m``
         about their box) reaches beyond the finest level's leaves, the first with its centre (m)."""
         band = self.scene.refinement.body_band_m
-        if band is None or self.octree.covers(need):
-            return super()._rebuild_reason(need, octree, hot)
         pos = self.body_positions_m()
-        out = self.bodies_outside_finest(pos, margin_cells=band / (self.units.dx_m / 2 ** self.finest))
+        out = [] if band is None or self.octree.covers(need) else \
+            self.bodies_outside_finest(pos, margin_cells=band / (self.units.dx_m / 2 ** self.finest))
         if not out:
             return super()._rebuild_reason(need, octree, hot)
         x, y, z = pos[out[0]]

@@ -19,7 +19,7 @@ from iceresist.errors import InputError
 from iceresist.io.hdf5 import RunFile
 from iceresist.post.resistance import ice_resistance_from_timeseries, resistance_from_contact_force, window_halves
 from iceresist.post.scaling import PAPER_SCALE, force_to_full_scale
-from iceresist.post.statistics import MIN_BATCH_LENGTH_TAU, integrated_autocorrelation_time, pooled_batch_means
+from iceresist.post.statistics import MIN_BATCH_LENGTH_TAU, pooled_batch_means
 from iceresist.post.window import select_window
 from iceresist.ship.hull import HullGeometry
 from iceresist.ship.icefield import floe_corners
@@ -187,22 +187,23 @@ def analyse_ensemble(paths) -> dict:
     mean), ``window_samples`` (all runs'), ``ci_method``."""
     rows, windows, taus = [], [], []
     for path in paths:
-        rows.append(analyse_case(path))
+        row = analyse_case(path)        # its tau_int is that of the same window (steady_mean)
         case = load_case(path)
         ts, model = case["ts"], case["model"]
         t, fx, x = ts["time_s"][1:], ts["Fx_N"][1:], ts["x_bow_m"][1:]
         w = select_window(t, resistance_from_contact_force(fx, +1), window_m=tuple(model["steady_window_m"]),
                           x_ship_m=x, signal_name="Fx_N")
+        rows.append(row)
         windows.append(w.values)
-        taus.append((float(integrated_autocorrelation_time(w.values)), w.dt_s))
-    pm = pooled_batch_means(windows, [tau for tau, _ in taus])
+        taus.append(row["tau_int_s"] / w.dt_s)
+    pm = pooled_batch_means(windows, taus)
     how = (f"pooled batch means of {len(rows)} ice arrangements ({pm.n_batches} batches of >= "
            f"{MIN_BATCH_LENGTH_TAU:.0f} tau_int)")
     if pm.too_few_batches:
         how += "; fewer than 10 batches: the interval's own spread is poorly known"
     return {"mean_force_N": pm.mean, "ci95_N": pm.ci_half_width, "n_batches": pm.n_batches,
             "run_means_N": list(pm.record_means), "batches_per_run": list(pm.batches),
-            "tau_int_s": float(np.mean([tau * dt for tau, dt in taus])),
+            "tau_int_s": float(np.mean([r["tau_int_s"] for r in rows])),
             "window_samples": int(sum(len(w) for w in windows)), "ci_method": how, "runs": rows}
 
 

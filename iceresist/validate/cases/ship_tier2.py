@@ -149,31 +149,13 @@ def ensemble_result(name: str, params: dict, paths, *, backend: str, precision: 
     interval in ``extra``."""
     ens = analyse_ensemble(paths)
     rows = ens["runs"]
-    first = rows[0]
-    with RunFile(paths[0], "r") as rf:
-        model = rf.meta_object("model")
-    fluid = []
-    for path in paths:
-        with RunFile(path, "r") as rf:
-            fluid.extend(rf.h5["timeseries/Fx_fluid_N"][1:])   # row 0 is the state before the first step
-    per_record = int(model["lbm_steps_per_record"])
-    return CaseResult(case=name, label=params["label"], resolution=float(params["resolution"]),
-                      cells=int(first["cells"]), steps=sum(int(r["steps"]) for r in rows) * per_record,
-                      wall_s=sum(float(r["wall_time_s"]) for r in rows),
-                      quantity="mean ice (contact) force on the hull in the steady window (N, model scale)",
-                      value=float(ens["mean_force_N"]), reference=float("nan"), error=float("nan"),
-                      backend=backend, precision=precision,
-                      extra={"dem_precision": "float64", "ci95_N": float(ens["ci95_N"]),
-                             "ci_method": ens["ci_method"], "n_batches": int(ens["n_batches"]),
-                             "seeds": len(paths),
-                             # each run's mean and its own interval (a table cell each: space-separated)
-                             "run_means_N": " ".join(f"{v:.4g}" for v in ens["run_means_N"]),
-                             "run_ci95_N": " ".join(f"{float(r['ci95_N']):.4g}" for r in rows),
-                             "records": sum(int(r["steps"]) for r in rows), "lbm_steps_per_record": per_record,
-                             "total_s": total_s, "dx_m": float(first["resolution_m"]),
-                             "R_sim_kN": float(force_to_full_scale(ens["mean_force_N"], first["scale"])) / 1e3,
-                             "tau_int_s": float(ens["tau_int_s"]),
-                             "mean_fluid_Fx_N": float(np.mean(fluid)) if fluid else float("nan"), **extra})
+    return _rung_result(name, params, paths, rows, ens["mean_force_N"], ens["ci95_N"], backend=backend,
+                        precision=precision, total_s=total_s, ci_method=ens["ci_method"],
+                        n_batches=int(ens["n_batches"]), seeds=len(paths),
+                        # each run's mean and its own interval (a table cell each: space-separated)
+                        run_means_N=" ".join(f"{v:.4g}" for v in ens["run_means_N"]),
+                        run_ci95_N=" ".join(f"{float(r['ci95_N']):.4g}" for r in rows),
+                        tau_int_s=float(ens["tau_int_s"]), **extra)
 
 
 def case_result(name: str, params: dict, path, *, backend: str, precision: str, total_s: float,
@@ -182,17 +164,31 @@ def case_result(name: str, params: dict, path, *, backend: str, precision: str, 
     the mean ice force in the steady window, its interval, the records and steps (LBM steps: level-0 steps on
     levels), the mean fluid force on the hull; ``extra`` added."""
     row = analyse_case(path)
-    with RunFile(path, "r") as rf:
-        fluid_x = rf.h5["timeseries/Fx_fluid_N"][1:]  # row 0 is the state before the first step
-        model = rf.meta_object("model")
-    lbm_steps = int(row["steps"]) * int(model["lbm_steps_per_record"])
+    return _rung_result(name, params, [path], [row], row["mean_force_N"], row["ci95_N"], backend=backend,
+                        precision=precision, total_s=total_s, **extra)
+
+
+def _rung_result(name: str, params: dict, paths, rows, value: float, ci95: float, *, backend: str, precision: str,
+                 total_s: float, **extra) -> CaseResult:
+    """A rung's :class:`CaseResult` from its finished run files ``paths`` and their rows ``rows``
+    (:func:`iceresist.post.case.analyse_case`): ``value`` and ``ci95`` the mean ice force and its interval; the
+    records, LBM steps (level-0 steps on levels) and wall time of all runs, their mean fluid force on the hull."""
+    fluid = []
+    for path in paths:
+        with RunFile(path, "r") as rf:
+            fluid.extend(rf.h5["timeseries/Fx_fluid_N"][1:])   # row 0 is the state before the first step
+            model = rf.meta_object("model")
+    per_record = int(model["lbm_steps_per_record"])
+    records = sum(int(r["steps"]) for r in rows)
+    first = rows[0]
     return CaseResult(case=name, label=params["label"], resolution=float(params["resolution"]),
-                      cells=int(row["cells"]), steps=lbm_steps, wall_s=float(row["wall_time_s"]),
+                      cells=int(first["cells"]), steps=records * per_record,
+                      wall_s=sum(float(r["wall_time_s"]) for r in rows),
                       quantity="mean ice (contact) force on the hull in the steady window (N, model scale)",
-                      value=float(row["mean_force_N"]), reference=float("nan"), error=float("nan"),
+                      value=float(value), reference=float("nan"), error=float("nan"),
                       backend=backend, precision=precision,
-                      extra={"dem_precision": "float64", "ci95_N": float(row["ci95_N"]), "records": int(row["steps"]),
-                             "lbm_steps_per_record": int(model["lbm_steps_per_record"]), "total_s": total_s,
-                             "dx_m": float(row["resolution_m"]), "R_sim_kN": float(row["R_sim_kN"]),
-                             "mean_fluid_Fx_N": float(np.mean(fluid_x)) if len(fluid_x) else float("nan"),
-                             **extra})
+                      extra={"dem_precision": "float64", "ci95_N": float(ci95), "records": records,
+                             "lbm_steps_per_record": per_record, "total_s": total_s,
+                             "dx_m": float(first["resolution_m"]),
+                             "R_sim_kN": float(force_to_full_scale(value, first["scale"])) / 1e3,
+                             "mean_fluid_Fx_N": float(np.mean(fluid)) if fluid else float("nan"), **extra})
